@@ -1,0 +1,112 @@
+"""Compliances (vascular volume stores).  State: stored volume V [mL].
+
+``compliance``      linear:       P(node) - P(ref) = (V - V0)/C
+``log_compliance``  Payne06 (thesis eqs. Cv, P2; Payne 2006 eqs. 5-6):
+                    V = Vn + ln(dP - P0)/k,  C = dV/d(dP) = 1/(k (dP - P0)),
+                    i.e. dP = P0 + exp(k (V - Vn)), defined for every V (no log of a pressure).
+Both are pressure-defining branches whose flow fills the store: dV/dt = flow node -> ref.
+``clamp_at_zero`` (log law, default true; MODEL_NOTES "compartments collapse"): the volume
+cannot fall below 0 -- at the limit its derivative is held at zero.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from hemocircuit.component import Component, Observable, Option, Param, State, Storage, pressure_branch
+
+
+class _Store(Component):
+    terminals = ("node", "ref")
+    role = "pressure"
+    options = {"clamp_at_zero": Option(False, kind=bool, doc="hold V >= 0 (dV/dt = 0 at the limit)")}
+
+    def branches(self):
+        return (("node", "ref"),)
+
+    def states(self):
+        return (State("V", "mL", 1.0, "stored volume"),)
+
+    def storages(self):
+        return (Storage("node", "ref", "V", state="V"),)
+
+    def observables(self):
+        return (Observable("V", "mL", "stored volume", state_only=True),
+                Observable("C", "mL/mmHg", "compliance dV/dP", state_only=True))
+
+    def dc_open(self):
+        return True
+
+    def pressure(self, p, V):
+        raise NotImplementedError
+
+    def volume(self, p, dP):
+        raise NotImplementedError
+
+    def stamp(self, p, x, u, t, src=None):
+        return pressure_branch(self.pressure(p, x[..., 0]))
+
+    def derivatives(self, p, x, u, t, src=None):
+        q = u[..., 2]
+        if self.opts["clamp_at_zero"]:
+            q = np.where((x[..., 0] <= 0.0) & (q < 0.0), 0.0, q)
+        return q[..., None]
+
+    def initial_states(self, p, u, flows=None, x=None):
+        return self.volume(p, u[..., 0] - u[..., 1])[..., None]
+
+    def observe(self, p, x, u, t, src=None):
+        V = x[..., 0]
+        collapsed = self.opts["clamp_at_zero"] or self.opts.get("extended", False)
+        return {"V": np.maximum(V, 0.0) if collapsed else V, "C": self.compliance(p, V)}
+
+
+class LinearCompliance(_Store):
+    """Linear compliance C [mL/mmHg] with unstressed volume V0 [mL]."""
+
+    type_name = "compliance"
+    parameters = {"C": Param("mL/mmHg", lower=0.0, lower_open=True, doc="compliance"),
+                  "V0": Param("mL", default="0 mL", doc="unstressed volume")}
+
+    def pressure(self, p, V):
+        return (V - p["V0"]) / p["C"]
+
+    def volume(self, p, dP):
+        return p["V0"] + p["C"] * dP
+
+    def compliance(self, p, V):
+        return p["C"] + 0.0 * V
+
+
+class LogCompliance(_Store):
+    """Payne06 logarithmic compliance: V = Vn + ln(dP - P0)/k, k [1/mL] > 0."""
+
+    type_name = "log_compliance"
+    parameters = {"k": Param("1/mL", lower=0.0, lower_open=True, doc="stiffness coefficient"),
+                  "P0": Param("mmHg", doc="pressure offset (P_v1, P_a1)"),
+                  "Vn": Param("mL", doc="volume offset (V_vn, V_an)")}
+    options = {"clamp_at_zero": Option(True, kind=bool, doc="hold V >= 0 (dV/dt = 0 at the limit)"),
+               "extended": Option(False, kind=bool, doc="continue the law linearly below dP - P0 = EPS")}
+    #: steady states follow the thesis (section brainSS): pressures from the resistive network
+    #: even where dP <= P0 (a collapsed compartment, reported with V = 0), so the law is
+    #: continued linearly below dP - P0 = EPS while solving, and the clamp is off
+    steady_opts = {"clamp_at_zero": False, "extended": True}
+    EPS = 1e-3  # mmHg
+
+    def pressure(self, p, V):
+        k, P0, Vn = p["k"], p["P0"], p["Vn"]
+        if not self.opts["extended"]:
+            return P0 + np.exp(k * (V - Vn))
+        V_eps = Vn + np.log(self.EPS) / k
+        # C1 continuation: slope d(dP)/dV = k EPS at V_eps
+        return P0 + np.where(V >= V_eps, np.exp(k * (np.maximum(V, V_eps) - Vn)), self.EPS * (1 + k * (V - V_eps)))
+
+    def volume(self, p, dP):
+        k, P0, Vn = p["k"], p["P0"], p["Vn"]
+        e = dP - P0
+        V_eps = Vn + np.log(self.EPS) / k
+        return np.where(e >= self.EPS, Vn + np.log(np.maximum(e, self.EPS)) / k, V_eps + (e / self.EPS - 1) / k)
+
+    def compliance(self, p, V):
+        k = p["k"]
+        V_eps = p["Vn"] + np.log(self.EPS) / k
+        return np.where(V >= V_eps, np.exp(-k * (np.maximum(V, V_eps) - p["Vn"])) / k, 1.0 / (k * self.EPS))

@@ -1,0 +1,243 @@
+"""Operating point (steady state), SPICE-style.
+
+1. DC guess: stores open (no flow), inductors shorted; the network is solved for the node
+   pressures and every element derives its states from them (``initial_states``).  Elements
+   whose conductance depends on their state (the arteriole) are iterated to a fixed point
+   with under-relaxation 1/2 (the thesis's own scheme, section brainSS).
+2. Newton on the reduced system f(x) = 0 (finite-difference Jacobian from one batched
+   evaluation), with one row per conservation law replaced by its constraint.
+3. Fallbacks if Newton fails: pseudo-transient continuation, then source stepping.
+All three run vectorised over the batch of parameter sets.  If everything fails, the error
+names the worst-balanced state.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import SolverError
+
+
+@dataclass
+class OperatingPoint:
+    circuit: object
+    x: np.ndarray  # (nx,) or (B, nx)
+    values: dict  # column -> value (single) or (B,) array
+    units: dict
+    method: str
+    residual: float
+
+    def __getitem__(self, key):
+        return self.values[key]
+
+    def as_flat_dict(self):
+        """{'P(a) [mmHg]': 78.67, ...} (same names as the CSV columns)."""
+        return {f"{k} [{self.units[k]}]": (float(v) if np.ndim(v) == 0 else np.asarray(v).tolist())
+                for k, v in self.values.items()}
+
+
+def _scaled_residual(circuit, t, x, F):
+    """Residual in 'state scales per second' so states of very different size compare."""
+    return np.abs(F) / circuit.state_scales
+
+
+def residual(circuit, t, X, law_totals):
+    """f(x) with the conservation-law rows replaced by their constraints."""
+    F = circuit.evaluate(t, X)
+    if circuit.law_specs:
+        vols = circuit.law_volumes(X)
+        Bx = X.shape[0]
+        for spec, total, vol in zip(circuit.law_specs, law_totals, vols):
+            rep = Bx // np.size(total) if np.size(total) else 1
+            if spec.get("_target") is not None:
+                F[:, spec["row"]] = spec["_target"](X) * circuit.state_scales[spec["row"]]
+            else:
+                F[:, spec["row"]] = (vol - np.repeat(np.atleast_1d(total), rep)) * 1.0
+    return F
+
+
+def _jac(circuit, t, X, law_totals):
+    B, nx = X.shape
+    h = 1e-7 * np.maximum(np.abs(X), circuit.state_scales)
+    h = (X + h) - X
+    stack = np.repeat(X[:, None, :], nx + 1, axis=1)
+    idx = np.arange(nx)
+    stack[:, idx + 1, idx] += h
+    F = residual(circuit, t, stack.reshape(B * (nx + 1), nx), _rep(law_totals, nx + 1)).reshape(B, nx + 1, nx)
+    J = (F[:, 1:, :] - F[:, :1, :]) / h[:, :, None]
+    return np.swapaxes(J, 1, 2), F[:, 0, :]
+
+
+def _rep(totals, k):
+    return [None if t is None else np.repeat(np.atleast_1d(t), k) for t in totals]
+
+
+def newton(circuit, X, law_totals, t=0.0, tol=1e-10, max_iter=50, ptc=False):
+    """Damped Newton (or pseudo-transient continuation) on the batch X (B, nx)."""
+    X = X.copy()
+    B, nx = X.shape
+    scales = circuit.state_scales
+    dt = np.full(B, 1e-3)
+    done = np.zeros(B, bool)
+    norm_prev = None
+    for it in range(max_iter if not ptc else 400):
+        J, F = _jac(circuit, t, X, law_totals)
+        norm = np.max(np.abs(F) / scales, axis=1)
+        if not np.all(np.isfinite(F)):
+            return X, False, norm
+        if ptc:
+            M = np.eye(nx)[None] / dt[:, None, None] - J
+        else:
+            M = J
+        try:
+            dX = np.linalg.solve(M, -F[..., None])[..., 0]
+        except np.linalg.LinAlgError:
+            dX = np.linalg.lstsq(M[0], -F[0], rcond=None)[0][None] if B == 1 else np.zeros_like(X)
+        step_small = np.max(np.abs(dX) / (np.abs(X) + scales), axis=1) < tol
+        # line search on the scaled residual
+        lam = np.ones(B)
+        for _ in range(12):
+            Xn = X + lam[:, None] * dX
+            Fn = residual(circuit, t, Xn, law_totals)
+            nn = np.max(np.abs(Fn) / scales, axis=1)
+            bad = ~np.isfinite(nn) | ((nn > norm * (1 - 1e-4 * lam)) & ~ptc & (norm > 1e-14))
+            if not bad.any():
+                break
+            lam = np.where(bad, lam * 0.5, lam)
+        X = X + lam[:, None] * dX
+        if ptc:
+            dt = np.where(np.isfinite(nn) & (nn < norm), dt * 2.0, dt * 0.5)
+            dt = np.clip(dt, 1e-6, 1e12)
+        done = step_small & (lam == 1.0)
+        if np.all(done) and (not ptc or np.all(dt > 1e6)):
+            Fn = residual(circuit, t, X, law_totals)
+            return X, True, np.max(np.abs(Fn) / scales, axis=1)
+        norm_prev = norm
+    Fn = residual(circuit, t, X, law_totals)
+    nn = np.max(np.abs(Fn) / scales, axis=1)
+    return X, bool(np.all(nn < 1e-8)), nn
+
+
+def dc_guess(circuit, t=0.0, max_iter=200, tol=1e-12):
+    """States from the DC network (stores open, inductors shorted), fixed-point iterated."""
+    B = circuit.B
+    X = np.zeros((B, circuit.nx))
+    plist = circuit._params(1)
+    for g, p in zip(circuit.groups, plist):
+        if g.S:
+            X[:, g.sidx] = np.broadcast_to(g.comp.default_states(p), (B, g.E, g.S))
+    relax = 1.0 if circuit.all_constant else 0.5
+    for it in range(max_iter):
+        u, plist_b, stamps = _dc_u(circuit, t, X)
+        Xn = X.copy()
+        for g, p, (A_loc, b_loc, src) in zip(circuit.groups, plist_b, stamps):
+            if g.S == 0:
+                continue
+            ul = u[:, g.uidx]
+            flows = np.einsum("beij,bej->bei", np.broadcast_to(A_loc, (B,) + A_loc.shape[1:]), ul) - b_loc
+            Xn[:, g.sidx] = g.comp.initial_states(p, ul, flows, X[:, g.sidx])
+        step = Xn - X
+        X = X + relax * step
+        if np.max(np.abs(step) / (np.abs(X) + circuit.state_scales)) < tol:
+            break
+    return X
+
+
+def _dc_u(circuit, t, X):
+    plist = circuit._bound_params(X, circuit._params(1), t)
+    A, b, stamps = circuit._assemble(t, X, plist, dc=True)
+    u = circuit._solve(A, b)
+    return u, plist, stamps
+
+
+def _calibrate(circuit, t):
+    """Fix conserved totals given by calibrations: solve with P(node) = target at 'when'."""
+    for k, spec in enumerate(circuit.law_specs):
+        if spec["kind"] != "calibration" or circuit.law_totals[k] is not None:
+            continue
+        cal = circuit.copy()
+        cal.set_params(spec["when"])
+        node_j = cal.nodes.index(spec["node"])
+        cspec = cal.law_specs[k]
+        def target(X, cal=cal, node_j=node_j, spec=spec):
+            u, _, _ = cal.evaluate(t, X, want="u")
+            return (u[:, node_j] - spec["pressure"]) / 1.0
+
+        cspec["_target"] = target
+        totals = [None if j == k else cal.law_totals[j] for j in range(len(cal.law_specs))]
+        X0 = dc_guess(cal, t)
+        X, ok, res = _solve_with_fallbacks(cal, X0, totals, t)
+        if not ok:
+            raise SolverError(f"calibration of the conserved volume at node '{spec['node']}' "
+                              f"({spec['pressure']} mmHg when {spec['when']}) did not converge",
+                              where="computing the operating point")
+        circuit.law_totals[k] = cal.law_volumes(X)[k]
+
+
+def _solve_with_fallbacks(circuit, X0, totals, t):
+    X, ok, res = newton(circuit, X0, totals, t)
+    method = "newton"
+    if not ok:
+        X, ok, res = newton(circuit, X0, totals, t, ptc=True)
+        method = "pseudo-transient"
+        if ok:
+            X, ok, res = newton(circuit, X, totals, t)
+    if not ok:
+        X, ok, res, method = _source_stepping(circuit, totals, t)
+    return X, ok, res if not ok else res
+
+
+def _source_stepping(circuit, totals, t):
+    """Ramp every pressure/flow source 'value' from 30 % to 100 %, continuing the solution."""
+    paths = [f"{e}.value" for g in circuit.groups if g.comp.time_dependent for e in g.ids]
+    base = {p: circuit.get_param(p) for p in paths}
+    X = None
+    ok = False
+    res = np.inf
+    for lam in np.linspace(0.3, 1.0, 15):
+        c = circuit.copy()
+        for p in paths:
+            c.set_param(p, base[p] * lam if c.B > 1 else float(base[p][0] * lam), prepare=False)
+        c._prepare()
+        X0 = dc_guess(c, t) if X is None else X
+        X, ok, res = newton(c, X0, totals, t, ptc=True)
+        if not ok:
+            break
+    return X, ok, res, "source-stepping"
+
+
+def operating_point(circuit, t: float = 0.0, x0=None) -> OperatingPoint:
+    """Steady state of the circuit (every parameter set of a batch at once)."""
+    reporting = circuit
+    circuit = circuit.steady_variant()
+    _calibrate(circuit, t)
+    reporting.law_totals = circuit.law_totals
+    totals = [np.atleast_1d(v) if v is not None else None for v in circuit.law_totals]
+    X0 = dc_guess(circuit, t) if x0 is None else np.atleast_2d(np.asarray(x0, float)).copy()
+    X, ok, res = newton(circuit, X0, totals, t)
+    method = "newton"
+    if not ok:
+        X2, ok, res = _solve_with_fallbacks(circuit, X0, totals, t)
+        X, method = X2, "fallback"
+    if not ok:
+        F = residual(circuit, t, X, totals)
+        scaled = np.abs(F) / circuit.state_scales
+        b, j = np.unravel_index(np.nanargmax(np.where(np.isfinite(scaled), scaled, np.inf)), scaled.shape)
+        raise SolverError(f"no operating point found (Newton, pseudo-transient continuation and source "
+                          f"stepping failed); worst-balanced state '{circuit.state_names[j]}' with "
+                          f"d/dt = {F[b, j]:.3g} {circuit.state_units[j]}/s"
+                          + (f" in batch member {b}" if circuit.B > 1 else ""),
+                          state=circuit.state_dict(X[b]), where="computing the operating point")
+    # outputs from the steady variant (collapsed stores report V = 0), laws shared
+    single = circuit.B == 1
+    if single:
+        vals = {k: float(v[0]) for k, v in circuit.outputs(t, X).items()}
+    else:
+        vals = {}
+        for k in range(circuit.B):
+            for key, v in circuit.member(k).outputs(t, X[k:k + 1]).items():
+                vals.setdefault(key, []).append(float(v[0]))
+        vals = {k: np.array(v) for k, v in vals.items()}
+    return OperatingPoint(circuit, X[0] if single else X, vals, circuit.column_units(), method,
+                          float(np.max(res)))

@@ -1,0 +1,172 @@
+"""Transient simulation: stiff integration, restarted at every scheduled discontinuity.
+
+Discontinuities are protocol events (parameter changes), source waveform breakpoints and
+hard state limits (e.g. the Ca floor of second-order Ca dynamics: integration stops there,
+the state is put on the limit, the rate state reset to zero, and integration continues).
+The solver gets the batched finite-difference Jacobian of the circuit.
+Results are named time series (see :class:`TransientResult`); a solver failure raises
+SolverError carrying the time, the state and the part computed so far.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+from ..errors import SolverError
+from ..protocol import Protocol
+
+
+class TransientResult:
+    """Time series: ``t`` (T,), ``x`` (T, nx) states, ``columns`` {name: (T,) array}, ``units``."""
+
+    def __init__(self, t, x, columns, units, state_names, stats=None):
+        self.t, self.x, self.columns, self.units = t, x, columns, units
+        self.state_names = state_names
+        self.stats = stats or {}
+
+    def __getitem__(self, key):
+        if key in ("t", "time"):
+            return self.t
+        return self.columns[key]
+
+    def keys(self):
+        return ["time"] + list(self.columns)
+
+
+def _limit_events(circuit, limits):
+    evs = []
+    for idx, bound, _ in limits:
+        def ev(t, x, idx=idx, bound=bound):
+            return x[idx] - bound
+        ev.terminal = True
+        ev.direction = -1
+        evs.append(ev)
+    return evs
+
+
+def simulate(circuit, t_end, dt=None, t0=0.0, x0=None, protocol=None, method="BDF", rtol=1e-6, atol=None,
+             max_step=np.inf, first_step=None):
+    """Integrate from t0 to t_end [s].
+
+    x0: initial states (default: the operating point after the protocol's initial settings).
+    dt: output interval [s] (default: the solver's own steps).
+    protocol: a Protocol (or path to a protocol YAML) with initial settings and timed events.
+    """
+    from .op import operating_point
+
+    c = circuit.copy()
+    if isinstance(protocol, str):
+        protocol = Protocol.load(protocol, c)
+    if protocol is not None:
+        c = protocol.apply_initial(c)
+        if t_end is None:
+            t_end = protocol.t_end
+    if t_end is None:
+        raise SolverError("no end time given (t_end or a protocol's t_end)")
+    if c.B != 1:
+        raise SolverError("simulate() runs one parameter set; use hemocircuit.batch for many")
+    x = operating_point(c, t=t0).x if x0 is None else np.asarray(x0, dtype=float).copy()
+    events = sorted([(ev.at, ev) for ev in (protocol.events if protocol else []) if t0 < ev.at < t_end],
+                    key=lambda e: e[0])
+    limits = c.hard_limits()
+    scales = c.state_scales
+    atol_v = (atol if atol is not None else rtol * 1e-3) * scales
+    ts, xs, segs = [], [], []
+    t = t0
+    nfev = njev = nsteps = 0
+    t_grid = None if dt is None else np.arange(t0, t_end + 0.5 * dt, dt)
+
+    def one_segment(t_a, t_b, x_a):
+        nonlocal nfev, njev, nsteps
+        tpts = None
+        if t_grid is not None:
+            tpts = t_grid[(t_grid >= t_a) & (t_grid <= t_b)]
+            if tpts.size == 0 or tpts[0] > t_a:
+                tpts = np.concatenate([[t_a], tpts])
+            if tpts[-1] < t_b:
+                tpts = np.concatenate([tpts, [t_b]])
+        try:
+            sol = solve_ivp(c.rhs, (t_a, t_b), x_a, method=method, t_eval=tpts, rtol=rtol, atol=atol_v,
+                            jac=(c.jacobian if method in ("BDF", "Radau", "LSODA") else None),
+                            events=_limit_events(c, limits) or None, max_step=max_step,
+                            first_step=first_step)
+        except Exception as exc:  # a failing right-hand side or linear solve
+            raise SolverError(f"integration failed: {exc}", time=t_a, state=c.state_dict(x_a),
+                              partial=_partial()) from None
+        nfev += sol.nfev
+        njev += sol.njev
+        nsteps += len(sol.t)
+        if sol.status == -1 or not np.all(np.isfinite(sol.y)):
+            tf = float(sol.t[-1]) if len(sol.t) else t_a
+            xf = sol.y[:, -1] if sol.y.size else x_a
+            raise SolverError(f"integrator {method} failed: {sol.message}", time=tf, state=c.state_dict(xf),
+                              partial=_partial())
+        return sol
+
+    def _partial():
+        if not ts:
+            return None
+        return _collect(c, ts, xs, segs)
+
+    bounds = [t0] + [e[0] for e in events] + [t_end]
+    for k in range(len(bounds) - 1):
+        t_a, t_b = bounds[k], bounds[k + 1]
+        if k > 0:
+            c = c.copy()
+            events[k - 1][1].apply(c)
+        # restart at waveform breakpoints inside the segment
+        cuts = [t_a] + c.breakpoints(t_a, t_b) + [t_b]
+        for a, b in zip(cuts, cuts[1:]):
+            cur = a
+            while cur < b:
+                sol = one_segment(cur, b, x)
+                ts.append(sol.t)
+                xs.append(sol.y.T)
+                segs.append(c)
+                x = sol.y[:, -1].copy() if sol.y.size else x
+                if sol.status == 1:  # a hard limit was reached
+                    te = [e for e in sol.t_events if len(e)]
+                    tev = float(min(e[0] for e in te))
+                    xev = [ye[0] for ye in sol.y_events if len(ye)][0].copy()
+                    for idx, bound, reset in limits:
+                        if xev[idx] <= bound * (1 + 1e-9) + 1e-300:
+                            xev[idx] = bound
+                            if reset is not None:
+                                xev[reset] = max(xev[reset], 0.0)
+                    x = xev
+                    # nudge: without a positive rate the state would sit on the bound
+                    cur = tev
+                    ts.append(np.array([tev]))
+                    xs.append(x[None, :])
+                    segs.append(c)
+                    f = c.rhs(cur, x)
+                    if all(f[idx] <= 0 and x[idx] <= bound for idx, bound, _ in limits if x[idx] <= bound):
+                        # held at the bound until its rate turns positive: step past with the rate frozen
+                        pass
+                else:
+                    cur = b
+    res = _collect(c, ts, xs, segs)
+    res.stats = {"nfev": nfev, "njev": njev, "nsteps": nsteps, "method": method}
+    return res
+
+
+def _collect(c_last, ts, xs, segs):
+    """Stack segments (dropping duplicated boundary points) and compute outputs per segment."""
+    t_all, x_all, cols = [], [], {}
+    for t, x, c in zip(ts, xs, segs):
+        if t.size == 0:
+            continue
+        if t_all and t_all[-1].size and t[0] <= t_all[-1][-1]:
+            # keep the later value at a restart time (after an event)
+            t_all[-1], x_all[-1] = t_all[-1][:-1], x_all[-1][:-1]
+            for k in cols:
+                cols[k][-1] = cols[k][-1][:-1]
+        out = c.outputs(t, x)
+        for k, v in out.items():
+            cols.setdefault(k, []).append(np.asarray(v))
+        t_all.append(t)
+        x_all.append(x)
+    t = np.concatenate(t_all) if t_all else np.zeros(0)
+    x = np.concatenate(x_all) if x_all else np.zeros((0, c_last.nx))
+    columns = {k: np.concatenate(v) for k, v in cols.items()}
+    return TransientResult(t, x, columns, c_last.column_units(), c_last.state_names)

@@ -1,0 +1,162 @@
+"""From a parsed netlist to checked numbers: component lookup, options, units, bounds.
+
+Produces :class:`ElementData` (numeric parameters in declared units, options, waveforms,
+expressions) for every element; errors name the netlist file, element id and parameter.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .component import Component
+from .errors import NetlistError
+from .expressions import Expression, Reference, constant_reference, is_expression
+from .netlist import Netlist
+from .registry import component_types
+from .units import UnitError, parse_quantity
+from .waveforms import Constant, parse_waveform
+
+
+@dataclass
+class ElementData:
+    id: str
+    cls: type
+    nodes: list
+    opts: dict
+    values: dict  # param -> float (declared unit)
+    file: str | None
+    waveforms: dict = field(default_factory=dict)  # param -> Waveform (non-constant)
+    expressions: dict = field(default_factory=dict)  # param -> Expression
+    raw: dict = field(default_factory=dict)
+
+    @property
+    def where(self):
+        return {"file": self.file, "element": self.id}
+
+
+def _option_value(cls, name, raw, where):
+    opt = cls.options[name]
+    val = raw
+    if opt.kind is bool and not isinstance(raw, bool):
+        if isinstance(raw, str) and raw.lower() in ("true", "false", "yes", "no"):
+            val = raw.lower() in ("true", "yes")
+        else:
+            raise NetlistError(f"option '{name}' must be true or false, got {raw!r}", **where)
+    elif opt.kind is int and not isinstance(raw, bool):
+        try:
+            val = int(raw)
+            if val != raw and str(val) != str(raw):
+                raise ValueError
+        except (TypeError, ValueError):
+            raise NetlistError(f"option '{name}' must be an integer, got {raw!r}", **where) from None
+    if opt.choices is not None and val not in opt.choices:
+        raise NetlistError(f"option '{name}' must be one of {list(opt.choices)}, got {raw!r}", **where)
+    return val
+
+
+def parse_element(spec, netlist_file=None) -> ElementData:
+    where = {"file": spec.file or netlist_file, "element": spec.id}
+    types = component_types()
+    cls = types.get(spec.type)
+    if cls is None:
+        raise NetlistError(f"unknown component type '{spec.type}'; known types: {sorted(types)}", **where)
+    if len(spec.nodes) != len(cls.terminals):
+        raise NetlistError(f"type '{spec.type}' has {len(cls.terminals)} terminals {list(cls.terminals)}, "
+                           f"got {len(spec.nodes)} node(s) {spec.nodes}", **where)
+    opts = {}
+    for name, raw in spec.values.items():
+        if name in cls.options:
+            opts[name] = _option_value(cls, name, raw, where)
+    unknown = [k for k in spec.values if k not in cls.options and k not in cls.parameters]
+    if unknown:
+        raise NetlistError(f"unknown parameter(s) {unknown} for type '{spec.type}'; it takes "
+                           f"{sorted(cls.parameters)}" + (f" and options {sorted(cls.options)}" if cls.options else ""),
+                           **where)
+    comp = cls(opts)
+    defaults = comp.defaults() if hasattr(comp, "defaults") else {}
+    data = ElementData(spec.id, cls, list(spec.nodes), comp.opts, {}, where["file"], raw=dict(spec.values))
+    base_dir = os.path.dirname(where["file"]) if where["file"] else None
+    for name, par in cls.parameters.items():
+        raw = spec.values.get(name, defaults.get(name, par.default))
+        if raw is None:
+            raise NetlistError(f"missing parameter '{name}' [{par.unit}] ({par.doc})", **where)
+        if is_expression(raw):
+            data.expressions[name] = raw  # compiled later, when all elements are known
+            data.values[name] = np.nan
+            continue
+        if isinstance(raw, dict) and name in getattr(cls, "waveform_params", ()):
+            wf = parse_waveform(raw, par.unit, base_dir, {**where})
+            if isinstance(wf, Constant):
+                data.values[name] = wf.value
+            else:
+                data.values[name] = 0.0
+                data.waveforms[name] = wf
+            continue
+        if isinstance(raw, (int, float)) and not isinstance(raw, bool) and name in defaults and name not in spec.values:
+            data.values[name] = float(raw)  # preset values are already numbers in the declared unit
+            continue
+        try:
+            data.values[name] = parse_quantity(raw, par.unit, f"parameter '{name}'")
+        except UnitError as exc:
+            raise NetlistError(str(exc), **where) from None
+    check_values(data)
+    return data
+
+
+def check_values(data: ElementData, values: dict | None = None):
+    """Bounds and cross-parameter checks (also used for --set and protocol events)."""
+    values = data.values if values is None else values
+    for name, val in values.items():
+        if name in data.expressions:
+            continue
+        par = data.cls.parameters[name]
+        arr = np.atleast_1d(np.asarray(val, dtype=float))
+        if par.violates(arr).any():
+            raise NetlistError(f"parameter '{name}' = {float(arr[par.violates(arr)][0]):g} {par.unit} is not "
+                               f"physical: need {par.bounds_text()}", **data.where)
+    comp = data.cls(data.opts)
+    p = {k: np.atleast_2d(np.asarray(v, dtype=float)) for k, v in values.items()}
+    for _, msg in comp.check(p):
+        raise NetlistError(msg, **data.where)
+
+
+def compile_expressions(elements: list[ElementData], netlist: Netlist):
+    """Turn expression strings into Expression objects, resolving references."""
+    by_id = {e.id: e for e in elements}
+    for e in elements:
+        for name, text in list(e.expressions.items()):
+            if isinstance(text, Expression):
+                continue
+
+            def resolve(elem, attr, e=e):
+                if elem is None:
+                    if attr not in netlist.parameters:
+                        raise NetlistError(f"expression for '{name}': unknown name '{attr}' (netlist parameters: "
+                                           f"{sorted(netlist.parameters)})", **e.where)
+                    return constant_reference(attr, netlist.parameters[attr], e.where)
+                other = by_id.get(elem)
+                if other is None:
+                    raise NetlistError(f"expression for '{name}': no element '{elem}'", **e.where)
+                if elem == e.id:
+                    raise NetlistError(f"expression for '{name}' refers to its own element", **e.where)
+                if attr in other.cls.parameters:
+                    if attr in other.expressions:
+                        raise NetlistError(f"expression for '{name}': {elem}.{attr} is itself an expression",
+                                           **e.where)
+                    return Reference(elem, attr, other.cls.parameters[attr].unit, "param")
+                obs = {o.name: o for o in other.cls(other.opts).observables()}
+                if attr in obs and obs[attr].state_only:
+                    return Reference(elem, attr, obs[attr].unit, "observable")
+                raise NetlistError(f"expression for '{name}': '{elem}' has no parameter or state-only observable "
+                                   f"'{attr}' (observables: {sorted(k for k, o in obs.items() if o.state_only)})",
+                                   **e.where)
+
+            e.expressions[name] = Expression(text, e.cls.parameters[name].unit, resolve, e.where)
+
+
+def parse_netlist(netlist: Netlist) -> list[ElementData]:
+    elements = [parse_element(spec, netlist.file) for spec in netlist.elements]
+    compile_expressions(elements, netlist)
+    return elements

@@ -1,0 +1,639 @@
+"""The assembled circuit: modified nodal analysis -> an ODE dx/dt = f(t, x).
+
+At every right-hand-side evaluation the node pressures and the flows of pressure-defining
+branches are found from the linear MNA system ``A u = b`` given the states (one batched dense
+solve; the elements here are all affine in the pressures).  Elements are evaluated per *group*
+(all elements of one type and options), vectorised over elements and over a batch of B
+parameter sets, so there is no per-element Python in the hot path.
+
+Parts that cannot change are kept apart (svZeroDSolver style): the matrix of groups whose
+stamps do not depend on states or time is built once per parameter set; when every group is
+like that, the inverse of A is cached and each evaluation is one matrix-vector product.
+
+Parameters are addressed as ``ID.PARAM`` everywhere (``--set``, sweeps, protocols, fitting).
+A Circuit is plain data plus numpy arrays, so it pickles cheaply to worker processes.
+"""
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+
+import numpy as np
+
+from .build import ElementData, check_values, parse_netlist
+from .component import Component
+from .errors import HemocircuitError, NetlistError, TopologyError
+from .graph import check_topology, local_node_map
+from .netlist import GROUND, Netlist, load_netlist
+from .units import UnitError, parse_quantity, parse_with_unit
+
+
+class Group:
+    """All elements of one component type with the same options."""
+
+    def __init__(self, comp: Component, elements: list[ElementData]):
+        self.comp = comp
+        self.elements = elements
+        self.ids = [e.id for e in elements]
+        self.E = len(elements)
+        self.states = comp.states()
+        self.S = len(self.states)
+        self.local_nodes = comp.local_nodes
+        self.branches = comp.branches()
+        self.K, self.M = len(self.local_nodes), len(self.branches)
+        self.L = self.K + self.M
+        self.observables = comp.observables()
+        self.waves = [(i, name, wf) for i, e in enumerate(elements) for name, wf in e.waveforms.items()]
+        self.exprs = [(i, name, ex) for i, e in enumerate(elements) for name, ex in e.expressions.items()]
+        self.constant = comp.constant_matrix and not self.exprs
+        self.time_dependent = comp.time_dependent or bool(self.waves)
+
+    def source_values(self, t, B):
+        """Waveform contributions (B, E) at time t (scalar or (B,1) array); None if none."""
+        if not self.waves:
+            return None
+        tt = np.asarray(t, dtype=float)
+        src = np.zeros(np.broadcast_shapes(tt.shape[:1] if tt.ndim else (1,), (B,)) + (self.E,))
+        for i, _, wf in self.waves:
+            src[:, i] = np.vectorize(wf, otypes=[float])(tt.reshape(-1)) if tt.ndim else wf(float(tt))
+        return src
+
+
+@dataclass
+class Column:
+    name: str
+    unit: str
+
+
+class Circuit:
+    """An assembled, validated circuit.  Build with :func:`assemble` or ``hemocircuit.load``."""
+
+    def __init__(self, netlist: Netlist, elements: list[ElementData]):
+        self.netlist = netlist
+        self.file = netlist.file
+        self.elements = {e.id: e for e in elements}
+        comps = [e.cls(e.opts) for e in elements]
+        self.laws = check_topology(elements, comps, netlist.file)
+        # --- nodes and unknowns -------------------------------------------------------
+        nodes = []
+        for e, c in zip(elements, comps):
+            for n in local_node_map(e, c).values():
+                if n != GROUND and n not in nodes:
+                    nodes.append(n)
+        self.nodes = nodes
+        node_index = {n: i for i, n in enumerate(nodes)}
+        # --- groups -------------------------------------------------------------------
+        keyed: dict = {}
+        for e, c in zip(elements, comps):
+            key = (e.cls, tuple(sorted((k, repr(v)) for k, v in e.opts.items())))
+            keyed.setdefault(key, (c, []))[1].append(e)
+        self.groups = [Group(c, es) for c, es in keyed.values()]
+        n_branch = 0
+        self.branch_names = []
+        for g in self.groups:
+            g.uidx = np.zeros((g.E, g.L), dtype=int)
+            for i, e in enumerate(g.elements):
+                m = local_node_map(e, g.comp)
+                for j, ln in enumerate(g.local_nodes):
+                    g.uidx[i, j] = -1 if m[ln] == GROUND else node_index[m[ln]]
+                for j, _ in enumerate(g.branches):
+                    g.uidx[i, g.K + j] = len(nodes) + n_branch
+                    self.branch_names.append(f"{e.id}#{j}")
+                    n_branch += 1
+        self.n = len(nodes) + n_branch
+        for g in self.groups:
+            g.uidx[g.uidx < 0] = self.n  # ground slot, pressure fixed at 0
+            ui = g.uidx
+            g.rows = np.repeat(ui[:, :, None], g.L, axis=2)  # (E, L, L)
+            g.cols = np.repeat(ui[:, None, :], g.L, axis=1)
+            N1 = self.n + 1
+            g.flat = (g.rows * N1 + g.cols).reshape(-1)
+            g.S_A = np.zeros((g.E * g.L * g.L, N1 * N1))
+            g.S_A[np.arange(g.S_A.shape[0]), g.flat] = 1.0
+            g.S_b = np.zeros((g.E * g.L, N1))
+            g.S_b[np.arange(g.E * g.L), ui.reshape(-1)] = 1.0
+        # --- states -------------------------------------------------------------------
+        names, units, scales, owners = [], [], [], []
+        for g in self.groups:
+            g.sidx = np.zeros((g.E, g.S), dtype=int)
+            for i, e in enumerate(g.elements):
+                for j, s in enumerate(g.states):
+                    g.sidx[i, j] = len(names)
+                    names.append(f"{e.id}.{s.name}")
+                    units.append(s.unit)
+                    scales.append(s.scale)
+                    owners.append((e.id, s.name))
+        self.state_names, self.state_units = names, units
+        self.state_scales = np.array(scales, dtype=float)
+        self.nx = len(names)
+        self._locate = {e.id: (g, i) for g in self.groups for i, e in enumerate(g.elements)}
+        self.B = 1
+        self._load_params()
+        self._bind_constraints()
+
+    # ------------------------------------------------------------------ parameters ----
+    def _load_params(self):
+        for g in self.groups:
+            g.p = {name: np.array([[e.values[name] for e in g.elements]], dtype=float)
+                   for name in g.comp.parameters}
+        self._prepare()
+
+    def _prepare(self):
+        """Rebuild everything that depends only on parameters (called after any change)."""
+        N1 = self.n + 1
+        self.A_const = np.zeros((self.B, N1 * N1))
+        self.all_constant = True
+        for g in self.groups:
+            if g.constant:
+                A_loc, _ = g.comp.stamp(g.p, np.zeros((1, g.E, g.S)), None, 0.0, None)
+                A_loc = np.broadcast_to(A_loc, (A_loc.shape[0], g.E, g.L, g.L))
+                self.A_const = self.A_const + A_loc.reshape(A_loc.shape[0], -1) @ g.S_A
+            else:
+                self.all_constant = False
+        n = self.n
+        self._Ainv = None
+        if self.all_constant:
+            A = self.A_const.reshape(-1, N1, N1)[:, :n, :n]
+            try:
+                self._Ainv = np.linalg.inv(A)
+            except np.linalg.LinAlgError:
+                raise TopologyError("the nodal equations are singular (a pressure is undefined)",
+                                    file=self.file) from None
+        self._rep_cache = {}
+
+    def param_path(self, path: str):
+        """Split 'ID.PARAM' and check it names a parameter.  Returns (element data, group, index, name)."""
+        if not isinstance(path, str) or "." not in path:
+            raise NetlistError(f"parameter path {path!r} must be ID.PARAM", file=self.file)
+        eid, name = path.split(".", 1)
+        if eid not in self.elements:
+            raise NetlistError(f"no element '{eid}' (elements: {sorted(self.elements)})", file=self.file,
+                               element=eid)
+        e = self.elements[eid]
+        g, i = self._locate[eid]
+        if name not in e.cls.parameters:
+            if name in e.cls.options:
+                raise NetlistError(f"'{name}' is a structural option; change it with Circuit.with_options "
+                                   "(or in the netlist / protocol 'initial')", file=e.file, element=eid)
+            raise NetlistError(f"no parameter '{name}'; '{e.cls.type_name}' has {sorted(e.cls.parameters)}",
+                               file=e.file, element=eid)
+        return e, g, i, name
+
+    def param_unit(self, path):
+        e, _, _, name = self.param_path(path)
+        return e.cls.parameters[name].unit
+
+    def get_param(self, path):
+        """Current value(s) of ID.PARAM in its declared unit, shape (B,)."""
+        _, g, i, name = self.param_path(path)
+        return np.broadcast_to(g.p[name][:, i], (self.B,)).copy()
+
+    def set_param(self, path, value, prepare=True):
+        """Set ID.PARAM to ``value`` (quantity string with unit, or number in the declared unit,
+        or an array of B numbers for a batch).  Checked against the parameter's bounds."""
+        e, g, i, name = self.param_path(path)
+        par = e.cls.parameters[name]
+        if isinstance(value, (str, dict)):
+            if isinstance(value, dict):
+                from .waveforms import Constant, parse_waveform
+                wf = parse_waveform(value, par.unit, None, {"file": e.file, "element": e.id})
+                g.waves = [w for w in g.waves if not (w[0] == i and w[1] == name)]
+                if not isinstance(wf, Constant):
+                    g.waves.append((i, name, wf))
+                    g.time_dependent = True
+                    value = 0.0
+                else:
+                    value = wf.value
+            else:
+                try:
+                    value = parse_quantity(value, par.unit, f"{path}")
+                except UnitError as exc:
+                    raise NetlistError(str(exc), file=e.file, element=e.id) from None
+                g.waves = [w for w in g.waves if not (w[0] == i and w[1] == name)]
+        elif hasattr(value, "to"):
+            value = float(value.to(par.unit).magnitude)
+        arr = np.asarray(value, dtype=float)
+        check_values(e, {name: arr})
+        if name in e.expressions:
+            raise NetlistError(f"'{name}' follows an expression ({e.expressions[name].text}); it cannot be set",
+                               file=e.file, element=e.id)
+        cur = g.p[name]
+        if arr.ndim == 0:
+            cur = cur.copy()
+            cur[:, i] = arr
+        else:
+            if arr.shape != (self.B,):
+                raise HemocircuitError(f"{path}: expected {self.B} values for the batch, got shape {arr.shape}")
+            cur = np.repeat(cur, self.B, axis=0) if cur.shape[0] == 1 else cur.copy()
+            cur[:, i] = arr
+        g.p[name] = cur
+        if prepare:
+            self._prepare()
+
+    def set_params(self, assignments: dict):
+        for k, v in assignments.items():
+            self.set_param(k, v, prepare=False)
+        self._prepare()
+
+    def with_options(self, changes: dict) -> "Circuit":
+        """A re-assembled circuit with structural options changed ({ID.OPTION: value}).
+
+        Numeric parameters set on this circuit are carried over where they still exist.
+        """
+        nl = copy.deepcopy(self.netlist)
+        for path, v in changes.items():
+            eid, _, name = path.partition(".")
+            try:
+                nl.element(eid).values[name] = v
+            except KeyError:
+                raise NetlistError(f"no element '{eid}'", file=self.file, element=eid) from None
+        new = assemble(nl)
+        changed = {path.partition(".")[0] for path in changes}
+        for g in self.groups:
+            for i, eid in enumerate(g.ids):
+                if eid in changed:
+                    continue  # its options (maybe its preset) changed: keep the netlist's values
+                for name, arr in g.p.items():
+                    if name in self.elements[eid].expressions:
+                        continue
+                    ng, ni = new._locate[eid]
+                    if name in ng.p and self.B == 1:
+                        ng.p[name] = ng.p[name].copy()
+                        ng.p[name][:, ni] = arr[:, i]
+        new._prepare()
+        return new
+
+    def steady_variant(self) -> "Circuit":
+        """This circuit with each component's ``steady_opts`` applied (for steady-state solves)."""
+        if not any(g.comp.steady_opts for g in self.groups):
+            return self
+        c = self.copy()
+        for g in c.groups:
+            if g.comp.steady_opts:
+                g.comp = copy.copy(g.comp)
+                g.comp.opts = {**g.comp.opts, **g.comp.steady_opts}
+        return c
+
+    def copy(self) -> "Circuit":
+        return copy.deepcopy(self)
+
+    def batch(self, B: int) -> "Circuit":
+        """A copy whose parameter arrays are repeated to a batch of B sets (set members with set_param)."""
+        c = self.copy()
+        c.B = B
+        for g in c.groups:
+            g.p = {k: np.repeat(v[:1], B, axis=0) if v.shape[0] == 1 else v for k, v in g.p.items()}
+        c._prepare()
+        return c
+
+    def member(self, k: int) -> "Circuit":
+        """Batch member k as a single circuit."""
+        c = self.copy()
+        for g in c.groups:
+            g.p = {n: v[k:k + 1] if v.shape[0] > 1 else v for n, v in g.p.items()}
+        c.B = 1
+        c._prepare()
+        return c
+
+    def _params(self, rep):
+        """Parameter dicts for a stacked batch in which each member appears ``rep`` times."""
+        if rep == 1:
+            return [g.p for g in self.groups]
+        if rep not in self._rep_cache:
+            self._rep_cache[rep] = [{k: (np.repeat(v, rep, axis=0) if v.shape[0] > 1 else v) for k, v in g.p.items()}
+                                    for g in self.groups]
+        return self._rep_cache[rep]
+
+    # --------------------------------------------------------------- constraints -------
+    def _bind_constraints(self):
+        self.law_specs = []
+        specs = list(self.netlist.constraints)
+        for law in self.laws:
+            match = [c for c in specs if isinstance(c, dict) and c.get("node") in law.nodes]
+            if not match:
+                node = sorted(law.nodes)[0]
+                raise TopologyError(
+                    f"node(s) {sorted(law.nodes)} connect only through volume stores, so the stored volume "
+                    f"{law.describe()} is conserved and the operating point is undefined until it is fixed: add "
+                    f"'constraints: [{{node: {node}, volume: <total> mL}}]' or a calibration "
+                    f"'{{node: {node}, pressure: 10 mmHg, when: {{Pa.value: 80 mmHg}}}}'",
+                    file=self.file, element=law.terms[0][0], node=node)
+            c = match[0]
+            specs.remove(c)
+            self.law_specs.append(self._parse_constraint(c, law))
+        for c in specs:
+            node = c.get("node") if isinstance(c, dict) else None
+            raise NetlistError(f"constraint {c!r} does not match a conservation law (only nodes connected "
+                               "exclusively through volume stores need one)", file=self.file, node=node)
+        self.law_totals = [None] * len(self.law_specs)
+        for k, s in enumerate(self.law_specs):
+            if s["kind"] == "volume":
+                self.law_totals[k] = np.full(self.B, s["volume"])
+
+    def _parse_constraint(self, c, law):
+        where = {"file": self.file, "node": c.get("node")}
+        unknown = set(c) - {"node", "volume", "pressure", "when"}
+        if unknown:
+            raise NetlistError(f"unknown constraint key(s) {sorted(unknown)}", **where)
+        # the state whose equation the law replaces in the operating-point solve
+        row = None
+        terms = []
+        for eid, si, sign in law.terms:
+            g, i = self._locate[eid]
+            st = g.comp.storages()[si]
+            terms.append((g, i, st.volume, sign))
+            if row is None and st.state is not None:
+                row = g.sidx[i, [s.name for s in g.states].index(st.state)]
+        if row is None:
+            raise NetlistError("the conserved volume has no state to replace in the steady-state equations",
+                               **where)
+        try:
+            if "volume" in c:
+                return {"kind": "volume", "volume": parse_quantity(c["volume"], "mL", "constraint volume"),
+                        "terms": terms, "row": row, "law": law}
+            if "pressure" in c:
+                when = c.get("when") or {}
+                if not isinstance(when, dict):
+                    raise NetlistError("'when' must be a mapping ID.PARAM: value", **where)
+                for k in when:
+                    self.param_path(k)
+                return {"kind": "calibration", "pressure": parse_quantity(c["pressure"], "mmHg", "constraint pressure"),
+                        "node": c["node"], "when": when, "terms": terms, "row": row, "law": law}
+        except UnitError as exc:
+            raise NetlistError(str(exc), **where) from None
+        raise NetlistError("a constraint needs 'volume' (conserved total) or 'pressure' with 'when' "
+                           "(calibration)", **where)
+
+    def law_volumes(self, x):
+        """Conserved combinations sum(sign * V) for states x (B', nx) -> list of (B',) arrays."""
+        out = []
+        if not self.law_specs:
+            return out
+        obs = self._state_observables(np.atleast_2d(x), self._params(1) if np.atleast_2d(x).shape[0] == self.B
+                                      else self._params_for(np.atleast_2d(x).shape[0]))
+        for s in self.law_specs:
+            total = 0.0
+            for g, i, vol, sign in s["terms"]:
+                total = total + sign * obs[id(g)][vol][:, i]
+            out.append(total)
+        return out
+
+    def _params_for(self, Bx):
+        if Bx % self.B:
+            raise HemocircuitError(f"state batch {Bx} is not a multiple of the parameter batch {self.B}")
+        return self._params(Bx // self.B)
+
+    # ------------------------------------------------------------------ evaluation -----
+    def _state_observables(self, x, plist, t=0.0):
+        out = {}
+        for g, p in zip(self.groups, plist):
+            xl = x[:, g.sidx]
+            out[id(g)] = g.comp.observe(p, xl, None, t)
+        return out
+
+    def _bound_params(self, x, plist, t):
+        """Parameters with expression-bound values filled in for states x."""
+        if not any(g.exprs for g in self.groups):
+            return plist
+        Bx = x.shape[0]
+        need = {}
+        for g in self.groups:
+            for _, _, ex in g.exprs:
+                for key, ref in ex.refs.items():
+                    if ref.kind == "observable":
+                        need[ref.element] = True
+        obs = {}
+        for eid in need:
+            g, i = self._locate[eid]
+            p = plist[self.groups.index(g)]
+            obs[eid] = (g.comp.observe(p, x[:, g.sidx], None, t), i)
+        out = []
+        for g, p in zip(self.groups, plist):
+            if not g.exprs:
+                out.append(p)
+                continue
+            p = dict(p)
+            for i, name, ex in g.exprs:
+                vals = {}
+                for key, ref in ex.refs.items():
+                    if ref.kind == "param":
+                        og, oi = self._locate[ref.element]
+                        vals[key] = plist[self.groups.index(og)][ref.name][:, oi]
+                    elif ref.kind == "observable":
+                        o, oi = obs[ref.element]
+                        vals[key] = o[ref.name][:, oi]
+                v = np.broadcast_to(ex.evaluate(vals), (Bx,))
+                arr = np.array(np.broadcast_to(p[name], (Bx, g.E)))
+                arr[:, i] = v
+                p[name] = arr
+            out.append(p)
+        return out
+
+    def _assemble(self, t, x, plist, dc=False):
+        """Stamp all groups.  Returns (A (Bx,n,n) or None if cached inverse, b (Bx,n), locals)."""
+        Bx = x.shape[0]
+        N1 = self.n + 1
+        b = np.zeros((Bx, N1))
+        A = None if (self.all_constant and not dc) else np.broadcast_to(
+            self.A_const if self.A_const.shape[0] == Bx else np.repeat(self.A_const, Bx // self.A_const.shape[0], 0),
+            (Bx, N1 * N1)).copy()
+        stamps = []
+        for g, p in zip(self.groups, plist):
+            xl = x[:, g.sidx]
+            src = g.source_values(t, Bx) if g.waves else None
+            A_loc, b_loc = g.comp.stamp(p, xl, None, t, src)
+            A_loc = np.broadcast_to(A_loc, (A_loc.shape[0], g.E, g.L, g.L))
+            b_loc = np.broadcast_to(b_loc, (b_loc.shape[0], g.E, g.L))
+            if dc and (g.comp.dc_open() or g.comp.dc_short()):
+                A_loc, b_loc = self._dc_stamp(g, A_loc, b_loc)
+                A = A + A_loc.reshape(A_loc.shape[0], -1) @ g.S_A - (
+                    0.0 if not g.constant else self._const_part(g, Bx))
+            elif A is not None and not g.constant:
+                A = A + A_loc.reshape(A_loc.shape[0], -1) @ g.S_A
+            b = b + b_loc.reshape(b_loc.shape[0], -1) @ g.S_b
+            stamps.append((A_loc, b_loc, src))
+        n = self.n
+        if A is not None:
+            A = A.reshape(Bx, N1, N1)[:, :n, :n]
+        return A, b[:, :n], stamps
+
+    def _const_part(self, g, Bx):
+        A_loc, _ = g.comp.stamp(g.p, np.zeros((1, g.E, g.S)), None, 0.0, None)
+        A_loc = np.broadcast_to(A_loc, (A_loc.shape[0], g.E, g.L, g.L))
+        return A_loc.reshape(A_loc.shape[0], -1) @ g.S_A
+
+    def _dc_stamp(self, g, A_loc, b_loc):
+        A_loc = np.array(A_loc)
+        b_loc = np.array(b_loc)
+        if g.comp.dc_open():
+            for m in range(g.M):
+                r = g.K + m
+                A_loc[..., r, :] = 0.0
+                A_loc[..., r, r] = 1.0  # branch flow = 0
+                b_loc[..., r] = 0.0
+        else:  # short: a large conductance between the first two terminals
+            G = 1e6
+            A_loc[..., 0, 0] += G
+            A_loc[..., 0, 1] -= G
+            A_loc[..., 1, 0] -= G
+            A_loc[..., 1, 1] += G
+            b_loc[..., :2] = 0.0
+        return A_loc, b_loc
+
+    def _solve(self, A, b):
+        if A is None:
+            Ainv = self._Ainv
+            if Ainv.shape[0] != b.shape[0]:
+                Ainv = np.repeat(Ainv, b.shape[0] // Ainv.shape[0], axis=0)
+            u = np.einsum("bij,bj->bi", Ainv, b)
+        else:
+            try:
+                u = np.linalg.solve(A, b[..., None])[..., 0]
+            except np.linalg.LinAlgError:
+                raise TopologyError("the nodal equations are singular at this state (a pressure is undefined)",
+                                    file=self.file) from None
+        return np.concatenate([u, np.zeros((u.shape[0], 1))], axis=1)  # + ground slot
+
+    def evaluate(self, t, x, dc=False, want="rhs"):
+        """Core evaluation for a stacked batch x (Bx, nx).
+
+        Returns dx/dt (Bx, nx) for want='rhs', or the intermediate pieces for outputs.
+        """
+        x = np.asarray(x, dtype=float)
+        if x.ndim == 1:
+            x = x[None, :]
+        Bx = x.shape[0]
+        plist = self._bound_params(x, self._params_for(Bx), t)
+        A, b, stamps = self._assemble(t, x, plist, dc=dc)
+        u = self._solve(A, b)
+        if want == "u":
+            return u, plist, stamps
+        dx = np.empty((Bx, self.nx))
+        for g, p, (A_loc, b_loc, src) in zip(self.groups, plist, stamps):
+            if g.S == 0:
+                continue
+            ul = u[:, g.uidx]
+            dx[:, g.sidx] = g.comp.derivatives(p, x[:, g.sidx], ul, t, src)
+        return dx
+
+    def rhs(self, t, x):
+        """dx/dt for a single run (x of shape (nx,)) or a batch (B, nx)."""
+        if np.ndim(x) == 1:
+            return self.evaluate(t, x)[0]
+        return self.evaluate(t, x)
+
+    def jacobian(self, t, x):
+        """Finite-difference Jacobian d(dx/dt)/dx, all columns from one batched evaluation.
+
+        x: (nx,) -> (nx, nx); or (B, nx) -> (B, nx, nx).
+        """
+        single = np.ndim(x) == 1
+        X = np.atleast_2d(np.asarray(x, dtype=float))
+        B, nx = X.shape
+        h = 1e-7 * np.maximum(np.abs(X), self.state_scales)  # (B, nx)
+        h = (X + h) - X
+        stack = np.repeat(X[:, None, :], nx + 1, axis=1)  # (B, nx+1, nx)
+        idx = np.arange(nx)
+        stack[:, idx + 1, idx] += h
+        F = self.evaluate(t, stack.reshape(B * (nx + 1), nx)).reshape(B, nx + 1, nx)
+        J = (F[:, 1:, :] - F[:, :1, :]) / h[:, :, None]  # (B, col, row)
+        J = np.swapaxes(J, 1, 2)
+        return J[0] if single else J
+
+    # ------------------------------------------------------------------ outputs --------
+    def columns(self) -> list[Column]:
+        """Every output column, in a stable order."""
+        cols = [Column(f"P({n})", "mmHg") for n in self.nodes if ":" not in n]
+        cols += [Column(f"Q({e})", "mL/s") for g in self.groups for e in g.ids]
+        for g in self.groups:
+            store_vols = {s.volume for s in g.comp.storages()}
+            obs_names = [o.name for o in g.observables]
+            for e in g.ids:
+                for s in g.states:
+                    if s.name not in obs_names:
+                        cols.append(Column(f"{e}.{s.name}", s.unit))
+                for o in g.observables:
+                    cols.append(Column(f"V({e})" if o.name in store_vols else f"{e}.{o.name}", o.unit))
+        return cols
+
+    def outputs(self, t, x) -> dict:
+        """All outputs for states x (T, nx) at times t (T,) -> {column name: (T,) array}.
+
+        Evaluated for all times at once (the time series is treated as a batch).
+        """
+        x = np.atleast_2d(np.asarray(x, dtype=float))
+        T = x.shape[0]
+        tt = np.broadcast_to(np.asarray(t, dtype=float), (T,)).reshape(T, 1) if np.ndim(t) else float(t)
+        if self.B != 1 and T % self.B:
+            raise HemocircuitError("outputs() of a batch circuit needs one member's parameters: use member(k)")
+        u, plist, stamps = self.evaluate(tt, x, want="u")
+        out = {}
+        for j, n in enumerate(self.nodes):
+            if ":" not in n:
+                out[f"P({n})"] = u[:, j]
+        for g, p, (A_loc, b_loc, src) in zip(self.groups, plist, stamps):
+            ul = u[:, g.uidx]
+            flows = np.einsum("beij,bej->bei", np.broadcast_to(A_loc, (T,) + A_loc.shape[1:]), ul) - b_loc
+            xl = x[:, g.sidx]
+            obs = g.comp.observe(p, xl, ul, tt, src)
+            store_vols = {s.volume for s in g.comp.storages()}
+            obs_names = [o.name for o in g.observables]
+            for i, e in enumerate(g.ids):
+                out[f"Q({e})"] = flows[:, i, 0] if g.K else np.zeros(T)
+                for j, s in enumerate(g.states):
+                    if s.name not in obs_names:
+                        out[f"{e}.{s.name}"] = xl[:, i, j]
+                for o in g.observables:
+                    key = f"V({e})" if o.name in store_vols else f"{e}.{o.name}"
+                    out[key] = np.broadcast_to(obs[o.name][:, i] if np.ndim(obs[o.name]) == 2 else obs[o.name], (T,))
+        return out
+
+    def column_units(self):
+        return {c.name: c.unit for c in self.columns()}
+
+    def state_dict(self, x):
+        return dict(zip(self.state_names, np.asarray(x, dtype=float).reshape(-1)))
+
+    def hard_limits(self):
+        """[(state index, lower bound, index of a state reset to 0 at the bound or None)]."""
+        out = []
+        for g in self.groups:
+            for name, bound, reset in getattr(g.comp, "hard_limits", lambda: ())():
+                names = [s.name for s in g.states]
+                for i in range(g.E):
+                    out.append((g.sidx[i, names.index(name)], bound,
+                                None if reset is None else g.sidx[i, names.index(reset)]))
+        return out
+
+    def breakpoints(self, t0, t1):
+        """Scheduled discontinuities of sources in (t0, t1)."""
+        pts = set()
+        for g in self.groups:
+            for _, _, wf in g.waves:
+                pts.update(b for b in wf.breakpoints() if t0 < b < t1)
+            if "start" in g.p and "amplitude" in g.p:
+                for s, a in zip(np.ravel(g.p["start"]), np.ravel(np.broadcast_to(g.p["amplitude"], g.p["start"].shape))):
+                    if a != 0 and t0 < s < t1:
+                        pts.add(float(s))
+        return sorted(pts)
+
+    def describe(self) -> str:
+        lines = [f"circuit '{self.netlist.name}' ({self.file})",
+                 f"  {len(self.elements)} elements, {len(self.nodes)} nodes, {self.nx} states, {self.n} unknowns"]
+        for g in self.groups:
+            lines.append(f"  {g.comp.type_name}: {', '.join(g.ids)}")
+        for s in self.law_specs:
+            lines.append(f"  conserved: {s['law'].describe()} ({s['kind']})")
+        return "\n".join(lines)
+
+
+def assemble(netlist: Netlist) -> Circuit:
+    return Circuit(netlist, parse_netlist(netlist))
+
+
+def load(path: str, set_params: dict | None = None) -> Circuit:
+    """Load, validate and assemble a netlist file; optionally apply {ID.PARAM: value}."""
+    c = assemble(load_netlist(path))
+    if set_params:
+        c.set_params(set_params)
+    return c

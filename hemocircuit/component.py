@@ -1,0 +1,246 @@
+"""The component interface: what every element type declares and the hooks it implements.
+
+A component type is a subclass of :class:`Component` in a module of ``hemocircuit.components``
+(found by scanning that package, like Myokit plug-ins) or registered by a third party through
+the entry-point group ``hemocircuit.components``.  One instance serves *all* elements of that
+type that share the same options (a "group"): every hook is vectorised over the batch of
+parameter sets and over the elements of the group, so the hot path dispatches once per group,
+never once per element.
+
+Array shapes in the hooks (B = batch of parameter sets, E = elements in the group):
+  ``p[name]``   parameter values, shape (B, E), in the parameter's declared unit
+  ``x``         the group's states, shape (B, E, S) in the states' declared units
+  ``u``         local unknowns of the nodal system, shape (B, E, K + M): pressures of the
+                element's K local nodes (terminals then internal nodes, mmHg) followed by
+                the flows of its M pressure-defining branches (mL/s)
+  ``t``         time in s (float)
+
+Modified nodal analysis (MNA) contract: an element contributes to the global linear system
+``A u = b`` through ``stamp``, returning ``(A_loc, b_loc)`` of shapes (B, E, K+M, K+M) and
+(B, E, K+M).  Row j < K is the flow *leaving* local node j into the element (Kirchhoff's
+current law: the sum over elements is zero); row K+m is the constraint equation of branch m
+(P_plus - P_minus = E).  ``A_loc @ u - b_loc`` evaluated at the solution gives the flow the
+element draws from each of its nodes, which is how element flows are reported generically.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Sequence
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Param:
+    """A numeric parameter: unit, default (a string with unit, or None = required), bounds.
+
+    Bounds are in ``unit``; ``lower_open``/``upper_open`` make them strict (R > 0).
+    """
+
+    unit: str
+    default: Any = None
+    lower: float | None = None
+    upper: float | None = None
+    lower_open: bool = False
+    upper_open: bool = False
+    doc: str = ""
+
+    def violates(self, value: np.ndarray) -> np.ndarray:
+        bad = ~np.isfinite(value)
+        if self.lower is not None:
+            bad |= (value <= self.lower) if self.lower_open else (value < self.lower)
+        if self.upper is not None:
+            bad |= (value >= self.upper) if self.upper_open else (value > self.upper)
+        return bad
+
+    def bounds_text(self) -> str:
+        lo = "" if self.lower is None else f"{self.lower:g} {'<' if self.lower_open else '<='} "
+        hi = "" if self.upper is None else f" {'<' if self.upper_open else '<='} {self.upper:g}"
+        return f"{lo}value{hi} [{self.unit}]"
+
+
+@dataclass(frozen=True)
+class Option:
+    """A structural, non-numeric setting (changes the equations or the state list).
+
+    Options are fixed when the circuit is assembled; changing one re-assembles.
+    """
+
+    default: Any
+    choices: tuple | None = None
+    kind: type | tuple = object
+    doc: str = ""
+
+
+@dataclass(frozen=True)
+class State:
+    """A dynamic state: name, unit, and a natural scale (used for solver tolerances)."""
+
+    name: str
+    unit: str
+    scale: float
+    doc: str = ""
+
+
+@dataclass(frozen=True)
+class Observable:
+    """A quantity the element reports (name, unit).  ``state_only``: needs no pressures,
+    so other elements' parameters may follow it (see netlist expressions)."""
+
+    name: str
+    unit: str
+    doc: str = ""
+    state_only: bool = False
+
+
+@dataclass(frozen=True)
+class Storage:
+    """A volume store: flow through local nodes ``plus`` -> ``minus`` changes ``volume``.
+
+    ``volume`` names a state_only observable (mL).  ``state`` names the state that holds the
+    volume (None if the volume is derived, like an arteriolar bed's pi r^2 L n).  Used to find
+    conservation laws (nodes reached only through stores) generically.
+    """
+
+    plus: str
+    minus: str
+    volume: str
+    state: str | None = None
+
+
+class Component:
+    """Base class of every element type.  Subclasses set the class attributes and hooks."""
+
+    #: name used as ``type:`` in netlists
+    type_name: str = ""
+    #: terminal names, in netlist ``nodes:`` order
+    terminals: tuple[str, ...] = ()
+    #: numeric parameters
+    parameters: dict[str, Param] = {}
+    #: structural options
+    options: dict[str, Option] = {}
+    #: topology role of the element's terminal pairs (for the validation pass):
+    #:   'conductive': a resistive path; 'pressure': fixes a pressure difference
+    #:   (source, compliance); 'flow': fixes the flow (inductor, flow source).
+    role: str = "conductive"
+    #: True when A_loc does not depend on states or time (stamped once per parameter set)
+    constant_matrix: bool = True
+    #: True when stamp() is affine in the pressures (no Newton iteration needed)
+    linear_in_pressure: bool = True
+    #: True when the element drives its branch from a time-dependent source value
+    time_dependent: bool = False
+
+    #: option overrides used while solving for a steady state (must not change the states)
+    steady_opts: dict = {}
+
+    def __init__(self, opts: dict | None = None):
+        self.opts = {k: o.default for k, o in self.options.items()}
+        self.opts.update(opts or {})
+
+    # --- structure (may depend on options) -------------------------------------------
+    def internal_nodes(self) -> tuple[str, ...]:
+        return ()
+
+    def branches(self) -> tuple[tuple[str, str], ...]:
+        """Pressure-defining branches (plus, minus) in local node names."""
+        return ()
+
+    def states(self) -> tuple[State, ...]:
+        return ()
+
+    def observables(self) -> tuple[Observable, ...]:
+        return ()
+
+    def storages(self) -> tuple[Storage, ...]:
+        return ()
+
+    def edges(self) -> tuple[tuple[str, str, str], ...]:
+        """(local node a, local node b, role) for the topology pass."""
+        t = self.terminals
+        return ((t[0], t[1], self.role),)
+
+    @property
+    def local_nodes(self) -> tuple[str, ...]:
+        return tuple(self.terminals) + tuple(self.internal_nodes())
+
+    # --- checks ------------------------------------------------------------------------
+    def check(self, p: dict[str, np.ndarray]) -> list[tuple[int, str]]:
+        """Cross-parameter physics checks beyond simple bounds: [(element index, message)]."""
+        return []
+
+    # --- numerical hooks (vectorised: see module docstring) -----------------------------
+    def stamp(self, p, x, u, t, src=None):
+        raise NotImplementedError
+
+    def derivatives(self, p, x, u, t, src=None) -> np.ndarray:
+        """dx/dt, shape (B, E, S)."""
+        return np.zeros(x.shape)
+
+    def observe(self, p, x, u, t, src=None) -> dict[str, np.ndarray]:
+        """Observables (B, E) each.  ``u`` is None when only state_only ones are wanted."""
+        return {}
+
+    def default_states(self, p) -> np.ndarray:
+        """States to start the DC-guess iteration from, shape (B, E, S)."""
+        return np.zeros(next(iter(p.values())).shape + (len(self.states()),)) if p else np.zeros((1, 1, 0))
+
+    def initial_states(self, p, u, flows=None, x=None) -> np.ndarray:
+        """A state guess consistent with local pressures/branch flows ``u`` and terminal flows.
+
+        Used by the DC-guess iteration of the operating point; ``x`` is the previous guess.
+        """
+        return np.zeros(u.shape[:2] + (len(self.states()),))
+
+    def dc_open(self) -> bool:
+        """True if, for the DC guess, the element's branches carry no flow (volume stores)."""
+        return False
+
+    def dc_short(self) -> bool:
+        """True if, for the DC guess, the element is a short circuit (inductors)."""
+        return False
+
+    def clip_states(self, x):
+        """Project states onto their physical domain (e.g. Ca >= floor); identity by default."""
+        return x
+
+
+def two_terminal_conductance(g: np.ndarray, j: np.ndarray | None = None):
+    """MNA stamp of flow q = g (Pa - Pb) + j from terminal a to terminal b.
+
+    Returns (A_loc, b_loc) with shapes (B, E, 2, 2) and (B, E, 2).
+    """
+    A = np.empty(g.shape + (2, 2))
+    A[..., 0, 0] = g
+    A[..., 0, 1] = -g
+    A[..., 1, 0] = -g
+    A[..., 1, 1] = g
+    b = np.zeros(g.shape + (2,))
+    if j is not None:
+        b[..., 0] = -j
+        b[..., 1] = j
+    return A, b
+
+
+def pressure_branch(value: np.ndarray):
+    """MNA stamp of a pressure-defining branch P_a - P_b = value between two terminals.
+
+    Local unknowns: [P_a, P_b, I] with I the flow from a through the element to b.
+    """
+    shape = value.shape
+    A = np.zeros(shape + (3, 3))
+    A[..., 0, 2] = 1.0   # I leaves node a
+    A[..., 1, 2] = -1.0  # and enters node b
+    A[..., 2, 0] = 1.0
+    A[..., 2, 1] = -1.0
+    b = np.zeros(shape + (3,))
+    b[..., 2] = value
+    return A, b
+
+
+def flow_branch(q: np.ndarray):
+    """MNA stamp of an imposed flow q from terminal a to terminal b."""
+    A = np.zeros(q.shape + (2, 2))
+    b = np.empty(q.shape + (2,))
+    b[..., 0] = -q
+    b[..., 1] = q
+    return A, b

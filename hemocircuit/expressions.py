@@ -1,0 +1,128 @@
+"""Parameter expressions: a parameter that follows other elements' quantities.
+
+A value written as ``"= rho_b * art.L / (pi * art.r**2 * art.n)"`` is an expression.  Names
+are netlist parameters (``rho_b``), other elements' parameters (``art.L``) or state-only
+observables (``art.r``), plus ``pi`` and the functions exp, log, sqrt.  At load time pint
+checks the expression's dimension against the target parameter's unit and finds the factor
+to it; at run time it is evaluated with every quantity in coherent SI base units (one float
+factor per name, computed once), so the hot path is plain numpy.
+"""
+from __future__ import annotations
+
+import ast
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import NetlistError
+from .units import Q_, parse_with_unit, si_factor
+
+_FUNCS = {"exp": np.exp, "log": np.log, "sqrt": np.sqrt}
+_ALLOWED = (ast.Expression, ast.BinOp, ast.UnaryOp, ast.Constant, ast.Name, ast.Attribute, ast.Load, ast.Call,
+            ast.Add, ast.Sub, ast.Mult, ast.Div, ast.Pow, ast.USub, ast.UAdd)
+
+
+def is_expression(value) -> bool:
+    return isinstance(value, str) and value.lstrip().startswith("=")
+
+
+@dataclass
+class Reference:
+    element: str | None  # None: a netlist parameter (a constant)
+    name: str
+    unit: str
+    kind: str  # 'param', 'observable' or 'constant'
+    constant: float = 0.0  # SI value when kind == 'constant'
+
+
+class Expression:
+    """A compiled expression; ``refs`` lists what it reads, ``evaluate`` computes it."""
+
+    def __init__(self, text, target_unit, resolve, where):
+        self.text = text.lstrip()[1:].strip()
+        self.where = where
+        try:
+            tree = ast.parse(self.text, mode="eval")
+        except SyntaxError as exc:
+            raise NetlistError(f"cannot parse expression {self.text!r}: {exc.msg}", **where) from None
+        self.refs: dict[str, Reference] = {}
+        for node in ast.walk(tree):
+            if not isinstance(node, _ALLOWED):
+                raise NetlistError(f"expression {self.text!r}: {type(node).__name__} is not allowed "
+                                   "(use + - * / **, numbers, names, exp/log/sqrt)", **where)
+            if isinstance(node, ast.Call) and not (isinstance(node.func, ast.Name) and node.func.id in _FUNCS):
+                raise NetlistError(f"expression {self.text!r}: only exp, log, sqrt may be called", **where)
+        self._tree = tree
+        self._key = {}
+        self._collect(tree.body, resolve)
+        code = compile(ast.fix_missing_locations(_Rename(self._key).visit(tree)), "<expr>", "eval")
+        self._code = code
+        # dimension check and output factor, evaluated once with pint
+        env = {"pi": np.pi, **_FUNCS}
+        for name, ref in self._named().items():
+            env[name] = ref.pint if ref.kind == "constant" else Q_(1.0, ref.unit)
+        try:
+            sample = eval(code, {"__builtins__": {}}, env)
+            sample = sample if hasattr(sample, "to") else Q_(sample, "dimensionless")
+            sample.to(target_unit)
+        except Exception as exc:
+            raise NetlistError(f"expression {self.text!r} does not give a quantity in {target_unit}: {exc}",
+                               **where) from None
+        self.out_factor = 1.0 / si_factor(target_unit)
+        self.si = {k: (si_factor(r.unit) if r.kind != "constant" else None) for k, r in self._named().items()}
+
+    def _named(self):
+        return {self._key[k]: r for k, r in self.refs.items()}
+
+    def _collect(self, node, resolve):
+        if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name):
+            key = f"{node.value.id}.{node.attr}"
+            if key not in self.refs:
+                self.refs[key] = resolve(node.value.id, node.attr)
+                self._key[key] = f"_r{len(self._key)}"
+            return
+        if isinstance(node, ast.Attribute):
+            raise NetlistError(f"expression {self.text!r}: write references as ELEMENT.NAME", **self.where)
+        if isinstance(node, ast.Name):
+            if node.id in _FUNCS or node.id == "pi":
+                return
+            if node.id not in self.refs:
+                self.refs[node.id] = resolve(None, node.id)
+                self._key[node.id] = f"_r{len(self._key)}"
+            return
+        for child in ast.iter_child_nodes(node):
+            self._collect(child, resolve)
+
+    def evaluate(self, values: dict):
+        """``values``: reference key -> array in that reference's unit.  Returns target-unit value."""
+        env = {"pi": np.pi, **_FUNCS}
+        for key, ref in self.refs.items():
+            name = self._key[key]
+            env[name] = ref.constant if ref.kind == "constant" else values[key] * self.si[name]
+        return eval(self._code, {"__builtins__": {}}, env) * self.out_factor
+
+
+class _Rename(ast.NodeTransformer):
+    def __init__(self, key):
+        self.key = key
+
+    def visit_Attribute(self, node):
+        if isinstance(node.value, ast.Name):
+            return ast.copy_location(ast.Name(id=self.key[f"{node.value.id}.{node.attr}"], ctx=ast.Load()), node)
+        return node
+
+    def visit_Name(self, node):
+        if node.id in self.key:
+            return ast.copy_location(ast.Name(id=self.key[node.id], ctx=ast.Load()), node)
+        return node
+
+
+def constant_reference(name, raw, where) -> Reference:
+    """A netlist-level parameter used in an expression: a constant, stored in SI."""
+    try:
+        q = parse_with_unit(raw)
+    except Exception as exc:
+        raise NetlistError(f"parameter {name}: {exc}", **where) from None
+    ref = Reference(None, name, str(q.units), "constant", float(q.to_base_units().magnitude))
+    ref.pint = q.to_base_units()
+    return ref

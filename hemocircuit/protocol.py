@@ -1,0 +1,108 @@
+"""Protocol files: timed parameter changes for transients (YAML).
+
+    description: Kuo91 fig. 2A
+    t_end: 450 s
+    initial: {art.ca_order: 2, Pup.value: 60 cmH2O}     # before the starting operating point
+    events:
+      - {at: 51 s, set: {Pup.value: 80 cmH2O, Pdown.value: 80 cmH2O}}
+      - {at: 239 s, set: {art.tau_Ca: 1 s}}
+
+Paths are ID.PARAM (the same namespace as --set and sweeps).  Structural options (such as
+``art.ca_order``) may only be set in ``initial``: they change the state vector.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+
+import yaml
+
+from .errors import NetlistError
+from .units import UnitError, parse_quantity
+
+
+@dataclass
+class Event:
+    at: float
+    set: dict
+
+    def apply(self, circuit):
+        circuit.set_params(self.set)
+
+
+@dataclass
+class Protocol:
+    t_end: float | None
+    initial: dict = field(default_factory=dict)
+    events: list = field(default_factory=list)
+    description: str = ""
+    file: str | None = None
+
+    @classmethod
+    def load(cls, path, circuit=None):
+        if not os.path.exists(path):
+            raise NetlistError(f"protocol file not found: {path}")
+        try:
+            with open(path) as fh:
+                data = yaml.safe_load(fh)
+        except yaml.YAMLError as exc:
+            raise NetlistError(f"protocol is not valid YAML: {exc}", file=path) from None
+        return cls.from_dict(data, path, circuit)
+
+    @classmethod
+    def from_dict(cls, data, path=None, circuit=None):
+        where = {"file": path}
+        if not isinstance(data, dict):
+            raise NetlistError("a protocol is a mapping with 'events' (and optional t_end, initial)", **where)
+        unknown = set(data) - {"description", "t_end", "initial", "events"}
+        if unknown:
+            raise NetlistError(f"unknown protocol key(s) {sorted(unknown)}", **where)
+        try:
+            t_end = parse_quantity(data["t_end"], "s", "t_end") if "t_end" in data else None
+        except UnitError as exc:
+            raise NetlistError(str(exc), **where) from None
+        initial = data.get("initial") or {}
+        if not isinstance(initial, dict):
+            raise NetlistError("'initial' must be a mapping ID.PARAM: value", **where)
+        events = []
+        for i, ev in enumerate(data.get("events") or []):
+            if not isinstance(ev, dict) or "at" not in ev or not isinstance(ev.get("set"), dict):
+                raise NetlistError(f"event {i} must be {{at: <time>, set: {{ID.PARAM: value}}}}", **where)
+            try:
+                at = parse_quantity(ev["at"], "s", f"event {i} time")
+            except UnitError as exc:
+                raise NetlistError(str(exc), **where) from None
+            events.append(Event(at, dict(ev["set"])))
+        proto = cls(t_end, dict(initial), sorted(events, key=lambda e: e.at), str(data.get("description", "")), path)
+        if circuit is not None:
+            proto.check(circuit)
+        return proto
+
+    def check(self, circuit):
+        """Validate every path and value against the circuit (before any simulation)."""
+        c = self.apply_initial(circuit)
+        for ev in self.events:
+            for path in ev.set:
+                e, _, _, name = (None, None, None, None)
+                eid, _, name = path.partition(".")
+                if eid in c.elements and name in c.elements[eid].cls.options:
+                    raise NetlistError(f"event at {ev.at:g} s sets the structural option '{path}'; options may only "
+                                       "be set in 'initial'", file=self.file, element=eid)
+            probe = c.copy()
+            try:
+                probe.set_params(ev.set)
+            except NetlistError as exc:
+                raise NetlistError(f"event at {ev.at:g} s: {exc}", file=self.file) from None
+            c = probe
+        return True
+
+    def apply_initial(self, circuit):
+        opts = {k: v for k, v in self.initial.items() if _is_option(circuit, k)}
+        c = circuit.with_options(opts) if opts else circuit.copy()
+        c.set_params({k: v for k, v in self.initial.items() if k not in opts})
+        return c
+
+
+def _is_option(circuit, path):
+    eid, _, name = path.partition(".")
+    return eid in circuit.elements and name in circuit.elements[eid].cls.options

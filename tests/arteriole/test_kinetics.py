@@ -1,0 +1,68 @@
+"""4-state kinetics (eqs 4state, 4stateCons, phos, dephos, 4stateSS) and figure figrPhospCa."""
+import numpy as np
+
+
+def _grid():
+    Ca = np.logspace(-12, -3, 37)[:, None]
+    cG = np.concatenate([[0.0], np.logspace(-11, -4, 15)])[None, :]
+    return Ca, cG
+
+
+def test_quasi_steady_sums_to_one_and_is_null_vector(art, kuo):
+    Ca, cG = _grid()
+    K = art.kinetics.rate_constants(Ca, cG, kuo)
+    alpha = np.stack(np.broadcast_arrays(*art.kinetics.quasi_steady(K)), axis=-1)
+    assert alpha.shape == (37, 16, 4)
+    assert np.all(alpha >= 0)
+    np.testing.assert_allclose(alpha.sum(-1), 1.0, rtol=0, atol=1e-14)
+    resid = np.einsum("...ij,...j->...i", art.kinetics.k_matrix(K), alpha)
+    assert np.max(np.abs(resid)) < 1e-12
+    # the derivative function agrees with the matrix and vanishes there too
+    d = np.stack(np.broadcast_arrays(*art.kinetics.derivative(tuple(np.moveaxis(alpha, -1, 0)), K)), -1)
+    np.testing.assert_allclose(d, resid, atol=1e-15)
+
+
+def test_closed_form_equals_linear_solve(art, kuo):
+    Ca, cG = _grid()
+    K = art.kinetics.rate_constants(Ca, cG, kuo)
+    closed = np.stack(np.broadcast_arrays(*art.kinetics.quasi_steady(K)), axis=-1)
+    solved = art.kinetics.quasi_steady_solve(K)
+    np.testing.assert_allclose(closed, solved, rtol=1e-10, atol=1e-14)
+
+
+def test_closed_form_with_other_rate_values(art, kuo):
+    """Random K3, K4, K7 (not the tab4State values): the closed form is general."""
+    rng = np.random.default_rng(1)
+    p = dict(kuo, K3=rng.uniform(0.01, 2, 50), K4=rng.uniform(0.01, 2, 50),
+             K7=rng.uniform(0.001, 1, 50))
+    K = art.kinetics.rate_constants(rng.uniform(1e-9, 1e-5, 50), rng.uniform(0, 1e-6, 50), p)
+    closed = np.stack(art.kinetics.quasi_steady(K), axis=-1)
+    np.testing.assert_allclose(closed, art.kinetics.quasi_steady_solve(K), rtol=1e-10, atol=1e-14)
+
+
+def test_rates_at_nonpositive_ca_are_finite(art, kuo):
+    K = art.kinetics.rate_constants(np.array([-1e-6, 0.0, art.CA_FLOOR]), 1e-9, kuo)
+    assert all(np.all(np.isfinite(k)) for k in K)
+    np.testing.assert_allclose(K[0][:2], K[0][2])  # clipped at the floor
+
+
+def test_passive_alpha_and_zero_active_force(art, kuo):
+    K = art.kinetics.rate_constants(np.array([1e-7, 1e-5]), np.array([1e-9, 1e-7]), kuo, passive=True)
+    alpha = np.stack(np.broadcast_arrays(*art.kinetics.quasi_steady(K)), -1)
+    np.testing.assert_array_equal(alpha, [[1, 0, 0, 0], [1, 0, 0, 0]])
+    assert np.all(art.mechanics.active_force_isometric(np.array([0.9, 1.4]), alpha[:, 2], kuo) == 0)
+    # through the model: passive states give alpha = [1,0,0,0] and F_a = 0 whatever Ca is
+    s = {"Ca": np.array([1e-7, 1e-6]), "Cw": 1e-8, "lambda": 1.2}
+    obs = art.observables(s, 8000.0, 0.0, kuo, {"passive": True})
+    np.testing.assert_array_equal(np.broadcast_to(obs["M"], (2,)), 1.0)
+    np.testing.assert_array_equal(obs["F_a"], 0.0)
+
+
+def test_lee97_phosphorylation_curves(art, kuo):
+    Ca, cG, phos = art.lee97.phosphorylation_curves(kuo)
+    assert phos.shape == (6, 81)
+    assert np.all(np.diff(phos, axis=1) > 0)          # rises with Ca
+    assert np.all(np.diff(phos, axis=0) <= 1e-15)     # cGMP lowers it
+    i = np.argmin(np.abs(np.log10(Ca) + 6))           # at Ca = 1 uM cGMP matters
+    assert phos[0, i] - phos[-1, i] > 0.05
+    assert phos[0, -1] - phos[-1, -1] < 0.5 * (phos[0, i] - phos[-1, i])  # curves converge

@@ -1,0 +1,51 @@
+"""Parameter table, presets, units, no_speed."""
+import numpy as np
+import pytest
+
+
+def test_presets_complete_and_within_bounds(art):
+    for name, p in art.PRESETS.items():
+        assert set(p) == set(art.PARAMETERS), name
+        assert art.check_params(p) == [], name
+
+
+def test_units_parse_with_pint_and_match_si(art):
+    pint = pytest.importorskip("pint")
+    ureg = pint.UnitRegistry()
+    dims = {"h_w": "[length]**2/[time]", "k_tau": "[length]**2*[substance]/[length]**3/[time]",
+            "mu_b": "[pressure]*[time]", "f1": "[force]*[time]/[length]", "q1": "[force]",
+            "s_w": "[substance]/[length]**3/[time]", "sigma_L": "[pressure]", "omega_n": "1/[time]"}
+    for name, spec in art.PARAMETERS.items():
+        q = ureg.Quantity(1, spec.unit)
+        assert q.to_base_units().magnitude == pytest.approx(
+            {"mol/L": 1e3}.get(str(spec.unit).split("/")[0] + "/L", q.to_base_units().magnitude))
+        if name in dims:
+            assert q.check(dims[name]), name
+        assert spec.doc and ("tab" in spec.doc or "sec." in spec.doc or name == "n"), name
+
+
+def test_known_values(art):
+    k, f = art.PRESETS["kuo91"], art.PRESETS["falcone91"]
+    assert k["dP0"] == pytest.approx(60 * 133.322, rel=1e-5)
+    assert (k["h_w"], k["r_dw"], k["s_w"], k["k_tau"]) == (38.0e-12, 47.6e-3, 346e-12, 1.24e-15)
+    assert f["f2"] == k["f2"] and f["h_w"] == k["h_w"] and f["k_tau"] == k["k_tau"]
+    assert (f["q3"], f["l0"], f["f1"], f["lambda_opt"]) == (0.619, 64.3e-6, 98.7e-6, 1.79)
+
+
+def test_effective_applies_no_speed_once(art, kuo):
+    p = art.effective(dict(kuo, no_speed=1 / 0.005))
+    # tabActiveFit values: h_w 7.61e-9, s_w 69.2e-9, r_dw 9.51, k_tau 248e-15
+    np.testing.assert_allclose([p["h_w"], p["s_w"], p["r_dw"], p["k_tau"]],
+                               [7.61e-9, 69.2e-9, 9.51, 248e-15], rtol=2e-3)
+    assert art.effective(p) == p
+    arr = art.effective(dict(kuo, no_speed=np.array([1.0, 2.0])))
+    np.testing.assert_array_equal(arr["h_w"], [38e-12, 76e-12])
+    assert kuo["no_speed"] == 1.0
+
+
+def test_make_params_rejects_unknown(art):
+    with pytest.raises(KeyError):
+        art.make_params("kuo91", hw=1.0)
+    with pytest.raises(KeyError):
+        art.make_params("nope")
+    assert art.check_params(dict(art.make_params(), NO_U=780e-12)) != []
