@@ -39,6 +39,9 @@ class PressureSource(Component):
     def branches(self):
         return (("node", "ref"),)
 
+    def varies_in_time(self, p):
+        return bool(np.any(p["amplitude"] != 0))
+
     def value(self, p, t, src):
         return p["value"] + (0.0 if src is None else src) + _sine_term(p, t)
 
@@ -55,6 +58,8 @@ class FlowSource(Component):
     waveform_params = ("value",)
     role = "flow"
     time_dependent = True
+
+    varies_in_time = PressureSource.varies_in_time
 
     def stamp(self, p, x, u, t, src=None):
         return flow_branch(PressureSource.value(self, p, t, src) + np.zeros(x.shape[:2]))

@@ -117,7 +117,9 @@ def check_values(data: ElementData, values: dict | None = None):
             raise NetlistError(f"parameter '{name}' = {float(arr[par.violates(arr)][0]):g} {par.unit} is not "
                                f"physical: need {par.bounds_text()}", **data.where)
     comp = data.cls(data.opts)
-    p = {k: np.atleast_2d(np.asarray(v, dtype=float)) for k, v in values.items()}
+    merged = {**data.values, **values}
+    merged = {k: v for k, v in merged.items() if k not in data.expressions}
+    p = {k: np.atleast_2d(np.asarray(v, dtype=float)) for k, v in merged.items()}
     for _, msg in comp.check(p):
         raise NetlistError(msg, **data.where)
 

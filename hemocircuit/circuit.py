@@ -139,17 +139,31 @@ class Circuit:
         self._prepare()
 
     def _prepare(self):
-        """Rebuild everything that depends only on parameters (called after any change)."""
+        """Rebuild everything that depends only on parameters (called after any change).
+
+        Groups whose stamps depend neither on states nor on time ("static": resistors,
+        constant sources) are stamped here once, into A_const and b_const, and skipped by
+        every right-hand-side evaluation.
+        """
         N1 = self.n + 1
         self.A_const = np.zeros((self.B, N1 * N1))
+        self.b_const = np.zeros((self.B, N1))
         self.all_constant = True
+        self.dynamic_groups = []
         for g in self.groups:
+            g.static = (g.constant and g.S == 0 and not g.waves
+                        and not g.comp.varies_in_time(g.p))
             if g.constant:
-                A_loc, _ = g.comp.stamp(g.p, np.zeros((1, g.E, g.S)), None, 0.0, None)
+                A_loc, b_loc = g.comp.stamp(g.p, np.zeros((1, g.E, g.S)), None, 0.0, None)
                 A_loc = np.broadcast_to(A_loc, (A_loc.shape[0], g.E, g.L, g.L))
                 self.A_const = self.A_const + A_loc.reshape(A_loc.shape[0], -1) @ g.S_A
+                if g.static:
+                    b_loc = np.broadcast_to(b_loc, (b_loc.shape[0], g.E, g.L))
+                    self.b_const = self.b_const + b_loc.reshape(b_loc.shape[0], -1) @ g.S_b
             else:
                 self.all_constant = False
+            if not g.static:
+                self.dynamic_groups.append(g)
         n = self.n
         self._Ainv = None
         if self.all_constant:
@@ -160,6 +174,12 @@ class Circuit:
                 raise TopologyError("the nodal equations are singular (a pressure is undefined)",
                                     file=self.file) from None
         self._rep_cache = {}
+
+    def _rep(self, arr, Bx):
+        """Parameter-batch array (B, ...) laid out for a stacked batch of Bx rows."""
+        if arr.shape[0] == Bx or arr.shape[0] == 1:
+            return arr
+        return np.repeat(arr, Bx // arr.shape[0], axis=0)
 
     def param_path(self, path: str):
         """Split 'ID.PARAM' and check it names a parameter.  Returns (element data, group, index, name)."""
@@ -335,22 +355,25 @@ class Circuit:
         unknown = set(c) - {"node", "volume", "pressure", "when"}
         if unknown:
             raise NetlistError(f"unknown constraint key(s) {sorted(unknown)}", **where)
-        # the state whose equation the law replaces in the operating-point solve
-        row = None
+        # the state whose equation the law replaces (and, in the DC guess, the store kept
+        # closed to anchor the group's pressure): preferably a store leading to ground
+        row = anchor = None
         terms = []
         for eid, si, sign in law.terms:
             g, i = self._locate[eid]
             st = g.comp.storages()[si]
             terms.append((g, i, st.volume, sign))
-            if row is None and st.state is not None:
+            if st.state is None:
+                continue
+            m = local_node_map(self.elements[eid], g.comp)
+            to_ground = GROUND in (m[st.plus], m[st.minus])
+            if row is None or (to_ground and not anchor_to_ground):
                 row = g.sidx[i, [s.name for s in g.states].index(st.state)]
-        if row is None:
-            raise NetlistError("the conserved volume has no state to replace in the steady-state equations",
-                               **where)
+                anchor, anchor_to_ground = (g, i), to_ground
         try:
             if "volume" in c:
                 return {"kind": "volume", "volume": parse_quantity(c["volume"], "mL", "constraint volume"),
-                        "terms": terms, "row": row, "law": law}
+                        "terms": terms, "row": row, "law": law, "anchor": anchor}
             if "pressure" in c:
                 when = c.get("when") or {}
                 if not isinstance(when, dict):
@@ -358,7 +381,7 @@ class Circuit:
                 for k in when:
                     self.param_path(k)
                 return {"kind": "calibration", "pressure": parse_quantity(c["pressure"], "mmHg", "constraint pressure"),
-                        "node": c["node"], "when": when, "terms": terms, "row": row, "law": law}
+                        "node": c["node"], "when": when, "terms": terms, "row": row, "law": law, "anchor": anchor}
         except UnitError as exc:
             raise NetlistError(str(exc), **where) from None
         raise NetlistError("a constraint needs 'volume' (conserved total) or 'pressure' with 'when' "
@@ -430,28 +453,37 @@ class Circuit:
         return out
 
     def _assemble(self, t, x, plist, dc=False):
-        """Stamp all groups.  Returns (A (Bx,n,n) or None if cached inverse, b (Bx,n), locals)."""
+        """Stamp the non-static groups onto the cached static part.
+
+        Returns (A (Bx,n,n), or None when the cached inverse applies; b (Bx,n); per-group
+        stamps (None for static groups)).
+        """
         Bx = x.shape[0]
         N1 = self.n + 1
-        b = np.zeros((Bx, N1))
-        A = None if (self.all_constant and not dc) else np.broadcast_to(
-            self.A_const if self.A_const.shape[0] == Bx else np.repeat(self.A_const, Bx // self.A_const.shape[0], 0),
-            (Bx, N1 * N1)).copy()
-        stamps = []
-        for g, p in zip(self.groups, plist):
+        b = np.array(np.broadcast_to(self._rep(self.b_const, Bx), (Bx, N1)))
+        need_A = dc or not self.all_constant
+        A = np.array(np.broadcast_to(self._rep(self.A_const, Bx), (Bx, N1 * N1))) if need_A else None
+        stamps = [None] * len(self.groups)
+        for k, (g, p) in enumerate(zip(self.groups, plist)):
+            if g.static and not dc:
+                continue
             xl = x[:, g.sidx]
             src = g.source_values(t, Bx) if g.waves else None
             A_loc, b_loc = g.comp.stamp(p, xl, None, t, src)
-            A_loc = np.broadcast_to(A_loc, (A_loc.shape[0], g.E, g.L, g.L))
-            b_loc = np.broadcast_to(b_loc, (b_loc.shape[0], g.E, g.L))
+            if A_loc.ndim != 4 or A_loc.shape[1] != g.E:
+                A_loc = np.broadcast_to(A_loc, (A_loc.shape[0], g.E, g.L, g.L))
+            if b_loc.shape[1:] != (g.E, g.L):
+                b_loc = np.broadcast_to(b_loc, (b_loc.shape[0], g.E, g.L))
             if dc and (g.comp.dc_open() or g.comp.dc_short()):
                 A_loc, b_loc = self._dc_stamp(g, A_loc, b_loc)
-                A = A + A_loc.reshape(A_loc.shape[0], -1) @ g.S_A - (
-                    0.0 if not g.constant else self._const_part(g, Bx))
-            elif A is not None and not g.constant:
                 A = A + A_loc.reshape(A_loc.shape[0], -1) @ g.S_A
-            b = b + b_loc.reshape(b_loc.shape[0], -1) @ g.S_b
-            stamps.append((A_loc, b_loc, src))
+                if g.constant:
+                    A = A - self._const_part(g, Bx)
+            elif need_A and not g.constant:
+                A = A + A_loc.reshape(A_loc.shape[0], -1) @ g.S_A
+            if not g.static:  # static groups are already in b_const
+                b = b + b_loc.reshape(b_loc.shape[0], -1) @ g.S_b
+            stamps[k] = (A_loc, b_loc, src)
         n = self.n
         if A is not None:
             A = A.reshape(Bx, N1, N1)[:, :n, :n]
@@ -460,17 +492,21 @@ class Circuit:
     def _const_part(self, g, Bx):
         A_loc, _ = g.comp.stamp(g.p, np.zeros((1, g.E, g.S)), None, 0.0, None)
         A_loc = np.broadcast_to(A_loc, (A_loc.shape[0], g.E, g.L, g.L))
-        return A_loc.reshape(A_loc.shape[0], -1) @ g.S_A
+        return self._rep(A_loc.reshape(A_loc.shape[0], -1) @ g.S_A, Bx)
 
     def _dc_stamp(self, g, A_loc, b_loc):
         A_loc = np.array(A_loc)
         b_loc = np.array(b_loc)
         if g.comp.dc_open():
+            # one store per conservation law stays closed: it anchors the pressure of a node
+            # group that is otherwise joined to the circuit only through open stores
+            keep = [i for s in self.law_specs for (gg, i) in [s["anchor"]] if gg is g]
+            opened = np.setdiff1d(np.arange(g.E), keep)
             for m in range(g.M):
                 r = g.K + m
-                A_loc[..., r, :] = 0.0
-                A_loc[..., r, r] = 1.0  # branch flow = 0
-                b_loc[..., r] = 0.0
+                A_loc[:, opened, r, :] = 0.0
+                A_loc[:, opened, r, r] = 1.0  # branch flow = 0
+                b_loc[:, opened, r] = 0.0
         else:  # short: a large conductance between the first two terminals
             G = 1e6
             A_loc[..., 0, 0] += G
@@ -509,11 +545,10 @@ class Circuit:
         if want == "u":
             return u, plist, stamps
         dx = np.empty((Bx, self.nx))
-        for g, p, (A_loc, b_loc, src) in zip(self.groups, plist, stamps):
+        for g, p, st in zip(self.groups, plist, stamps):
             if g.S == 0:
                 continue
-            ul = u[:, g.uidx]
-            dx[:, g.sidx] = g.comp.derivatives(p, x[:, g.sidx], ul, t, src)
+            dx[:, g.sidx] = g.comp.derivatives(p, x[:, g.sidx], u[:, g.uidx], t, st[2])
         return dx
 
     def rhs(self, t, x):
@@ -571,7 +606,10 @@ class Circuit:
         for j, n in enumerate(self.nodes):
             if ":" not in n:
                 out[f"P({n})"] = u[:, j]
-        for g, p, (A_loc, b_loc, src) in zip(self.groups, plist, stamps):
+        for g, p, st in zip(self.groups, plist, stamps):
+            if st is None:  # static group: stamp it for the flows
+                st = g.comp.stamp(p, x[:, g.sidx], None, tt, None) + (None,)
+            A_loc, b_loc, src = st
             ul = u[:, g.uidx]
             flows = np.einsum("beij,bej->bei", np.broadcast_to(A_loc, (T,) + A_loc.shape[1:]), ul) - b_loc
             xl = x[:, g.sidx]

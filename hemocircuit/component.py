@@ -163,6 +163,10 @@ class Component:
     def local_nodes(self) -> tuple[str, ...]:
         return tuple(self.terminals) + tuple(self.internal_nodes())
 
+    def varies_in_time(self, p) -> bool:
+        """True if the stamps of these parameter values change with time (sources with a sine)."""
+        return self.time_dependent
+
     # --- checks ------------------------------------------------------------------------
     def check(self, p: dict[str, np.ndarray]) -> list[tuple[int, str]]:
         """Cross-parameter physics checks beyond simple bounds: [(element index, message)]."""

@@ -21,3 +21,4 @@ __all__ = [
     "state_scales", "unpack", "CA_FLOOR", "PARAMETERS", "PRESETS", "effective", "make_params",
     "check_params", "SteadyStateWarning", "solve_steady",
 ]
+from .element import Arteriole  # noqa: E402,F401  (the circuit element)

@@ -64,12 +64,13 @@ def friction(lam, AMp, AM, p, passive=False):
     return p["l0"] * (overlap(lam, p) * (p["f1"] * AMp + p["f2"] * AM) + floor)
 
 
-def dlambda_dt_affine(lam, AMp, AM, p, passive=False):
+def dlambda_dt_affine(lam, AMp, AM, p, passive=False, r=None):
     """(a [1/s], b [1/(s*Pa)]) with dlambda/dt = a + b P (the rate is affine in P at given
-    states: r, F_p, F_a and the friction depend on lambda and the bridge fractions only)."""
+    states: r, F_p, F_a and the friction depend on lambda and the bridge fractions only).
+    ``r``: l2r(lam) if already computed."""
     D = friction(lam, AMp, AM, p, passive)
     a = -(passive_force(lam, p) + active_force_isometric(lam, AMp, p)) / D
-    b = p["w_c"] * l2r(lam, p) / D
+    b = p["w_c"] * (l2r(lam, p) if r is None else r) / D
     return a, b
 
 

@@ -42,7 +42,10 @@ OBSERVABLE_UNITS = {
 }
 
 
-class ArterioleError(ValueError):
+from hemocircuit.errors import HemocircuitError
+
+
+class ArterioleError(HemocircuitError, ValueError):
     """Non-finite derivatives or observables (invalid states, inputs or parameters)."""
 
 
@@ -125,7 +128,7 @@ def _evaluate(states, P, dP, params, options):
     K, alpha = _bridges(s, cG, p, o)
     sigma = wall_stress(P, r, p)                      # [Pa]
     Cab = np.zeros_like(sigma) if o["passive"] else ca_bar(sigma, p)   # [M]
-    a, b = _dlam_affine(lam, alpha[2], alpha[3], p, o["passive"])
+    a, b = _dlam_affine(lam, alpha[2], alpha[3], p, o["passive"], r)
     lam_dot = a + b * P                               # eq FaNew solved for lambda_dot [1/s]
     d = {"Cw": dCw_dt(Cw, Q, r, tau, p), "lambda": lam_dot}
     if o["ca_order"] == 2:
@@ -150,7 +153,7 @@ def derivatives(states, P, dP, params, options=None) -> dict:
 def observables(states, P, dP, params, options=None) -> dict:
     """Observables, dict name -> array, units in OBSERVABLE_UNITS.  Q is the flow of ONE vessel,
     R and V those of the bed of n vessels; F_a includes the friction term (eq FaNew)."""
-    d, c = _evaluate(states, P, dP, params, options)
+    _, c = _evaluate(states, P, dP, params, options)
     p, s, r, alpha = c["p"], c["s"], c["r"], c["alpha"]
     lam = s["lambda"]
     out = {"r": r, "lambda": lam, "Ca": s["Ca"], "Cw": s["Cw"],

@@ -11,7 +11,8 @@ import numpy as np
 from .cgmp import LN10, sigmoid_5_95
 
 #: lower floor of [Ca] [M] for the second-order dynamics (MODEL_NOTES): the integrator stops
-#: at it, resets dCa/dt to 0 and continues; K1/K2 clip Ca at it.
+#: at it, resets dCa/dt to 0 and continues (model.at_ca_floor, model.clip_states); K1/K2 clip
+#: Ca at it.
 CA_FLOOR = 1e-12
 
 
@@ -37,12 +38,3 @@ def d2Ca_dt2(Ca, dCa, Ca_bar, p):
     w = p["omega_n"]
     return w * w * (Ca_bar - Ca) - 2.0 * p["zeta"] * w * dCa
 
-
-def at_ca_floor(Ca):
-    """True where [Ca] is at or below CA_FLOOR (the integrator's floor event)."""
-    return np.asarray(Ca) <= CA_FLOOR
-
-
-def ca_floor_event(Ca):
-    """Event function Ca - CA_FLOOR [M]: crosses zero (downwards) when Ca reaches the floor."""
-    return np.asarray(Ca) - CA_FLOOR

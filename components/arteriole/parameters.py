@@ -92,7 +92,7 @@ NO_SPEED_SCALED = ("h_w", "r_dw", "s_w", "k_tau")
 _KUO91 = {
     # NO model: tabNewNOValues for h_w, s_w, r_dw, k_tau; the rest tabActiveFit (Kuo)
     "h_w": 38.0e-12, "s_w": 346e-12, "gamma_wb": 7.27, "r_db": 89.5, "r_dw": 47.6e-3,
-    "k_tau": 1.24e-14, "C_in": 0.0, "mu_b": 4.37e-3, "dP0": 60.0 * PA_PER_MMHG, "r0": 60e-6,
+    "k_tau": 1.24e-15, "C_in": 0.0, "mu_b": 4.37e-3, "dP0": 60.0 * PA_PER_MMHG, "r0": 60e-6,
     "NO_L": 780e-12, "NO_U": 36.5e-9, "pcGMP_L": -9.57, "pcGMP_U": -8.29,
     "sigma_L": -8.16e3, "sigma_U": 52.4e3, "pCa_L": -8.50, "pCa_U": -6.94,
     "f1": 9.34e-6, "f2": 500e-3, "lambda_opt": 1.49, "v": 9.71, "eta": 264e-3,

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import SolverError
+from ..errors import HemocircuitError, SolverError
 
 
 @dataclass
@@ -82,7 +82,10 @@ def newton(circuit, X, law_totals, t=0.0, tol=1e-10, max_iter=50, ptc=False):
     done = np.zeros(B, bool)
     norm_prev = None
     for it in range(max_iter if not ptc else 400):
-        J, F = _jac(circuit, t, X, law_totals)
+        try:
+            J, F = _jac(circuit, t, X, law_totals)
+        except HemocircuitError:
+            return X, False, np.full(B, np.inf)
         norm = np.max(np.abs(F) / scales, axis=1)
         if not np.all(np.isfinite(F)):
             return X, False, norm
@@ -99,8 +102,11 @@ def newton(circuit, X, law_totals, t=0.0, tol=1e-10, max_iter=50, ptc=False):
         lam = np.ones(B)
         for _ in range(12):
             Xn = X + lam[:, None] * dX
-            Fn = residual(circuit, t, Xn, law_totals)
-            nn = np.max(np.abs(Fn) / scales, axis=1)
+            try:
+                Fn = residual(circuit, t, Xn, law_totals)
+                nn = np.max(np.abs(Fn) / scales, axis=1)
+            except HemocircuitError:  # a trial point outside the physical domain
+                nn = np.full(B, np.inf)
             bad = ~np.isfinite(nn) | ((nn > norm * (1 - 1e-4 * lam)) & ~ptc & (norm > 1e-14))
             if not bad.any():
                 break
@@ -127,6 +133,14 @@ def dc_guess(circuit, t=0.0, max_iter=200, tol=1e-12):
     for g, p in zip(circuit.groups, plist):
         if g.S:
             X[:, g.sidx] = np.broadcast_to(g.comp.default_states(p), (B, g.E, g.S))
+    # anchors of conservation laws start at the calibration pressure (or 10 mmHg)
+    for spec in circuit.law_specs:
+        g, i = spec["anchor"]
+        target = spec.get("pressure", 10.0)
+        u = np.zeros((B, g.E, g.L))
+        u[:, i, 0] = target
+        X[:, g.sidx[i]] = g.comp.initial_states(plist[circuit.groups.index(g)], u)[:, i]
+    anchors = {(id(s["anchor"][0]), s["anchor"][1]) for s in circuit.law_specs}
     relax = 1.0 if circuit.all_constant else 0.5
     for it in range(max_iter):
         u, plist_b, stamps = _dc_u(circuit, t, X)
@@ -136,7 +150,10 @@ def dc_guess(circuit, t=0.0, max_iter=200, tol=1e-12):
                 continue
             ul = u[:, g.uidx]
             flows = np.einsum("beij,bej->bei", np.broadcast_to(A_loc, (B,) + A_loc.shape[1:]), ul) - b_loc
-            Xn[:, g.sidx] = g.comp.initial_states(p, ul, flows, X[:, g.sidx])
+            new = g.comp.initial_states(p, ul, flows, X[:, g.sidx])
+            for i in range(g.E):
+                if (id(g), i) not in anchors:
+                    Xn[:, g.sidx[i]] = new[:, i]
         step = Xn - X
         X = X + relax * step
         if np.max(np.abs(step) / (np.abs(X) + circuit.state_scales)) < tol:

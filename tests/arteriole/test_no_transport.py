@@ -67,5 +67,10 @@ def test_noss_solves_dCw_dt_zero(art, kuo, no_speed):
 
 
 def test_tau_hat_normalisation(art, kuo):
-    # tau_hat = 1 at dP = dP0 = 60 mmHg and r = r0
-    assert art.no_transport.tau_hat(60 * 133.322387415, 60e-6, kuo) == pytest.approx(1.0, rel=1e-12)
+    """tau_hat = (dP/dP0)(r/r0), dP0 = 60 mmHg, r0 = 60 um; Poiseuille wall shear r dP/(2L)."""
+    th = art.no_transport.tau_hat
+    mmhg = 133.322387415
+    assert th(60 * mmhg, 60e-6, kuo) == pytest.approx(1.0, rel=1e-12)
+    assert th(30 * mmhg, 120e-6, kuo) == pytest.approx(1.0, rel=1e-12)
+    assert th(15 * mmhg, 60e-6, kuo) == pytest.approx(0.25, rel=1e-12)
+    assert th(-15 * mmhg, 60e-6, kuo) == th(15 * mmhg, 60e-6, kuo)   # either flow direction

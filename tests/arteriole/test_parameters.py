@@ -9,16 +9,16 @@ def test_presets_complete_and_within_bounds(art):
         assert art.check_params(p) == [], name
 
 
-def test_units_parse_with_pint_and_match_si(art):
+def test_units_parse_with_pint_and_have_si_dimensions(art):
     pint = pytest.importorskip("pint")
     ureg = pint.UnitRegistry()
+    # MODEL_NOTES units: k_tau m^2 M/s and h_w m^2/s (so h_w/A_w is 1/s), mu_b Pa*s, ...
     dims = {"h_w": "[length]**2/[time]", "k_tau": "[length]**2*[substance]/[length]**3/[time]",
             "mu_b": "[pressure]*[time]", "f1": "[force]*[time]/[length]", "q1": "[force]",
-            "s_w": "[substance]/[length]**3/[time]", "sigma_L": "[pressure]", "omega_n": "1/[time]"}
+            "s_w": "[substance]/[length]**3/[time]", "sigma_L": "[pressure]", "omega_n": "1/[time]",
+            "dP0": "[pressure]", "v": "[length]/[time]", "NO_L": "[substance]/[length]**3"}
     for name, spec in art.PARAMETERS.items():
         q = ureg.Quantity(1, spec.unit)
-        assert q.to_base_units().magnitude == pytest.approx(
-            {"mol/L": 1e3}.get(str(spec.unit).split("/")[0] + "/L", q.to_base_units().magnitude))
         if name in dims:
             assert q.check(dims[name]), name
         assert spec.doc and ("tab" in spec.doc or "sec." in spec.doc or name == "n"), name
