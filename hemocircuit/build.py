@@ -158,7 +158,30 @@ def compile_expressions(elements: list[ElementData], netlist: Netlist):
             e.expressions[name] = Expression(text, e.cls.parameters[name].unit, resolve, e.where)
 
 
+def check_expression_values(elements: list[ElementData]):
+    """Bounds of expression parameters that follow only constants and other parameters
+    (those that follow states are checked by nothing but the solve)."""
+    by_id = {e.id: e for e in elements}
+    for e in elements:
+        for name, ex in e.expressions.items():
+            if any(r.kind == "observable" for r in ex.refs.values()):
+                continue
+            vals = {k: np.asarray(by_id[r.element].values[r.name], dtype=float)
+                    for k, r in ex.refs.items() if r.kind == "param"}
+            try:
+                with np.errstate(all="ignore"):
+                    v = float(np.asarray(ex.evaluate(vals), dtype=float).reshape(-1)[0])
+            except (ArithmeticError, ValueError, TypeError) as exc:
+                raise NetlistError(f"expression for '{name}' ({ex.text}) cannot be evaluated: {exc}",
+                                   **e.where) from None
+            par = e.cls.parameters[name]
+            if par.violates(np.array([v])).any():
+                raise NetlistError(f"parameter '{name}' = {ex.text} = {v:g} {par.unit} is not physical: "
+                                   f"need {par.bounds_text()}", **e.where)
+
+
 def parse_netlist(netlist: Netlist) -> list[ElementData]:
     elements = [parse_element(spec, netlist.file) for spec in netlist.elements]
     compile_expressions(elements, netlist)
+    check_expression_values(elements)
     return elements

@@ -306,6 +306,39 @@ class Circuit:
         c._prepare()
         return c
 
+    def subset(self, members) -> "Circuit":
+        """A cheap view of batch members ``members`` (shares structure, slices parameters).
+
+        Used inside batch integration, where members finish at different times."""
+        members = np.asarray(members)
+        if self.B == 1:
+            return self
+        if len(members) == self.B and np.all(members == np.arange(self.B)):
+            return self
+        key = members.tobytes()
+        cache = self.__dict__.setdefault("_subset_cache", {})
+        if key in cache:
+            return cache[key]
+        c = copy.copy(self)
+        c.__dict__.pop("_subset_cache", None)
+        c.groups = []
+        for g in self.groups:
+            ng = copy.copy(g)
+            ng.p = {k: (v[members] if v.shape[0] > 1 else v) for k, v in g.p.items()}
+            c.groups.append(ng)
+        c._locate = {eid: (c.groups[self.groups.index(g)], i) for eid, (g, i) in self._locate.items()}
+        c.B = len(members)
+        c.A_const = self.A_const[members] if self.A_const.shape[0] > 1 else self.A_const
+        c.b_const = self.b_const[members] if self.b_const.shape[0] > 1 else self.b_const
+        c._Ainv = None if self._Ainv is None else (self._Ainv[members] if self._Ainv.shape[0] > 1 else self._Ainv)
+        c._rep_cache = {}
+        c.law_totals = [None if v is None else np.atleast_1d(v)[members] if np.size(v) > 1 else v
+                        for v in self.law_totals]
+        if len(cache) > 64:
+            cache.clear()
+        cache[key] = c
+        return c
+
     def member(self, k: int) -> "Circuit":
         """Batch member k as a single circuit."""
         c = self.copy()

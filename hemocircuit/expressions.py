@@ -52,6 +52,11 @@ class Expression:
                                    "(use + - * / **, numbers, names, exp/log/sqrt)", **where)
             if isinstance(node, ast.Call) and not (isinstance(node.func, ast.Name) and node.func.id in _FUNCS):
                 raise NetlistError(f"expression {self.text!r}: only exp, log, sqrt may be called", **where)
+        # integer literals become floats: Python integer powers (10**10**10) can take unbounded
+        # time and memory, float powers overflow at once (reported as an error below)
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Constant) and type(node.value) is int:
+                node.value = float(node.value)
         self._tree = tree
         self._key = {}
         self._collect(tree.body, resolve)
@@ -121,8 +126,9 @@ def constant_reference(name, raw, where) -> Reference:
     """A netlist-level parameter used in an expression: a constant, stored in SI."""
     try:
         q = parse_with_unit(raw)
+        base = q.to_base_units()
+        ref = Reference(None, name, str(q.units), "constant", float(base.magnitude))
     except Exception as exc:
         raise NetlistError(f"parameter {name}: {exc}", **where) from None
-    ref = Reference(None, name, str(q.units), "constant", float(q.to_base_units().magnitude))
-    ref.pint = q.to_base_units()
+    ref.pint = base
     return ref

@@ -26,7 +26,8 @@ class ConservationLaw:
     terms: list  # [(element id, storage index, sign)]: sum(sign * volume) is constant
 
     def describe(self):
-        return " + ".join(f"{'+' if s > 0 else '-'}V({eid})" for eid, _, s in self.terms).lstrip("+ ")
+        text = " ".join(f"{'+' if s > 0 else '-'} V({eid})" for eid, _, s in self.terms)
+        return text[2:] if text.startswith("+ ") else text
 
 
 def local_node_map(elem, comp):
@@ -68,7 +69,10 @@ def check_topology(elements, comps, file=None):
                                 file=_file_of(elements, ids[0]) or file, element=ids[0], node=node)
     g = circuit_graph(elements, comps)
     if GROUND not in g:
-        raise TopologyError(f"no element connects to '{GROUND}': the circuit has no pressure reference", **where)
+        first = elements[0] if elements else None
+        raise TopologyError(f"no element connects to '{GROUND}': the circuit has no pressure reference",
+                            file=(first.file if first else None) or file, element=first.id if first else None,
+                            node=first.nodes[0] if first and first.nodes else None)
     for comp_nodes in nx.connected_components(g):
         if GROUND not in comp_nodes:
             node = sorted(comp_nodes)[0]

@@ -49,12 +49,49 @@ class Netlist:
         raise KeyError(eid)
 
 
+class UniqueKeyLoader(yaml.SafeLoader):
+    """A safe YAML loader that rejects a key repeated in one mapping (PyYAML keeps the last
+    one silently, so ``{R: 1 mmHg*s/mL, R: 2 mmHg*s/mL}`` would hide a typo)."""
+
+    def construct_mapping(self, node, deep=False):
+        seen = set()
+        for key_node, _ in node.value:
+            try:
+                key = self.construct_object(key_node, deep=True)
+                hash(key)
+            except (TypeError, yaml.YAMLError):
+                continue  # unhashable keys: PyYAML itself reports them
+            if key in seen:
+                raise yaml.constructor.ConstructorError(
+                    "while constructing a mapping", node.start_mark, f"found duplicate key {key!r}",
+                    key_node.start_mark)
+            seen.add(key)
+        return super().construct_mapping(node, deep=deep)
+
+
+def _absolutize(value, base_dir):
+    """Make ``{file: relative/path}`` entries (waveform tables) absolute against ``base_dir``,
+    so a value keeps pointing at its own netlist's folder when another netlist extends it."""
+    if isinstance(value, dict):
+        out = {}
+        for k, v in value.items():
+            if k == "file" and isinstance(v, str) and v and not os.path.isabs(v) and "${" not in v:
+                v = os.path.normpath(os.path.join(base_dir, v))
+            else:
+                v = _absolutize(v, base_dir)
+            out[k] = v
+        return out
+    if isinstance(value, list):
+        return [_absolutize(v, base_dir) for v in value]
+    return value
+
+
 def _read_yaml(path):
     if not os.path.exists(path):
         raise NetlistError(f"netlist file not found: {path}")
     try:
         with open(path) as fh:
-            data = yaml.safe_load(fh)
+            data = yaml.load(fh, Loader=UniqueKeyLoader)
     except yaml.YAMLError as exc:
         raise NetlistError(f"not valid YAML: {exc}", file=path) from None
     except (UnicodeDecodeError, OSError) as exc:
@@ -87,7 +124,7 @@ def _element_list(items, path, what="elements"):
         if not isinstance(nodes, list) or not all(isinstance(n, (str, int)) and not isinstance(n, bool)
                                                   for n in nodes):
             raise NetlistError("'nodes' must be a list of node names", file=path, element=eid)
-        values = {str(k): v for k, v in item.items() if k not in ELEMENT_KEYS}
+        values = {str(k): _absolutize(v, os.path.dirname(path)) for k, v in item.items() if k not in ELEMENT_KEYS}
         out.append(ElementSpec(eid, etype, [str(n) for n in nodes], values, path))
     return out
 
@@ -137,11 +174,14 @@ def _load_raw(path, chain):
                 if k == "id":
                     raise NetlistError("cannot change an element's id", file=path, element=cid)
                 if k == "type":
-                    match[0].type = v
+                    match[0].type = v if isinstance(v, str) else str(v)
                 elif k == "nodes":
-                    match[0].nodes = [str(n) for n in v] if isinstance(v, list) else v
+                    if not isinstance(v, list) or not all(isinstance(n, (str, int)) and not isinstance(n, bool)
+                                                          for n in v):
+                        raise NetlistError("'nodes' must be a list of node names", file=path, element=cid)
+                    match[0].nodes = [str(n) for n in v]
                 else:
-                    match[0].values[str(k)] = v
+                    match[0].values[str(k)] = _absolutize(v, base_dir)
                 match[0].file = path
         elements += _element_list(data.get("add"), path, "add")
         name = data.get("name", base["name"])
@@ -158,7 +198,8 @@ def _load_raw(path, chain):
         name = data.get("name", os.path.splitext(os.path.basename(path))[0])
         description = data.get("description", "")
         outputs = data.get("outputs", [])
-    # Resolve relative paths inside element values against *their* file's folder.
+    if not isinstance(outputs, list) or not all(isinstance(o, str) for o in outputs):
+        raise NetlistError("'outputs' must be a list of column names", file=path)
     return {"elements": elements, "parameters": merged_params, "constraints": constraints, "name": name,
             "description": description, "outputs": outputs, "base_dir": base_dir}
 

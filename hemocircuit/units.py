@@ -52,10 +52,21 @@ class UnitError(HemocircuitError):
 _NUMBER = re.compile(r"^\s*[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?\s*$")
 
 
+# an integer literal (not part of a name such as cmH2O, not a float or 1e-3)
+_INT_LITERAL = re.compile(r"(?<![\w.])(\d+(?:\.\d*)?(?:[eE][-+]?\d+)?)(?![\w.])")
+
+
+def _float_literals(text: str) -> str:
+    """'10**10**10 mmHg' -> '10.0**10.0**10.0 mmHg': pint evaluates integer literals with Python
+    integers, whose powers can take unbounded time and memory; floats overflow at once."""
+    return _INT_LITERAL.sub(lambda m: m.group(1) if any(c in m.group(1) for c in ".eE") else m.group(1) + ".0",
+                            text)
+
+
 @functools.lru_cache(maxsize=4096)
 def _parse(text: str):
     try:
-        return Q_(text) if not _NUMBER.match(text) else Q_(float(text), "dimensionless")
+        return Q_(_float_literals(text)) if not _NUMBER.match(text) else Q_(float(text), "dimensionless")
     except Exception as exc:  # pint raises many different types
         raise UnitError(f"cannot parse quantity {text!r}: {exc}") from None
 
@@ -80,13 +91,19 @@ def parse_quantity(value, unit: str, what: str = "value") -> float:
         q = _parse(value)
     else:
         raise UnitError(f"{what}: expected a quantity in {unit}, got {type(value).__name__} {value!r}")
-    if q.dimensionless and not target.dimensionless and _NUMBER.match(str(value)):
-        raise UnitError(f"{what}: {value!r} has no unit; give it in {unit}")
     try:
+        if q.dimensionless and not target.dimensionless and _NUMBER.match(str(value)):
+            raise UnitError(f"{what}: {value!r} has no unit; give it in {unit}")
         return float(q.to(unit).magnitude)
     except pint.DimensionalityError:
-        raise UnitError(f"{what}: {value!r} has dimension {q.dimensionality}, expected a unit of "
+        try:
+            dim = q.dimensionality
+        except (ArithmeticError, ValueError, TypeError):
+            dim = "?"
+        raise UnitError(f"{what}: {value!r} has dimension {dim}, expected a unit of "
                         f"{unit} ({target.dimensionality})") from None
+    except (ArithmeticError, ValueError, TypeError) as exc:  # overflow, complex magnitudes, ...
+        raise UnitError(f"{what}: cannot convert {value!r} to {unit}: {exc}") from None
 
 
 def parse_with_unit(value) -> "pint.Quantity":

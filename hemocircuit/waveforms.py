@@ -85,11 +85,19 @@ class Sum(Waveform):
 
 def _table_rows(spec, base_dir, unit, where):
     if isinstance(spec, dict) and "file" in spec:
+        if not isinstance(spec["file"], str) or not spec["file"] or len(spec) != 1:
+            raise NetlistError(f"a table file is given as {{file: NAME.csv}}, got {spec!r}", **where)
         path = spec["file"] if os.path.isabs(spec["file"]) else os.path.join(base_dir or ".", spec["file"])
-        if not os.path.exists(path):
+        if not os.path.isfile(path):
             raise NetlistError(f"table file not found: {path}", **where)
-        with open(path, newline="") as fh:
-            rows = [r for r in csv.reader(fh) if r and not r[0].lstrip().startswith("#")]
+        try:
+            with open(path, newline="") as fh:
+                rows = [r for r in csv.reader(fh) if r and not r[0].lstrip().startswith("#")]
+        except (OSError, UnicodeDecodeError, csv.Error) as exc:
+            raise NetlistError(f"table file {path}: cannot read: {exc}", **where) from None
+        if len(rows) < 2:
+            raise NetlistError(f"table file {path}: needs a header 'time [s],value [UNIT]' and at least one row",
+                               **where)
         header, rows = rows[0], rows[1:]
         units = []
         for h in header[:2]:
@@ -124,9 +132,12 @@ def parse_waveform(spec, unit: str, base_dir=None, where=None) -> Waveform:
                                **where)
         (kind, body), = spec.items()
         if kind in ("steps", "pwc", "pwl"):
-            rows = sorted(_table_rows(body, base_dir, unit, where))
+            # stable sort on time only: rows with equal times keep their order (a jump)
+            rows = sorted(_table_rows(body, base_dir, unit, where), key=lambda r: r[0])
             t = np.array([r[0] for r in rows])
             v = np.array([r[1] for r in rows])
+            if not (np.all(np.isfinite(t)) and np.all(np.isfinite(v))):
+                raise NetlistError(f"{kind} table: every time and value must be finite", **where)
             return Table(t, v, linear=(kind == "pwl"))
         if kind == "sine":
             if not isinstance(body, dict):
@@ -134,11 +145,14 @@ def parse_waveform(spec, unit: str, base_dir=None, where=None) -> Waveform:
             unknown = set(body) - {"offset", "amplitude", "frequency", "phase", "start"}
             if unknown:
                 raise NetlistError(f"unknown sine field(s) {sorted(unknown)}", **where)
-            return Sine(offset=parse_quantity(body.get("offset", f"0 {unit}"), unit, "sine offset"),
+            sine = Sine(offset=parse_quantity(body.get("offset", f"0 {unit}"), unit, "sine offset"),
                         amplitude=parse_quantity(body.get("amplitude", f"0 {unit}"), unit, "sine amplitude"),
                         frequency=parse_quantity(body.get("frequency", "0 Hz"), "Hz", "sine frequency"),
                         phase=parse_quantity(body.get("phase", "0 rad"), "rad", "sine phase"),
                         start=parse_quantity(body.get("start", "0 s"), "s", "sine start"))
+            if not np.all(np.isfinite([sine.offset, sine.amplitude, sine.frequency, sine.phase, sine.start])):
+                raise NetlistError("sine: every field must be finite", **where)
+            return sine
         if kind == "sum":
             if not isinstance(body, list) or not body:
                 raise NetlistError("sum needs a non-empty list of waveforms", **where)

@@ -22,9 +22,10 @@ from hemocircuit.component import Component, Observable, Option, Param, State, S
 from hemocircuit.units import M3_PER_ML, PA_PER_MMHG
 
 from . import model
-from .geometry import bed_volume, l2r, resistance
+from .geometry import bed_volume, l2r, lumen_area, resistance
 from .myogenic import CA_FLOOR
-from .parameters import PARAMETERS, PRESETS, check_params
+from .no_transport import _cb_inf
+from .parameters import PARAMETERS, PRESETS, check_params, effective
 from .steady_state import solve_steady
 
 _UNITS = {"mol/L": "M", "mol/L/s": "M/s"}
@@ -49,8 +50,17 @@ _OBS = {
     "F_a": ("N", 1.0, "active force per cell"),
     "F_p": ("N", 1.0, "passive force per cell"),
     "q_out": ("mL/s", 1.0, "flow leaving at the out terminal"),
+    # NO carried out of the bed (eq. cinv; read by downstream tracer pools, docs/downstream_no.md)
+    "Cb_inf": ("M", 1.0, "far-downstream blood [NO], h_w C_we / (h_w + r_db A_b) (eqs. cbbar, cinv)"),
+    "k_NO": ("m**2/s", 1.0, "blood NO loss per unit vessel length, h_w + r_db A_b (exponent of eq. cinv)"),
 }
-_STATE_ONLY = ("r", "lambda", "Ca", "dCa", "Cw", "V", "R")
+_STATE_ONLY = ("r", "lambda", "Ca", "dCa", "Cw", "V", "R", "Cb_inf", "k_NO")
+
+
+def _outlet_no(Cw, r, p):
+    """State-only terms of eq. cinv: {'Cb_inf' [M], 'k_NO' [m^2/s]} (no_speed applied)."""
+    pe = effective(p)
+    return {"Cb_inf": _cb_inf(Cw, r, pe), "k_NO": pe["h_w"] + pe["r_db"] * lumen_area(r)}
 
 
 class Arteriole(Component):
@@ -166,11 +176,13 @@ class Arteriole(Component):
                    "V": bed_volume(r, p) / M3_PER_ML, "R": resistance(r, p) * _OBS["R"][1]}
             if self.opts["ca_order"] == 2:
                 out["dCa"] = s["dCa"]
+            out.update(_outlet_no(s["Cw"], r, p))
             return out
         P_im, dP = self._pressures(u)
         o = model.observables(s, P_im, dP, p, self.model_options)
         out = {n: o[n] * _OBS[n][1] for n in _OBS if n in o}
         out["Q"] = o["Q"] * p["n"] * _OBS["Q"][1]
+        out.update(_outlet_no(s["Cw"], o["r"], p))
         if self.opts["volume_flow"]:
             out["q_out"] = 2.0 * (u[..., 3] - u[..., 1]) / (resistance(o["r"], p) * _OBS["R"][1])
         else:
