@@ -95,10 +95,10 @@ class LogCompliance(_Store):
     def pressure(self, p, V):
         k, P0, Vn = p["k"], p["P0"], p["Vn"]
         if not self.opts["extended"]:
-            return P0 + np.exp(k * (V - Vn))
+            return P0 + np.exp(np.minimum(k * (V - Vn), 700.0))
         V_eps = Vn + np.log(self.EPS) / k
         # C1 continuation: slope d(dP)/dV = k EPS at V_eps
-        return P0 + np.where(V >= V_eps, np.exp(k * (np.maximum(V, V_eps) - Vn)), self.EPS * (1 + k * (V - V_eps)))
+        return P0 + np.where(V >= V_eps, np.exp(np.minimum(k * (np.maximum(V, V_eps) - Vn), 700.0)), self.EPS * (1 + k * (V - V_eps)))
 
     def volume(self, p, dP):
         k, P0, Vn = p["k"], p["P0"], p["Vn"]

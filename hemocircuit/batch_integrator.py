@@ -94,39 +94,36 @@ def integrate(circuit, x0, t_out, rtol=1e-5, atol=None, h0=1e-3, max_steps=20000
         finite = np.all(np.isfinite(x_new), axis=1) & np.isfinite(err)
         err = np.where(finite, err, np.inf)
         accept = err <= 1.0
-        # hard limits: a step that crosses a bound is shortened to land on it
-        landed = np.zeros(len(idx), bool)
-        for li, bound, reset in limits:
-            cross = accept & (x_new[:, li] < bound)
-            if cross.any():
-                frac = (xi[:, li] - bound) / np.maximum(xi[:, li] - x_new[:, li], 1e-300)
-                near = cross & (np.abs(x_new[:, li] - bound) <= 1e-3 * np.abs(xi[:, li] - bound) + atol_v[li])
-                landed |= near
-                retry = cross & ~near
-                accept &= ~retry
-                hi_new = np.where(retry, hi * np.clip(frac, 0.05, 0.999), hi)
-                h[idx] = np.where(retry, hi_new, h[idx])
         # step-size control (embedded order 2 -> exponent 1/3)
         fac = np.clip(0.9 * np.where(err > 0, err, 1e-10) ** (-1.0 / ORDER), 0.2, 5.0)
+        h[idx] = hi * np.where(accept, fac, np.where(np.isfinite(err), np.minimum(fac, 0.5), 0.25))
         age[idx] = np.where(accept, age[idx] + 1, JAC_REUSE)  # refresh J after a rejection
-        rej = ~accept & ~landed
-        grow = np.where(accept, fac, np.where(np.isfinite(err), np.minimum(fac, 0.5), 0.25))
-        h_next = np.where(accept | rej, hi * grow, h[idx])
-        # members that hit a limit keep the shortened h chosen above
-        crossed_retry = ~accept & ~rej
-        h[idx] = np.where(crossed_retry, h[idx], h_next)
         nrej += int(np.sum(~accept))
         if accept.any():
             a = idx[accept]
             xa = x_new[accept]
-            ta = ti[accept] + hi[accept]
+            ha = hi[accept]
+            ta = ti[accept] + ha
+            fa = _rhs(circuit, ta, xa, members=a)
+            # hard limits: locate the crossing on the step's cubic Hermite interpolant, end
+            # the step there, put the state on the bound and reset its rate state
+            hit_any = np.zeros(len(a), bool)
             for li, bound, reset in limits:
-                hit = xa[:, li] <= bound * (1 + 1e-12) + 1e-300
-                if hit.any():
-                    xa[hit, li] = bound
-                    if reset is not None:
-                        xa[hit, reset] = np.maximum(xa[hit, reset], 0.0)
-            fa = _rhs(circuit, ta, xa, members=a, B=B)
+                hit = xa[:, li] < bound
+                if not hit.any():
+                    continue
+                j = np.nonzero(hit)[0]
+                s_cross = _hermite_root(x[a[j], li] - bound, f_cur[a[j], li] * ha[j], xa[j, li] - bound,
+                                        fa[j, li] * ha[j])
+                xs = _hermite(x[a[j]], f_cur[a[j]], xa[j], fa[j], ha[j], s_cross)
+                xs[:, li] = bound
+                if reset is not None:
+                    xs[:, reset] = np.maximum(xs[:, reset], 0.0)
+                xa[j], ta[j] = xs, ti[accept][j] + s_cross * ha[j]
+                hit_any[j] = True
+            if hit_any.any():
+                fa[hit_any] = _rhs(circuit, ta[hit_any], xa[hit_any], members=a[hit_any])
+                age[a[hit_any]] = JAC_REUSE
             # dense output on the grid: cubic Hermite between (t, x, f) and (ta, xa, fa)
             _emit(out, t_out, next_out, a, t[a], x[a], f_cur[a], ta, xa, fa)
             t[a], x[a], f_cur[a] = ta, xa, fa
@@ -187,22 +184,43 @@ def _step(c, t, x, f0, h, J, f_t, eye):
     return x_new, err
 
 
+def _hermite(x0, f0, x1, f1, h, s):
+    """Cubic Hermite interpolant at fractions s (n,) of steps h (n,)."""
+    s = s[:, None]
+    hh = h[:, None]
+    return ((1 + 2 * s) * (1 - s) ** 2 * x0 + s * (1 - s) ** 2 * hh * f0
+            + s * s * (3 - 2 * s) * x1 + s * s * (s - 1) * hh * f1)
+
+
+def _hermite_root(y0, d0, y1, d1):
+    """Fraction s in [0, 1] where the cubic with values y0, y1 and scaled slopes d0, d1 (= h f)
+    first crosses zero from above (bisection on the sign; y0 > 0 >= y1)."""
+    lo = np.zeros_like(y0)
+    hi = np.ones_like(y0)
+    for _ in range(40):
+        m = 0.5 * (lo + hi)
+        v = (1 + 2 * m) * (1 - m) ** 2 * y0 + m * (1 - m) ** 2 * d0 + m * m * (3 - 2 * m) * y1 + m * m * (m - 1) * d1
+        above = v > 0
+        lo = np.where(above, m, lo)
+        hi = np.where(above, hi, m)
+    return hi
+
+
 def _emit(out, t_out, next_out, members, t0, x0, f0, t1, x1, f1):
-    """Fill output grid points t0 < t_out <= t1 by cubic Hermite interpolation."""
-    for j, m in enumerate(members):
-        k = next_out[m]
-        stop = np.searchsorted(t_out, t1[j], side="right")
-        if stop <= k:
-            continue
-        ts = t_out[k:stop]
+    """Fill output grid points t0 < t_out <= t1 by cubic Hermite interpolation (vectorised)."""
+    stop = np.searchsorted(t_out, t1, side="right")
+    k = next_out[members]
+    pending = k < stop
+    while pending.any():
+        j = np.nonzero(pending)[0]
+        m = members[j]
+        kk = k[j]
         dt = t1[j] - t0[j]
-        s = ((ts - t0[j]) / dt)[:, None]
-        h00 = (1 + 2 * s) * (1 - s) ** 2
-        h10 = s * (1 - s) ** 2
-        h01 = s * s * (3 - 2 * s)
-        h11 = s * s * (s - 1)
-        out[m, k:stop] = h00 * x0[j] + h10 * dt * f0[j] + h01 * x1[j] + h11 * dt * f1[j]
-        next_out[m] = stop
+        s = (t_out[kk] - t0[j]) / dt
+        out[m, kk] = _hermite(x0[j], f0[j], x1[j], f1[j], dt, s)
+        k[j] += 1
+        pending = k < stop
+    next_out[members] = np.maximum(next_out[members], stop)
 
 
 def _fail_members(circuit, idx, t, x, h, ok, active, message, exc):

@@ -24,6 +24,7 @@ from .build import ElementData, check_values, parse_netlist
 from .component import Component
 from .errors import HemocircuitError, NetlistError, TopologyError
 from .graph import check_topology, local_node_map
+from .linalg import solve_batched
 from .netlist import GROUND, Netlist, load_netlist
 from .units import UnitError, parse_quantity, parse_with_unit
 
@@ -557,10 +558,12 @@ class Circuit:
             u = np.einsum("bij,bj->bi", Ainv, b)
         else:
             try:
-                u = np.linalg.solve(A, b[..., None])[..., 0]
+                u = solve_batched(A, b)
             except np.linalg.LinAlgError:
+                u = np.full(b.shape, np.nan)
+            if not np.all(np.isfinite(u)):
                 raise TopologyError("the nodal equations are singular at this state (a pressure is undefined)",
-                                    file=self.file) from None
+                                    file=self.file)
         return np.concatenate([u, np.zeros((u.shape[0], 1))], axis=1)  # + ground slot
 
     def evaluate(self, t, x, dc=False, want="rhs"):
@@ -614,7 +617,7 @@ class Circuit:
         cols = [Column(f"P({n})", "mmHg") for n in self.nodes if ":" not in n]
         cols += [Column(f"Q({e})", "mL/s") for g in self.groups for e in g.ids]
         for g in self.groups:
-            store_vols = {s.volume for s in g.comp.storages()}
+            store_vols = {s.volume for s in g.comp.storages()} | {"V"}
             obs_names = [o.name for o in g.observables]
             for e in g.ids:
                 for s in g.states:
@@ -647,7 +650,7 @@ class Circuit:
             flows = np.einsum("beij,bej->bei", np.broadcast_to(A_loc, (T,) + A_loc.shape[1:]), ul) - b_loc
             xl = x[:, g.sidx]
             obs = g.comp.observe(p, xl, ul, tt, src)
-            store_vols = {s.volume for s in g.comp.storages()}
+            store_vols = {s.volume for s in g.comp.storages()} | {"V"}  # volumes are V(id)
             obs_names = [o.name for o in g.observables]
             for i, e in enumerate(g.ids):
                 out[f"Q({e})"] = flows[:, i, 0] if g.K else np.zeros(T)

@@ -16,7 +16,7 @@ import yaml
 from .errors import NetlistError
 
 TOP_KEYS = {"name", "description", "parameters", "elements", "extends", "add", "remove", "change",
-            "constraints", "outputs"}
+            "constraints", "outputs", "derived"}
 ELEMENT_KEYS = {"id", "type", "nodes"}
 GROUND = "ground"
 _REF = re.compile(r"\$\{([A-Za-z_][A-Za-z0-9_]*)\}")
@@ -41,6 +41,7 @@ class Netlist:
     file: str | None = None
     base_dir: str | None = None
     outputs: list = field(default_factory=list)
+    derived: dict = field(default_factory=dict)  # name -> {expr, unit}: quantities computed from columns
 
     def element(self, eid):
         for e in self.elements:
@@ -86,12 +87,30 @@ def _absolutize(value, base_dir):
     return value
 
 
+# ``value: ${Pic}`` inside a flow mapping ``{...}`` is not valid YAML (the braces are flow
+# indicators), yet it is the documented netlist shape.  Before parsing, every ``${name}`` becomes
+# ``$(name)`` (same length, so YAML error columns stay right), and back afterwards.
+_REF_TEXT = re.compile(r"\$\{([A-Za-z_][A-Za-z0-9_]*)\}")
+_REF_SAFE = re.compile(r"\$\(([A-Za-z_][A-Za-z0-9_]*)\)")
+
+
+def _restore_refs(value):
+    if isinstance(value, str):
+        return _REF_SAFE.sub(lambda m: "${" + m.group(1) + "}", value)
+    if isinstance(value, list):
+        return [_restore_refs(v) for v in value]
+    if isinstance(value, dict):
+        return {_restore_refs(k): _restore_refs(v) for k, v in value.items()}
+    return value
+
+
 def _read_yaml(path):
     if not os.path.exists(path):
         raise NetlistError(f"netlist file not found: {path}")
     try:
         with open(path) as fh:
-            data = yaml.load(fh, Loader=UniqueKeyLoader)
+            text = _REF_TEXT.sub(lambda m: "$(" + m.group(1) + ")", fh.read())
+        data = _restore_refs(yaml.load(text, Loader=UniqueKeyLoader))
     except yaml.YAMLError as exc:
         raise NetlistError(f"not valid YAML: {exc}", file=path) from None
     except (UnicodeDecodeError, OSError) as exc:
@@ -200,8 +219,13 @@ def _load_raw(path, chain):
         outputs = data.get("outputs", [])
     if not isinstance(outputs, list) or not all(isinstance(o, str) for o in outputs):
         raise NetlistError("'outputs' must be a list of column names", file=path)
+    derived = data.get("derived") or {}
+    if not isinstance(derived, dict) or not all(isinstance(v, dict) and "expr" in v for v in derived.values()):
+        raise NetlistError("'derived' must be a mapping name -> {expr: '<expression of columns>', unit: ...}",
+                           file=path)
+    derived = {**(base["derived"] if "extends" in data else {}), **derived}
     return {"elements": elements, "parameters": merged_params, "constraints": constraints, "name": name,
-            "description": description, "outputs": outputs, "base_dir": base_dir}
+            "description": description, "outputs": outputs, "base_dir": base_dir, "derived": derived}
 
 
 def _substitute(value, params, where):
@@ -246,4 +270,4 @@ def load_netlist(path: str) -> Netlist:
         e.values = _substitute(e.values, params, {"file": e.file, "element": e.id})
     return Netlist(name=str(raw["name"]), description=str(raw["description"] or ""), elements=raw["elements"],
                    parameters=params, constraints=raw["constraints"], file=os.path.abspath(path),
-                   base_dir=raw["base_dir"], outputs=list(raw["outputs"] or []))
+                   base_dir=raw["base_dir"], outputs=list(raw["outputs"] or []), derived=dict(raw["derived"]))

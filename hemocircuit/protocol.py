@@ -65,6 +65,8 @@ class Protocol:
         if not isinstance(initial, dict):
             raise NetlistError("'initial' must be a mapping ID.PARAM: value", **where)
         events = []
+        if not isinstance(data.get("events") or [], list):
+            raise NetlistError("'events' must be a list of {at: <time>, set: {ID.PARAM: value}}", **where)
         for i, ev in enumerate(data.get("events") or []):
             if not isinstance(ev, dict) or "at" not in ev or not isinstance(ev.get("set"), dict):
                 raise NetlistError(f"event {i} must be {{at: <time>, set: {{ID.PARAM: value}}}}", **where)
@@ -80,6 +82,8 @@ class Protocol:
 
     def check(self, circuit):
         """Validate every path and value against the circuit (before any simulation)."""
+        for what, mapping in [("initial", self.initial)] + [(f"event at {ev.at:g} s", ev.set) for ev in self.events]:
+            _reject_bare_numbers(circuit, mapping, what, self.file)
         c = self.apply_initial(circuit)
         for ev in self.events:
             for path in ev.set:
@@ -101,6 +105,28 @@ class Protocol:
         c = circuit.with_options(opts) if opts else circuit.copy()
         c.set_params({k: v for k, v in self.initial.items() if k not in opts})
         return c
+
+
+def _reject_bare_numbers(circuit, mapping, what, file):
+    """A protocol file writes every dimensional value with its unit (like a netlist)."""
+    for path, value in mapping.items():
+        if not isinstance(path, str):
+            raise NetlistError(f"{what}: {path!r} is not an ID.PARAM path", file=file)
+        if _is_option(circuit, path):
+            continue
+        if not isinstance(value, (str, int, float, dict)) or isinstance(value, bool):
+            raise NetlistError(f"{what}: {path} = {value!r} is not a quantity with a unit (or a waveform)",
+                               file=file, element=path.partition(".")[0])
+        if not isinstance(value, (int, float)):
+            continue
+        try:
+            unit = circuit.param_unit(path)
+        except NetlistError:
+            continue  # reported with the event by the full check below
+        try:
+            parse_quantity(value, unit, path)
+        except UnitError as exc:
+            raise NetlistError(f"{what}: {exc}", file=file, element=path.partition(".")[0]) from None
 
 
 def _is_option(circuit, path):

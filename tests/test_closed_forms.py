@@ -230,9 +230,11 @@ def test_payne06_steady_state_is_a_fixed_point():
     op = c.operating_point()
     f = c.rhs(0.0, op.x)
     assert np.max(np.abs(f)) <= 1e-9 * 3.32
-    # and not for another state: 1 mL more in Cv drains out
+    # and not for another state: with 1 mL more in Cv, P(v) rises and the excess drains
+    Pv = 10 - 2.25 + math.exp(0.186 * (op.x[0] + 1.0 - 28))
     f2 = c.rhs(0.0, op.x + 1.0)
-    assert f2[0] < -0.1
+    assert f2[0] == pytest.approx((80 - Pv) / (0.4 + 20 + 1.32) - (Pv - 6) / 0.56, rel=1e-9)
+    assert f2[0] < -0.04
 
 
 # ------------------------------------------------------------- mass conservation ----------
@@ -361,6 +363,8 @@ def test_builtin_sine_term_of_sources(write):
              amplitude: 5 mmHg, frequency: 2 Hz, phase: 0 rad, start: 0.5 s}
           - {id: R1, type: resistor,    nodes: [in, a],     R: 1 mmHg*s/mL}
           - {id: Qf, type: flow_source, nodes: [a, ground], value: 3 mL/s, amplitude: 1 mL/s, frequency: 1 Hz}
+          - {id: R9, type: resistor,    nodes: [in, x],     R: 1 mmHg*s/mL}
+          - {id: Cx, type: compliance,  nodes: [x, ground], C: 0.01 mL/mmHg}
         """))
     res = c.simulate(2.0, dt=0.01)
     t = res.t

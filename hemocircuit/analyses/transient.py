@@ -124,25 +124,17 @@ def simulate(circuit, t_end, dt=None, t0=0.0, x0=None, protocol=None, method="BD
                 xs.append(sol.y.T)
                 segs.append(c)
                 x = sol.y[:, -1].copy() if sol.y.size else x
-                if sol.status == 1:  # a hard limit was reached
-                    te = [e for e in sol.t_events if len(e)]
-                    tev = float(min(e[0] for e in te))
-                    xev = [ye[0] for ye in sol.y_events if len(ye)][0].copy()
-                    for idx, bound, reset in limits:
-                        if xev[idx] <= bound * (1 + 1e-9) + 1e-300:
-                            xev[idx] = bound
-                            if reset is not None:
-                                xev[reset] = max(xev[reset], 0.0)
-                    x = xev
-                    # nudge: without a positive rate the state would sit on the bound
-                    cur = tev
-                    ts.append(np.array([tev]))
+                if sol.status == 1:  # a hard limit was reached: put the state on it, reset its rate
+                    k_ev = min((k for k, e in enumerate(sol.t_events) if len(e)), key=lambda k: sol.t_events[k][0])
+                    cur = float(sol.t_events[k_ev][0])
+                    x = sol.y_events[k_ev][0].copy()
+                    idx, bound, reset = limits[k_ev]
+                    x[idx] = bound
+                    if reset is not None:
+                        x[reset] = max(x[reset], 0.0)
+                    ts.append(np.array([cur]))
                     xs.append(x[None, :])
                     segs.append(c)
-                    f = c.rhs(cur, x)
-                    if all(f[idx] <= 0 and x[idx] <= bound for idx, bound, _ in limits if x[idx] <= bound):
-                        # held at the bound until its rate turns positive: step past with the rate frozen
-                        pass
                 else:
                     cur = b
     res = _collect(c, ts, xs, segs)
