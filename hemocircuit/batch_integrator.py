@@ -47,20 +47,24 @@ class BatchResult:
         self.t, self.x, self.ok, self.message, self.stats = t, x, ok, message, stats
 
 
-def integrate(circuit, x0, t_out, rtol=1e-5, atol=None, h0=1e-3, max_steps=200000, h_max=np.inf):
-    """Integrate every member of a batch circuit (B parameter sets) from x0 (B, nx) at t_out[0]
-    and return the states on the grid t_out (T,).  Members that fail are marked (ok False)
-    with a reason; the others are unaffected."""
+def integrate(circuit, x0, t_out, rtol=1e-5, atol=None, h0=1e-3, max_steps=500000, h_max=np.inf):
+    """Integrate every member of a batch circuit (B parameter sets) from x0 (B, nx) at the
+    first output time and return the states on the output grid: t_out (T,) common to all, or
+    (B, T), one grid per member (e.g. whole periods of each member's forcing frequency).
+    Members that fail are marked (ok False) with a reason; the others are unaffected, and every
+    member's trajectory is independent of which other members share the batch."""
     B, nx = np.shape(x0)
     assert circuit.B == B or circuit.B == 1
     t_out = np.asarray(t_out, dtype=float)
-    T = len(t_out)
+    if t_out.ndim == 1:
+        t_out = np.broadcast_to(t_out, (B, len(t_out)))
+    T = t_out.shape[1]
     scales = circuit.state_scales
     atol_v = (rtol * 1e-3 if atol is None else atol) * scales
     limits = circuit.hard_limits()
     x = np.array(x0, dtype=float)
-    t = np.full(B, t_out[0])
-    t_end = t_out[-1]
+    t = t_out[:, 0].copy()
+    t_end = t_out[:, -1]
     h = np.full(B, h0)
     active = np.ones(B, bool)
     ok = np.ones(B, bool)
@@ -76,7 +80,7 @@ def integrate(circuit, x0, t_out, rtol=1e-5, atol=None, h0=1e-3, max_steps=20000
     age = np.full(B, JAC_REUSE)  # steps since the member's Jacobian was computed
     while active.any() and nsteps < max_steps:
         idx = np.nonzero(active)[0]
-        ti, xi, hi, fi = t[idx], x[idx], np.minimum(h[idx], t_end - t[idx]), f_cur[idx]
+        ti, xi, hi, fi = t[idx], x[idx], np.minimum(h[idx], t_end[idx] - t[idx]), f_cur[idx]
         hi = np.minimum(hi, h_max)
         c = circuit.subset(idx)
         try:
@@ -127,7 +131,7 @@ def integrate(circuit, x0, t_out, rtol=1e-5, atol=None, h0=1e-3, max_steps=20000
             # dense output on the grid: cubic Hermite between (t, x, f) and (ta, xa, fa)
             _emit(out, t_out, next_out, a, t[a], x[a], f_cur[a], ta, xa, fa)
             t[a], x[a], f_cur[a] = ta, xa, fa
-            done = t[a] >= t_end - 1e-12 * max(1.0, abs(t_end))
+            done = t[a] >= t_end[a] - 1e-12 * np.maximum(1.0, np.abs(t_end[a]))
             active[a[done]] = False
         tiny = (h[idx] < 1e-12 * np.maximum(1.0, np.abs(t[idx]))) & active[idx]
         if tiny.any():
@@ -207,20 +211,21 @@ def _hermite_root(y0, d0, y1, d1):
 
 
 def _emit(out, t_out, next_out, members, t0, x0, f0, t1, x1, f1):
-    """Fill output grid points t0 < t_out <= t1 by cubic Hermite interpolation (vectorised)."""
-    stop = np.searchsorted(t_out, t1, side="right")
-    k = next_out[members]
-    pending = k < stop
-    while pending.any():
+    """Fill each member's output grid points t0 < t_out <= t1 by cubic Hermite interpolation."""
+    T = t_out.shape[1]
+    k = next_out[members].copy()
+    while True:
+        kc = np.minimum(k, T - 1)
+        pending = (k < T) & (t_out[members, kc] <= t1 + 1e-12 * np.maximum(1.0, np.abs(t1)))
+        if not pending.any():
+            break
         j = np.nonzero(pending)[0]
         m = members[j]
-        kk = k[j]
         dt = t1[j] - t0[j]
-        s = (t_out[kk] - t0[j]) / dt
-        out[m, kk] = _hermite(x0[j], f0[j], x1[j], f1[j], dt, s)
+        s = np.clip((t_out[m, k[j]] - t0[j]) / dt, 0.0, 1.0)
+        out[m, k[j]] = _hermite(x0[j], f0[j], x1[j], f1[j], dt, s)
         k[j] += 1
-        pending = k < stop
-    next_out[members] = np.maximum(next_out[members], stop)
+    next_out[members] = k
 
 
 def _fail_members(circuit, idx, t, x, h, ok, active, message, exc):

@@ -206,7 +206,10 @@ class Circuit:
 
     def get_param(self, path):
         """Current value(s) of ID.PARAM in its declared unit, shape (B,)."""
-        _, g, i, name = self.param_path(path)
+        e, g, i, name = self.param_path(path)
+        if name in e.expressions:
+            raise NetlistError(f"'{name}' follows the expression '{e.expressions[name].text}': it has no fixed "
+                               "value (it is evaluated from the states; see the outputs)", file=e.file, element=e.id)
         return np.broadcast_to(g.p[name][:, i], (self.B,)).copy()
 
     def set_param(self, path, value, prepare=True):

@@ -4,11 +4,7 @@ import textwrap
 
 import pytest
 
-TESTS = Path(__file__).resolve().parent
-ROOT = TESTS.parent
-NETLISTS = TESTS / "netlists"
-BAD = NETLISTS / "bad"
-PAYNE06 = ROOT / "netlists" / "payne06_passive.yaml"
+from paths import BAD, NETLISTS, PAYNE06, ROOT, TESTS  # noqa: F401
 
 
 @pytest.fixture

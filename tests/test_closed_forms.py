@@ -11,7 +11,7 @@ import pytest
 import hemocircuit as hc
 from hemocircuit.protocol import Protocol
 
-from conftest import PAYNE06
+from paths import PAYNE06
 
 TIGHT = dict(rtol=1e-9)
 
@@ -146,8 +146,6 @@ def test_resistor_divider_dc_sweep_exact(write):
     assert c.get_param("R2.R")[0] == 7.0
 
 
-@pytest.mark.xfail(strict=True, reason="hemocircuit/analyses/op.py dc_guess: np.max over an empty state "
-                   "vector raises ValueError when the circuit has no states (purely resistive)")
 def test_operating_point_and_sweep_of_a_circuit_without_states(write):
     c = hc.load(write(DIVIDER))
     assert c.nx == 0

@@ -133,10 +133,13 @@ def test_steady_state_equals_closed_forms(ops, reading, case):
 def test_pools_are_fixed_points(ops, reading):
     c, op = ops[reading, "base"]
     dx = c.rhs(0.0, op.x)
+    # the thesis reading's venous pool responds in ~0.4 us (volumes in m^3): float rounding of
+    # the state alone gives |dC/dt| ~ 1e-16 C / 0.4 us, so the rate is judged on that time scale
+    t_scale = 1e-6 if reading == "thesis" else 100.0
     for name in ("NOv.C", "NOt.C"):
         j = c.state_names.index(name)
-        # rate times the pool's slowest time scale is negligible against its value
-        assert abs(dx[j]) * 100.0 < 1e-9 * abs(op.x[j])
+        # rate times the pool's time scale is negligible against its value
+        assert abs(dx[j]) * t_scale < 1e-9 * abs(op.x[j])
     res = simulate(c, 5.0, dt=1.0, x0=op.x)
     for name in ("NOv.C", "NOt.C"):
         assert np.allclose(res[name], op[name], rtol=1e-6, atol=0)

@@ -1,7 +1,9 @@
 """Fuzzing the loader: malformed YAML and random netlists either load or raise the framework's
 own error (hemocircuit.errors.HemocircuitError), never anything else."""
+import atexit
 import os
 import random
+import shutil
 import tempfile
 
 import yaml
@@ -99,6 +101,7 @@ def _load_text(text):
 
 
 _DIR = tempfile.mkdtemp(prefix="hemocircuit-fuzz-")
+atexit.register(shutil.rmtree, _DIR, ignore_errors=True)
 
 
 def _accepts_or_framework_error(text):

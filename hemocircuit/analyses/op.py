@@ -77,6 +77,8 @@ def newton(circuit, X, law_totals, t=0.0, tol=1e-10, max_iter=50, ptc=False):
     """Damped Newton (or pseudo-transient continuation) on the batch X (B, nx)."""
     X = X.copy()
     B, nx = X.shape
+    if nx == 0:  # a purely resistive circuit: nothing to solve
+        return X, True, np.zeros(B)
     scales = circuit.state_scales
     dt = np.full(B, 1e-3)
     done = np.zeros(B, bool)
@@ -129,6 +131,8 @@ def dc_guess(circuit, t=0.0, max_iter=200, tol=1e-12):
     """States from the DC network (stores open, inductors shorted), fixed-point iterated."""
     B = circuit.B
     X = np.zeros((B, circuit.nx))
+    if circuit.nx == 0:
+        return X
     plist = circuit._params(1)
     for g, p in zip(circuit.groups, plist):
         if g.S:

@@ -1,0 +1,226 @@
+"""Small-signal AC analysis: transfer functions from a source to any outputs.
+
+Linearise at the operating point (``linearize``: central differences on the steady variant,
+conservation laws projected out) and evaluate
+
+    H(j w) = C (j w I - A)^-1 B + D,        w = 2 pi f,
+
+for every frequency with one batched complex solve (thousands of frequencies in milliseconds).
+The input is the source's ``value`` parameter (``--input Pa`` means ``Pa.value``; any
+``ID.PARAM`` is accepted), so H is in output unit per input unit, e.g. mL/s per mmHg.
+
+Reported per output:
+  gain       |H|                                   [output unit / input unit]
+  rel_gain   |H| * |p0 / y0| = |(dy/y0)/(dp/p0)|   [1]  (y0, p0 at the operating point)
+  phase      arg H in degrees, positive when the output *leads* the input; unwrapped along
+             frequency, with the lowest frequency's value in (-180, 180]
+  H          the complex transfer function itself
+"""
+from __future__ import annotations
+
+import re
+
+import numpy as np
+
+from ..errors import HemocircuitError, NetlistError
+from ..units import UnitError, parse_quantity
+from .linearize import linearize
+
+
+def parse_freqs(spec, per_decade=20):
+    """Frequencies [Hz] from 'F1:F2 Hz' (log-spaced, ``per_decade`` points per decade, both
+    ends included), 'F1:F2:STEP Hz' (linear) or a list '0.01,0.1,1 Hz'."""
+    if not isinstance(spec, str):
+        return np.atleast_1d(np.asarray(spec, dtype=float))
+    text = re.sub(r"(\d)([A-Za-z])", r"\1 \2", spec.strip(), count=1)
+    parts = text.split(None, 1)
+    body, unit = parts[0], (parts[1] if len(parts) > 1 else "Hz")
+    try:
+        if re.match(r"^[-+0-9.eE]+:[-+0-9.eE]+$", body):
+            a, b = (parse_quantity(f"{v} {unit}", "Hz", "frequency") for v in body.split(":"))
+            if not (0 < a < b):
+                raise NetlistError(f"frequency range {spec!r}: need 0 < start < stop for log spacing")
+            n = max(int(round(np.log10(b / a) * per_decade)), 1) + 1
+            return np.logspace(np.log10(a), np.log10(b), n)
+        from .dc import parse_range
+        return parse_range(text if len(parts) > 1 else f"{body} {unit}", "Hz")
+    except UnitError as exc:
+        raise NetlistError(f"frequencies {spec!r}: {exc}") from None
+
+
+def transfer(A, B, C, D, s):
+    """H(s) = C (s I - A)^-1 B + D for the complex frequencies s (F,).
+
+    A (..., n, n), B (..., n), C (..., ny, n), D (..., ny) -> H (..., ny, F).
+    Solved as one batched complex linear system; a singular s I - A (s = 0 with an integrator)
+    gives NaN at that frequency.
+    """
+    A = np.asarray(A, dtype=float)
+    n = A.shape[-1]
+    s = np.asarray(s, dtype=complex).reshape(-1)
+    lead = A.shape[:-2]
+    M = s[:, None, None] * np.eye(n) - A[..., None, :, :]  # (..., F, n, n)
+    rhs = np.broadcast_to(np.asarray(B, dtype=complex)[..., None, :, None], M.shape[:-1] + (1,))
+    try:
+        X = np.linalg.solve(M, rhs)[..., 0]  # (..., F, n)
+    except np.linalg.LinAlgError:
+        X = np.full(M.shape[:-1], np.nan, dtype=complex)
+        flat_M = M.reshape(-1, n, n)
+        flat_r = rhs.reshape(-1, n)
+        out = X.reshape(-1, n)
+        for k in range(flat_M.shape[0]):
+            try:
+                out[k] = np.linalg.solve(flat_M[k], flat_r[k])
+            except np.linalg.LinAlgError:
+                pass
+        X = out.reshape(M.shape[:-1])
+    H = np.einsum("...yn,...fn->...yf", np.asarray(C, dtype=float), X) + np.asarray(D, dtype=float)[..., None]
+    return H.reshape(lead + H.shape[-2:])
+
+
+def unwrapped_phase(H):
+    """arg H [deg] along the last axis, unwrapped, first value in (-180, 180]."""
+    ph = np.unwrap(np.angle(H), axis=-1)
+    first = ph[..., :1]
+    shift = -2 * np.pi * np.ceil((first - np.pi) / (2 * np.pi))
+    return np.degrees(ph + shift)
+
+
+class ACResult:
+    """Result of :func:`ac_response`.
+
+    freq (F,) [Hz]; per output name: H[name] complex, gain[name], rel_gain[name], phase[name]
+    (arrays (F,), or (B, F) for a batch circuit); y0[name] the operating-point value; p0 the
+    input's value; units; the linearisation ``lin`` and operating point ``op``.
+    """
+
+    def __init__(self, freq, input, p0, outputs, H, y0, units, lin, op):
+        self.freq = freq
+        self.input = input
+        self.p0 = p0
+        self.outputs = list(outputs)
+        self.H = {n: H[..., k, :] for k, n in enumerate(outputs)}
+        self.y0 = {n: y0[..., k] for k, n in enumerate(outputs)}
+        self.gain = {n: np.abs(h) for n, h in self.H.items()}
+        with np.errstate(divide="ignore", invalid="ignore"):
+            self.rel_gain = {n: np.abs(h) * np.abs(np.asarray(p0)[..., None] / np.asarray(self.y0[n])[..., None])
+                             for n, h in self.H.items()}
+        self.phase = {n: unwrapped_phase(h) for n, h in self.H.items()}
+        self.units = units
+        self.lin = lin
+        self.op = op
+
+    def columns(self):
+        """Tidy columns for a CSV (single circuit): per output gain, rel_gain, phase, Re, Im."""
+        cols, units = {}, {}
+        for n in self.outputs:
+            u = f"{self.units.get(n, '')}/{self.units.get('input', '')}".strip("/")
+            for key, arr, unit in ((f"gain {n}", self.gain[n], u), (f"rel_gain {n}", self.rel_gain[n], "1"),
+                                   (f"phase {n}", self.phase[n], "deg"), (f"Re {n}", self.H[n].real, u),
+                                   (f"Im {n}", self.H[n].imag, u)):
+                cols[key] = arr
+                units[key] = unit
+        return cols, units
+
+
+def ac_response(circuit, input="Pa", outputs=("Q(Rla)", "Q(Rsv)"), freqs="0.001:10 Hz", per_decade=20,
+                t=0.0, op=None, x=None) -> ACResult:
+    """Small-signal transfer functions from ``input`` to each of ``outputs``.
+
+    circuit: a Circuit (or a batch circuit: arrays gain a leading batch axis).
+    input:   source id ('Pa' -> 'Pa.value') or 'ID.PARAM'.
+    freqs:   array [Hz] or a spec string (:func:`parse_freqs`).
+    op / x:  the operating point to linearise about (computed when omitted).
+    """
+    from .op import operating_point
+
+    f = parse_freqs(freqs, per_decade)
+    if np.any(f < 0):
+        raise HemocircuitError("frequencies must be >= 0")
+    outputs = [outputs] if isinstance(outputs, str) else list(outputs)
+    if not outputs:
+        raise HemocircuitError("ac_response needs at least one output")
+    if x is None:
+        op = op or operating_point(circuit, t)
+        x = op.x
+    lin = linearize(circuit, x, input=input, outputs=outputs, t=t)
+    H = transfer(lin.A_red, lin.B_red, lin.C_red, lin.D, 2j * np.pi * f)
+    units = dict(circuit.column_units())
+    derived = getattr(circuit.netlist, "derived", {}) or {}
+    for n in outputs:
+        if n not in units and n in derived:
+            units[n] = str(derived[n].get("unit", ""))
+    units["input"] = circuit.param_unit(lin.input)
+    return ACResult(f, lin.input, lin.p0, outputs, H, lin.y0, units, lin, op)
+
+
+# ------------------------------------------------------------------------------ plots -----
+def plot_bode(path, res: ACResult, title=""):
+    """Bode plot: relative gain (log-log) and phase (deg, leading positive) against frequency."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(8, 6.5), sharex=True)
+    for n in res.outputs:
+        ax1.loglog(res.freq, np.atleast_2d(res.rel_gain[n])[0], label=f"{n} (|H| at f0: "
+                   f"{np.atleast_2d(res.gain[n])[0][0]:.3g} {res.units.get(n, '')}/{res.units['input']})")
+        ax2.semilogx(res.freq, np.atleast_2d(res.phase[n])[0], label=n)
+    ax1.set_ylabel(f"relative gain (dy/y)/(d{res.input}/{res.input})")
+    ax1.grid(alpha=0.3, which="both")
+    ax1.legend(fontsize=8)
+    ax2.axhline(0, color="k", lw=0.6)
+    ax2.set_ylabel("phase [deg] (+ = output leads)")
+    ax2.set_xlabel("frequency [Hz]")
+    ax2.grid(alpha=0.3, which="both")
+    ax2.legend(fontsize=8)
+    if title:
+        ax1.set_title(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+# ------------------------------------------------------------------------------ CLI -------
+def cmd_ac(args):
+    from .. import io
+    from ..cli import _load
+
+    c, proto = _load(args)
+    if proto:
+        c = proto.apply_initial(c)
+    outputs = args.output or ["Q(Rla)"]
+    res = ac_response(c, input=args.input, outputs=outputs, freqs=args.freq, per_decade=args.per_decade)
+    print(f"AC: {res.input} = {res.p0:.6g} {res.units['input']} -> {', '.join(outputs)}; "
+          f"{len(res.freq)} frequencies {res.freq[0]:.4g}..{res.freq[-1]:.4g} Hz")
+    for n in outputs:
+        g = res.rel_gain[n]
+        k = int(np.nanargmax(g))
+        print(f"  {n}: operating point {res.y0[n]:.6g} {res.units.get(n, '')}; "
+              f"gain at {res.freq[0]:.4g} Hz {res.gain[n][0]:.6g} {res.units.get(n, '')}/{res.units['input']} "
+              f"(relative {g[0]:.4g}, phase {res.phase[n][0]:+.2f} deg); "
+              f"relative-gain peak {g[k]:.4g} at {res.freq[k]:.4g} Hz")
+    cols, units = res.columns()
+    if not args.quiet:
+        show = [k for n in outputs for k in (f"rel_gain {n}", f"phase {n}")]
+        print("  ".join(f"{h:>16}" for h in ["f [Hz]"] + show))
+        for i in range(len(res.freq)):
+            print("  ".join(f"{v:>16.6g}" for v in [res.freq[i]] + [cols[s][i] for s in show]))
+    if args.out:
+        io.write_csv(args.out, cols, units, first=("f", res.freq, "Hz"))
+        print(f"wrote {args.out}")
+    if args.plot:
+        plot_bode(args.plot, res, title=f"{c.netlist.name}: {res.input} = {res.p0:.4g} {res.units['input']}")
+        print(f"wrote {args.plot}")
+
+
+def register_cli(sub, common):
+    sp = common(sub.add_parser("ac", help="small-signal transfer functions (Bode) at the operating point"))
+    sp.add_argument("--input", default="Pa", help="source id (its 'value') or ID.PARAM (default Pa)")
+    sp.add_argument("--output", action="append", help="output column, e.g. 'Q(Rla)' (repeatable)")
+    sp.add_argument("--freq", default="0.001:10Hz",
+                    help="F1:F2 UNIT (log-spaced), F1:F2:STEP UNIT (linear) or a list (default 0.001:10Hz)")
+    sp.add_argument("--per-decade", type=int, default=20, help="points per decade for F1:F2 (default 20)")
+    sp.add_argument("--quiet", action="store_true", help="do not print the table")
+    sp.set_defaults(func=cmd_ac)

@@ -1,0 +1,267 @@
+"""Nonlinear frequency response (thesis section artComp): step + sine forcing, batched.
+
+For every member (frequency x grid point): start at the operating point with the input
+source at its baseline P0, then apply P0 (1 + step) + amplitude P0 sin(2 pi f t) (thesis:
+10 % and 10 %; MODEL_NOTES "Analyses").  Integration proceeds in blocks of whole periods
+until the fundamental of every output over the last period differs from that of the period
+before by less than ``settle_tol`` (relative) - the transient has settled, detected not
+guessed.  Then, over the last ``n_periods`` whole periods, the fundamental of each output
+and of the input are found by DFT:
+  rel_amplitude = |Y1| / y0           (amplitude over the steady output y0 at P0, thesis's
+                                        'magnitude relative to steady state value')
+  gain          = (|Y1| / y0) / (|X1| / P0)   (relative gain, comparable with AC)
+  phase         = angle(Y1 / X1) in degrees, positive when the output leads the input
+  thd           = sqrt(sum_{k=2..5} |Yk|^2) / |Y1|  (harmonic distortion)
+All members integrate together in the vectorised batch integrator; chunks run in parallel.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..batch import build_batches, expand_grid, parse_grid_arg, resolve_values
+from ..batch_integrator import integrate
+from ..errors import HemocircuitError
+from ..execution import run_chunks, split
+
+SAMPLES = 64  # per period
+
+
+def _dft(y, n_per, k):
+    """k-th harmonic (complex amplitude, sine-phase convention) over whole periods."""
+    n = y.shape[-1]
+    ph = np.exp(-2j * np.pi * k * np.arange(n) / n_per)
+    return 2.0 / n * np.sum(y * ph, axis=-1)
+
+
+def _member_outputs(bc, k, t, X, outputs, inp_col):
+    m = bc.member(k)
+    cols = m.outputs(t, X)
+    return np.array([cols[o] for o in outputs]), cols[inp_col]
+
+
+def _run_chunk(job):
+    """Worker: one vectorised batch.  job = (batch circuit, list of member descriptors, options)."""
+    bc, members, opt = job
+    from .op import operating_point
+    B = bc.B
+    outputs, inp = opt["outputs"], opt["input"]
+    inp_node_col = opt["input_col"]
+    res = [None] * B
+    # baseline operating point (input at P0), then the step + sine
+    try:
+        op = operating_point(bc)
+        X0 = np.atleast_2d(op.x)
+    except Exception as exc:  # noqa: BLE001 - a batch-wide failure is recorded per member
+        return [{"error": f"operating point: {exc}"} for _ in range(B)]
+    y0 = np.array([[np.atleast_1d(op.values[o])[k] if B > 1 else op.values[o] for o in outputs] for k in range(B)])
+    P0 = bc.get_param(f"{inp}.value")
+    f = np.array([m["frequency"] for m in members])
+    bc.set_param(f"{inp}.value", P0 * (1 + opt["step"]), prepare=False)
+    bc.set_param(f"{inp}.amplitude", P0 * opt["amplitude"], prepare=False)
+    bc.set_param(f"{inp}.frequency", f, prepare=False)
+    bc.set_param(f"{inp}.phase", np.zeros(B), prepare=False)
+    bc.set_param(f"{inp}.start", np.zeros(B), prepare=False)
+    bc._prepare()
+    period = 1.0 / f
+    t = np.zeros(B)
+    x = X0.copy()
+    prev = np.full((B, len(outputs)), np.nan, dtype=complex)
+    settled = np.zeros(B, bool)
+    failed = np.zeros(B, bool)
+    total_periods = np.zeros(B, int)
+    block = opt["block_periods"]
+    last = {}
+    while True:
+        idx = np.nonzero(~settled & ~failed)[0]
+        if idx.size == 0:
+            break
+        sub = bc.subset(idx)
+        n_pts = block * SAMPLES
+        grid = t[idx, None] + period[idx, None] * np.arange(n_pts + 1)[None, :] / SAMPLES
+        r = integrate(sub, x[idx], grid, rtol=opt["rtol"], atol=opt["rtol"])
+        for j, m in enumerate(idx):
+            if not r.ok[j]:
+                failed[m] = True
+                res[m] = {"error": r.message[j]}
+                continue
+            tt = grid[j]
+            Y, X_in = _member_outputs(sub, j, tt, r.x[j], outputs, inp_node_col)
+            # fundamental of each of the last two periods of this block
+            a1 = _dft(Y[:, -SAMPLES:], SAMPLES, 1)
+            a0 = _dft(Y[:, -2 * SAMPLES:-SAMPLES], SAMPLES, 1)
+            x1 = _dft(X_in[-SAMPLES:], SAMPLES, 1)
+            total_periods[m] += block
+            rel = np.abs(a1 - a0) / np.maximum(np.abs(a1), 1e-300)
+            if np.all(rel < opt["settle_tol"]) or total_periods[m] >= opt["max_periods"]:
+                settled[m] = True
+                n = opt["n_periods"] * SAMPLES
+                yw, xw = Y[:, -n:], X_in[-n:]
+                X1 = _dft(xw, SAMPLES, 1)
+                Y1 = _dft(yw, SAMPLES, 1)
+                harm = np.array([_dft(yw, SAMPLES, h) for h in range(2, 6)])
+                res[m] = {
+                    "Y1": Y1, "X1": X1, "y0": y0[m], "P0": P0[m], "mean": yw.mean(axis=1),
+                    "thd": np.sqrt(np.sum(np.abs(harm) ** 2, axis=0)) / np.abs(Y1),
+                    "periods": int(total_periods[m]), "settled": bool(np.all(rel < opt["settle_tol"])),
+                    "settle_change": float(np.max(rel)),
+                }
+            t[m] = tt[-1]
+            x[m] = r.x[j, -1]
+    return res
+
+
+def frequency_response(circuit, freqs, outputs=("Q(Rla)", "Q(Rsv)"), input="Pa", step=0.1, amplitude=0.1,
+                       grid=None, settle_tol=1e-3, n_periods=2, block_periods=4, max_periods=400, rtol=1e-6,
+                       scheduler=None, workers=None, progress=False):
+    """Batched nonlinear frequency response.  ``grid``: [(ID.PARAM, [values])].  Returns a list
+    of rows (dicts), one per (grid point, frequency, output): tidy data."""
+    outputs = list(outputs)
+    grid = resolve_values(circuit, grid or [])
+    assignments, descr = [], []
+    for g in expand_grid(grid):
+        for f in np.atleast_1d(freqs):
+            assignments.append(dict(g))
+            descr.append({"grid": g, "frequency": float(f)})
+    src = circuit.elements.get(input)
+    if src is None or "value" not in src.cls.parameters or "amplitude" not in src.cls.parameters:
+        raise HemocircuitError(f"--input {input!r} must be a pressure or flow source element")
+    inp_col = f"P({src.nodes[0]})" if src.cls.type_name == "pressure_source" else f"Q({input})"
+    opt = dict(outputs=outputs, input=input, input_col=inp_col, step=step, amplitude=amplitude,
+               settle_tol=settle_tol, n_periods=n_periods, block_periods=max(block_periods, n_periods + 1),
+               max_periods=max_periods, rtol=rtol)
+    jobs, where = [], []
+    for bc, members in build_batches(circuit, assignments):
+        # chunks of one batch keep contiguous members (similar frequencies) together
+        for chunk in split(list(members), (workers or 2) if scheduler != "serial" else 1):
+            sub = bc.subset([members.index(k) for k in chunk])
+            sub = sub.copy() if sub is bc else sub
+            jobs.append((_detach(sub), [descr[k] for k in chunk], opt))
+            where.append(chunk)
+    results = run_chunks(_run_chunk, jobs, scheduler=scheduler, workers=workers, progress=progress,
+                         desc="frequency response")
+    rows = []
+    for chunk, res in zip(where, results):
+        for k, r in zip(chunk, res):
+            d = descr[k]
+            base = {**{p: v for p, v in d["grid"].items()}, "frequency [Hz]": d["frequency"]}
+            if "error" in r:
+                for o in outputs:
+                    rows.append({**base, "output": o, "error": r["error"]})
+                continue
+            for i, o in enumerate(outputs):
+                Y1, X1, y0 = r["Y1"][i], r["X1"], r["y0"][i]
+                rows.append({**base, "output": o,
+                             "rel_amplitude": float(abs(Y1) / abs(y0)),
+                             "gain": float((abs(Y1) / abs(y0)) / (abs(X1) / abs(r["P0"]))),
+                             "abs_gain": float(abs(Y1) / abs(X1)),
+                             "phase [deg]": float(np.degrees(np.angle(Y1 / X1))),
+                             "thd": float(r["thd"][i]), "steady": float(y0), "mean": float(r["mean"][i]),
+                             "periods": r["periods"], "settled": r["settled"], "error": ""})
+    return rows
+
+
+def _detach(c):
+    """A self-contained picklable copy of a (subset) circuit."""
+    c = c.copy()
+    c.__dict__.pop("_subset_cache", None)
+    return c
+
+
+def write_rows(path, rows):
+    import csv
+    keys = []
+    for r in rows:
+        keys += [k for k in r if k not in keys]
+    with open(path, "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=keys)
+        w.writeheader()
+        for r in rows:
+            w.writerow(r)
+
+
+def plot_bode(path, rows, outputs):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (a1, a2) = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
+    keyf = lambda r: tuple((k, str(v)) for k, v in r.items() if k not in (
+        "frequency [Hz]", "output", "rel_amplitude", "gain", "abs_gain", "phase [deg]", "thd", "steady", "mean",
+        "periods", "settled", "error"))
+    series = {}
+    for r in rows:
+        if r.get("error"):
+            continue
+        series.setdefault((keyf(r), r["output"]), []).append(r)
+    for (g, o), rs in series.items():
+        rs = sorted(rs, key=lambda r: r["frequency [Hz]"])
+        f = [r["frequency [Hz]"] for r in rs]
+        label = o + (" " + ", ".join(f"{k}={v}" for k, v in g) if g else "")
+        ls = "-" if o == outputs[0] else "--"
+        a1.semilogx(f, [r["rel_amplitude"] for r in rs], ls, label=label)
+        a2.semilogx(f, [r["phase [deg]"] for r in rs], ls, label=label)
+    a1.set_ylabel("amplitude / steady value")
+    a2.set_ylabel("phase [deg] (+ = leads)")
+    a2.set_xlabel("frequency [Hz]")
+    for a in (a1, a2):
+        a.grid(alpha=0.3, which="both")
+    a1.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def register_cli(sub, common):
+    sp = sub.add_parser("freq", help="nonlinear frequency response (step + sine), batched")
+    sp.add_argument("netlist")
+    sp.add_argument("--set", action="append", metavar="ID.PARAM=VALUE")
+    sp.add_argument("--input", default="Pa", help="source element (default Pa)")
+    sp.add_argument("--output", action="append", help="output column (repeatable; default Q(Rla), Q(Rsv))")
+    sp.add_argument("--freq", default="0.001:1Hz", help="START:STOP[Hz] (log spaced) or a list 0.01,0.1Hz")
+    sp.add_argument("--per-decade", type=float, default=10.0)
+    sp.add_argument("--step", type=float, default=10.0, help="step in percent of the baseline (default 10)")
+    sp.add_argument("--amplitude", type=float, default=10.0, help="sine amplitude in percent (default 10)")
+    sp.add_argument("--grid", action="append", help="ID.PARAM=V1,V2,... (repeatable; cartesian product)")
+    sp.add_argument("--scheduler", help="Dask scheduler address tcp://HOST:PORT (default: local processes)")
+    sp.add_argument("--workers", type=int, help="local worker processes (default: all cores)")
+    sp.add_argument("--rtol", type=float, default=1e-6)
+    sp.add_argument("--out", help="tidy CSV")
+    sp.add_argument("--plot", help="Bode plot PNG")
+    sp.set_defaults(func=cmd_freq)
+
+
+def parse_freqs(text, per_decade):
+    import re
+    t = text.replace("Hz", "").strip()
+    if ":" in t:
+        a, b = (float(v) for v in t.split(":")[:2])
+        n = int(round(np.log10(b / a) * per_decade)) + 1
+        return np.logspace(np.log10(a), np.log10(b), max(n, 2))
+    return np.array([float(v) for v in re.split(r"[,\s]+", t) if v])
+
+
+def cmd_freq(args):
+    from ..circuit import load
+    from ..cli import _sets
+
+    c = load(args.netlist)
+    c.set_params(_sets(args.set))
+    outputs = args.output or ["Q(Rla)", "Q(Rsv)"]
+    freqs = parse_freqs(args.freq, args.per_decade)
+    grid = [parse_grid_arg(g) for g in (args.grid or [])]
+    rows = frequency_response(c, freqs, outputs, args.input, args.step / 100, args.amplitude / 100, grid,
+                              rtol=args.rtol, scheduler=args.scheduler, workers=args.workers, progress=True)
+    for r in rows:
+        if r.get("error"):
+            print(f"failed: {r}")
+        else:
+            g = ", ".join(f"{k}={v}" for k, v in r.items() if "." in k and k not in ("phase [deg]",))
+            print(f"{g:>30} f={r['frequency [Hz]']:.4g} Hz {r['output']:>8}: amp {r['rel_amplitude']:.4g} "
+                  f"gain {r['gain']:.4g} phase {r['phase [deg]']:+.2f} deg thd {r['thd']:.3g}")
+    if args.out:
+        write_rows(args.out, rows)
+        print(f"wrote {args.out}")
+    if args.plot:
+        plot_bode(args.plot, rows, outputs)
+        print(f"wrote {args.plot}")

@@ -1,0 +1,254 @@
+"""Linearisation at an operating point (shared by the AC and stability analyses).
+
+For dx/dt = f(x, p) and outputs y = g(x, p), with p one parameter (the input: a source's
+``value``), this computes by *central* finite differences
+
+    A = df/dx (nx, nx)   B = df/dp (nx,)   C = dg/dx (ny, nx)   D = dg/dp (ny,)
+
+State steps are ``eps * max(|x_i|, state_scale_i)``, so states of very different size
+(volumes in mL, concentrations in M) are perturbed by comparable relative amounts.
+
+Everything is evaluated on the circuit's *steady variant* (``Circuit.steady_variant``): log
+compliances continued smoothly below their domain and the clamps off.  A state that sits at a
+hard limit (a collapsed compartment held at V = 0, second-order Ca at its floor) then gives the
+derivative of the smooth law, not the jump of a one-sided difference across the clamp -- the
+false, huge eigenvalue the thesis saw (chapter 6, stability analysis).  Such states are flagged
+(:func:`limit_flags`) so the verdict can be read with that in mind.
+
+Conservation laws (e.g. the ICP variant's V_a + V_v - V_ic = V_b0) make c^T f = 0 for the
+gradient c of the conserved quantity, hence c^T A = 0: one structural zero eigenvalue per law.
+:func:`reduce_laws` projects onto the subspace orthogonal to the c's (T = null_space(c^T),
+A_red = T^T A T, B_red = T^T B, C_red = C T), which removes exactly those zeros and leaves the
+other eigenvalues and every transfer function unchanged (the input does not change the
+conserved totals, so c^T B = 0).
+
+Works for a single circuit (x of shape (nx,)) and for a batch circuit (x of shape (B, nx)):
+every array then gains a leading batch axis.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..derived import evaluate_derived
+from ..errors import HemocircuitError
+
+EPS = 1e-6  # relative central-difference step (truncation ~ eps^2, round-off ~ 1e-16/eps)
+
+
+@dataclass
+class Linearization:
+    """State-space model (A, B, C, D) about ``x`` (leading batch axis for batch circuits).
+
+    ``A_red``, ``B_red``, ``C_red`` and ``T`` are the law-reduced matrices (equal to A, B, C and
+    the identity when the circuit has no conservation law).
+    """
+
+    x: np.ndarray
+    A: np.ndarray
+    B: np.ndarray | None
+    C: np.ndarray | None
+    D: np.ndarray | None
+    y0: np.ndarray | None  # outputs at the operating point
+    p0: np.ndarray | float | None  # input parameter value
+    T: np.ndarray
+    A_red: np.ndarray
+    B_red: np.ndarray | None
+    C_red: np.ndarray | None
+    law_gradients: np.ndarray  # (m, nx) or (B, m, nx)
+    state_names: list
+    outputs: list = field(default_factory=list)
+    input: str | None = None
+    t: float = 0.0
+
+
+def input_path(circuit, name):
+    """'Pa' -> 'Pa.value' (a source); 'ID.PARAM' is taken as it is (and checked)."""
+    if name is None:
+        return None
+    path = name if "." in name else f"{name}.value"
+    circuit.param_path(path)  # raises a NetlistError naming the choices when wrong
+    return path
+
+
+def _steps(circuit, X, eps=EPS):
+    h = eps * np.maximum(np.abs(X), circuit.state_scales)
+    return (X + h) - X  # exactly representable
+
+
+def state_jacobian(circuit, x, t=0.0, eps=EPS):
+    """Central-difference Jacobian df/dx of ``circuit`` (use the steady variant) at x.
+
+    x (nx,) -> (nx, nx); x (B, nx) for a batch circuit -> (B, nx, nx).  One batched evaluation.
+    """
+    single = np.ndim(x) == 1
+    X = np.atleast_2d(np.asarray(x, dtype=float))
+    Bm, nx = X.shape
+    h = _steps(circuit, X, eps)
+    stack = np.repeat(X[:, None, :], 2 * nx, axis=1)
+    idx = np.arange(nx)
+    stack[:, idx, idx] += h
+    stack[:, nx + idx, idx] -= h
+    F = circuit.evaluate(t, stack.reshape(Bm * 2 * nx, nx)).reshape(Bm, 2 * nx, nx)
+    J = (F[:, :nx, :] - F[:, nx:, :]) / (2 * h[:, :, None])  # (B, col, row)
+    J = np.swapaxes(J, 1, 2)
+    return J[0] if single else J
+
+
+def _output_values(circuit, t, X, names):
+    """Outputs ``names`` for states X (rows a multiple of the circuit's batch) -> (rows, ny)."""
+    cols = circuit.outputs(t, X)
+    missing = [n for n in names if n not in cols]
+    derived = getattr(circuit.netlist, "derived", {}) or {}
+    if missing:
+        want = {n: derived[n] for n in missing if n in derived}
+        unknown = [n for n in missing if n not in derived]
+        if unknown:
+            raise HemocircuitError(f"unknown output(s) {unknown}; available: {sorted(cols)} "
+                                   + (f"and derived {sorted(derived)}" if derived else ""))
+        cols = {**cols, **evaluate_derived(want, cols, circuit.file)}
+    return np.stack([np.broadcast_to(np.asarray(cols[n], dtype=float), (X.shape[0],)) for n in names], axis=1)
+
+
+def _param_batch(circuit, path, X, values):
+    """A batch circuit whose member (m, k) has the parameters of member m with ``path`` set to
+    values[m, k]; returns (circuit, stacked states) laid out member-major."""
+    Bm, K = values.shape
+    cb = circuit.copy()
+    for g in cb.groups:
+        g.p = {n: (np.repeat(v, K, axis=0) if v.shape[0] > 1 else v) for n, v in g.p.items()}
+    cb.B = Bm * K
+    cb.set_param(path, values.reshape(-1))
+    return cb, np.repeat(X, K, axis=0)
+
+
+def law_gradients(circuit, x, t=0.0, eps=EPS):
+    """Gradients c (m, nx) (or (B, m, nx)) of the conserved combinations sum(sign * V).
+
+    Stores whose volume is a state contribute exactly +-1; a store whose volume is a function
+    of other states (an arteriolar bed's pi r^2 L n) contributes its central-difference gradient
+    (the raw volume, not the reported max(V, 0) of a collapsed store).
+    """
+    single = np.ndim(x) == 1
+    X = np.atleast_2d(np.asarray(x, dtype=float))
+    Bm, nx = X.shape
+    specs = circuit.law_specs
+    c = np.zeros((Bm, len(specs), nx))
+    if not specs:
+        return c[0] if single else c
+    plist = circuit._params(1) if Bm == circuit.B else circuit._params_for(Bm)
+    for k, spec in enumerate(specs):
+        for g, i, vol, sign in spec["terms"]:
+            st = next((s for s in g.comp.storages() if s.volume == vol), None)
+            names = [s.name for s in g.states]
+            if st is not None and st.state is not None:
+                c[:, k, g.sidx[i, names.index(st.state)]] += sign
+                continue
+            p = plist[circuit.groups.index(g)]
+            xl = X[:, g.sidx]  # (B, E, S)
+            for j in range(g.S):
+                h = eps * np.maximum(np.abs(xl[:, i, j]), g.states[j].scale)
+                xp, xm = xl.copy(), xl.copy()
+                xp[:, i, j] += h
+                xm[:, i, j] -= h
+                dv = (g.comp.observe(p, xp, None, t)[vol][:, i] - g.comp.observe(p, xm, None, t)[vol][:, i]) / (2 * h)
+                c[:, k, g.sidx[i, j]] += sign * dv
+    return c[0] if single else c
+
+
+def reduction_basis(c):
+    """Orthonormal basis T (nx, nx - m) of the subspace orthogonal to the rows of c (m, nx);
+    batched for c (B, m, nx)."""
+    c = np.asarray(c, dtype=float)
+    nx = c.shape[-1]
+    m = c.shape[-2]
+    if m == 0:
+        eye = np.eye(nx)
+        return eye if c.ndim == 2 else np.broadcast_to(eye, c.shape[:-2] + (nx, nx)).copy()
+    _, s, vh = np.linalg.svd(c, full_matrices=True)
+    return np.swapaxes(vh[..., m:, :], -1, -2)
+
+
+def reduce_laws(T, A, B=None, C=None):
+    """(T^T A T, T^T B, C T) -- the dynamics on the conserved subspace."""
+    Tt = np.swapaxes(T, -1, -2)
+    A_red = Tt @ A @ T
+    B_red = None if B is None else (Tt @ B[..., None])[..., 0]
+    C_red = None if C is None else C @ T
+    return A_red, B_red, C_red
+
+
+def linearize(circuit, x=None, input=None, outputs=(), t=0.0, eps=EPS, op=None) -> Linearization:
+    """Linearise ``circuit`` about the states ``x`` (default: its operating point).
+
+    input:   a source id ('Pa' means 'Pa.value') or any 'ID.PARAM' -- the input p of B and D.
+    outputs: output columns ('Q(Rla)', 'P(alpha)', 'V(Ca)', 'art.r', derived names).
+    Works on ``circuit.steady_variant()`` (see the module docstring).
+    """
+    from .op import operating_point
+
+    if x is None:
+        op = op or operating_point(circuit, t)
+        x = op.x
+    sv = circuit.steady_variant()
+    single = np.ndim(x) == 1
+    X = np.atleast_2d(np.asarray(x, dtype=float))
+    Bm, nx = X.shape
+    if Bm != sv.B:
+        raise HemocircuitError(f"linearize: {Bm} state rows for a batch of {sv.B} parameter sets")
+    A = state_jacobian(sv, X, t, eps)
+    outputs = list(outputs or [])
+    path = input_path(sv, input)
+    Bv = C = D = y0 = p0 = None
+    if outputs:
+        h = _steps(sv, X, eps)
+        stack = np.repeat(X[:, None, :], 2 * nx + 1, axis=1)
+        idx = np.arange(nx)
+        stack[:, 1 + idx, idx] += h
+        stack[:, 1 + nx + idx, idx] -= h
+        Y = _output_values(sv, t, stack.reshape(-1, nx), outputs).reshape(Bm, 2 * nx + 1, len(outputs))
+        y0 = Y[:, 0, :]
+        C = np.swapaxes((Y[:, 1:nx + 1, :] - Y[:, nx + 1:, :]) / (2 * h[:, :, None]), 1, 2)  # (B, ny, nx)
+    if path is not None:
+        p0 = sv.get_param(path)  # (B,)
+        hp = eps * np.where(p0 != 0, np.abs(p0), 1.0)
+        hp = (p0 + hp) - p0
+        vals = np.stack([p0 + hp, p0 - hp], axis=1)
+        cb, Xp = _param_batch(sv, path, X, vals)
+        F = cb.evaluate(t, Xp).reshape(Bm, 2, nx)
+        Bv = (F[:, 0] - F[:, 1]) / (2 * hp[:, None])
+        if outputs:
+            Yp = _output_values(cb, t, Xp, outputs).reshape(Bm, 2, len(outputs))
+            D = (Yp[:, 0] - Yp[:, 1]) / (2 * hp[:, None])
+    c = law_gradients(sv, X, t, eps)
+    T = reduction_basis(c)
+    A_red, B_red, C_red = reduce_laws(T, A, Bv, C)
+
+    def one(a):
+        return a if a is None or not single else a[0]
+
+    return Linearization(x=one(X), A=one(A), B=one(Bv), C=one(C), D=one(D), y0=one(y0),
+                         p0=None if p0 is None else (float(p0[0]) if single else p0),
+                         T=one(T), A_red=one(A_red), B_red=one(B_red), C_red=one(C_red),
+                         law_gradients=one(c), state_names=list(sv.state_names), outputs=outputs,
+                         input=path, t=t)
+
+
+def limit_flags(circuit, x, rtol=1e-6):
+    """Names of the states of x (nx,) sitting at a hard limit of the *dynamic* circuit:
+    a clamped compliance collapsed to V <= 0 (the steady variant continues it below 0), or a
+    state at a declared floor (second-order Ca)."""
+    x = np.asarray(x, dtype=float)
+    out = []
+    for g in circuit.groups:
+        if g.comp.opts.get("clamp_at_zero") and "V" in [s.name for s in g.states]:
+            j = [s.name for s in g.states].index("V")
+            for i in range(g.E):
+                k = g.sidx[i, j]
+                if x[k] <= 0.0:
+                    out.append(circuit.state_names[k])
+    for k, bound, _ in circuit.hard_limits():
+        if x[k] <= bound + rtol * max(abs(bound), 1e-300):
+            out.append(circuit.state_names[k])
+    return out

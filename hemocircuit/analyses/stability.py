@@ -1,0 +1,393 @@
+"""Stability of equilibria along a parameter sweep; Hopf (and other) bifurcations.
+
+At every sweep value the operating point is continued from the previous one (as in a DC sweep),
+the circuit is linearised there (:mod:`.linearize`: central differences on the steady variant,
+so a state at a hard limit gives no false one-sided-difference eigenvalue), the structural zero
+eigenvalues of conservation laws are projected out, and the remaining eigenvalues classify the
+equilibrium:
+
+  'stable node'     every Re < 0, all eigenvalues real
+  'stable focus'    every Re < 0, at least one complex pair (damped oscillation)
+  'unstable node'   some Re > 0, all of them real (includes saddles; see n_unstable)
+  'unstable focus'  some Re > 0, among them a complex pair (growing oscillation)
+
+"Re > 0" means above a round-off tolerance (1e-9 of the largest |lambda|); an eigenvalue is
+complex when |Im| > 1e-7 |lambda|.  The least-damped complex pair is the one with the smallest
+damping ratio zeta = -Re/|lambda|; its frequency is Im/(2 pi) Hz.
+
+Events between neighbouring sweep points are located by bracketing in the parameter, with the
+operating point continued from the nearer bracket end:
+  'hopf'            the spectral abscissa max Re(lambda) changes sign and the critical
+                    eigenvalue is a complex pair (frequency reported); Brent's method
+  'real crossing'   it changes sign through a real eigenvalue (fold / branch point)
+  'complex onset'   the number of complex pairs changes (two real eigenvalues collide and
+                    leave the real axis, or a pair lands on it); bisection
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import HemocircuitError, SolverError
+from .linearize import limit_flags, linearize
+
+RE_TOL = 1e-9
+IM_TOL = 1e-7
+CLASSES = ("stable node", "stable focus", "unstable node", "unstable focus")
+
+
+# ------------------------------------------------------------------------ one point -------
+def sort_eigenvalues(lam):
+    """Largest real part first; of a conjugate pair the positive imaginary part first."""
+    lam = np.asarray(lam, dtype=complex)
+    return lam[np.lexsort((-lam.imag, -lam.real))]
+
+
+def analyse_eigenvalues(lam):
+    """Classification and least-damped pair of one equilibrium's eigenvalues (structural zeros
+    already removed).  Returns a dict."""
+    lam = sort_eigenvalues(lam)
+    if lam.size == 0:
+        return {"eigenvalues": lam, "classification": "stable node", "n_unstable": 0, "abscissa": -np.inf,
+                "n_pairs": 0, "pair": None, "pair_zeta": np.nan, "pair_freq": np.nan}
+    scale = max(np.max(np.abs(lam)), 1e-300)
+    cplx = np.abs(lam.imag) > IM_TOL * np.maximum(np.abs(lam), 1e-300)
+    unstable = lam.real > RE_TOL * scale
+    n_pairs = int(np.sum(cplx & (lam.imag > 0)))
+    if unstable.any():
+        cls = "unstable focus" if np.any(unstable & cplx) else "unstable node"
+    else:
+        cls = "stable focus" if n_pairs else "stable node"
+    pair, zeta, freq = None, np.nan, np.nan
+    if n_pairs:
+        upper = lam[cplx & (lam.imag > 0)]
+        z = -upper.real / np.abs(upper)
+        k = int(np.argmin(z))
+        pair, zeta, freq = upper[k], float(z[k]), float(upper[k].imag / (2 * np.pi))
+    return {"eigenvalues": lam, "classification": cls, "n_unstable": int(unstable.sum()),
+            "abscissa": float(lam.real.max()), "n_pairs": n_pairs, "pair": pair, "pair_zeta": zeta,
+            "pair_freq": freq}
+
+
+def eigenvalues(circuit, x, t=0.0):
+    """Eigenvalues at states x (nx,) with the conservation laws' structural zeros removed."""
+    lin = linearize(circuit, x, t=t)
+    return np.linalg.eigvals(lin.A_red)
+
+
+def analyse_point(circuit, x, t=0.0):
+    """Eigen-analysis of the equilibrium x of ``circuit`` (dict, see analyse_eigenvalues),
+    plus 'at_limit' (states at a hard limit) and 'x'."""
+    out = analyse_eigenvalues(eigenvalues(circuit, x, t))
+    out["at_limit"] = limit_flags(circuit, x)
+    out["x"] = np.asarray(x, dtype=float)
+    return out
+
+
+def _solve_at(circuit, param, value, x0, t=0.0):
+    """Operating point at param = value continued from x0 (fresh DC guess as a fallback)."""
+    from .op import operating_point
+
+    c = circuit.copy()
+    c.set_param(param, float(value))
+    try:
+        op = operating_point(c, t, x0=x0)
+    except SolverError:
+        op = operating_point(c, t)
+    return c, op
+
+
+# ------------------------------------------------------------------------ result ----------
+class StabilityResult:
+    """Per sweep point: ``values``, ``eigenvalues`` (N, n) complex (NaN where the operating
+    point failed), ``classification``, ``n_unstable``, ``abscissa`` (max Re), ``n_pairs``,
+    ``pair`` (least-damped complex pair, NaN if none), ``pair_zeta``, ``pair_freq`` [Hz],
+    ``at_limit`` (list of state names per point), ``x`` (N, nx); ``events`` (list of dicts
+    kind/value/eigenvalue/frequency); ``failed`` [(value, reason)]."""
+
+    def __init__(self, param, unit, values, points, events, failed, state_names):
+        self.param, self.unit = param, unit
+        self.values = np.asarray(values, dtype=float)
+        self.points = points
+        self.events = events
+        self.failed = failed
+        self.state_names = state_names
+        n = max((len(p["eigenvalues"]) for p in points if p is not None), default=0)
+        N = len(points)
+        self.eigenvalues = np.full((N, n), np.nan + 0j)
+        self.x = np.full((N, len(state_names)), np.nan)
+        self.classification, self.at_limit = [], []
+        self.n_unstable = np.full(N, -1)
+        self.n_pairs = np.full(N, -1)
+        self.abscissa = np.full(N, np.nan)
+        self.pair = np.full(N, np.nan + 0j)
+        self.pair_zeta = np.full(N, np.nan)
+        self.pair_freq = np.full(N, np.nan)
+        for i, p in enumerate(points):
+            if p is None:
+                self.classification.append("failed")
+                self.at_limit.append([])
+                continue
+            lam = p["eigenvalues"]
+            self.eigenvalues[i, :len(lam)] = lam
+            self.x[i] = p["x"]
+            self.classification.append(p["classification"])
+            self.at_limit.append(p["at_limit"])
+            self.n_unstable[i], self.n_pairs[i], self.abscissa[i] = p["n_unstable"], p["n_pairs"], p["abscissa"]
+            if p["pair"] is not None:
+                self.pair[i], self.pair_zeta[i], self.pair_freq[i] = p["pair"], p["pair_zeta"], p["pair_freq"]
+
+    @property
+    def stable(self):
+        return np.array([c.startswith("stable") for c in self.classification])
+
+    @property
+    def hopf(self):
+        """Parameter values of the located Hopf points."""
+        return [e["value"] for e in self.events if e["kind"] == "hopf"]
+
+    def complex_ranges(self):
+        """[(start, end)] parameter intervals with at least one complex pair; ends located by
+        bisection where a boundary lies inside the sweep (else the sweep's end)."""
+        has = self.n_pairs > 0
+        onsets = sorted(e["value"] for e in self.events if e["kind"] == "complex onset")
+        out = []
+        i, N = 0, len(has)
+        while i < N:
+            if not has[i]:
+                i += 1
+                continue
+            j = i
+            while j + 1 < N and has[j + 1]:
+                j += 1
+            lo, hi = self.values[i], self.values[j]
+            lo_b = [v for v in onsets if (i > 0 and min(self.values[i - 1], lo) <= v <= max(self.values[i - 1], lo))]
+            hi_b = [v for v in onsets if (j + 1 < N and min(hi, self.values[j + 1]) <= v <= max(hi, self.values[j + 1]))]
+            out.append((lo_b[0] if lo_b else lo, hi_b[0] if hi_b else hi))
+            i = j + 1
+        return out
+
+    def columns(self):
+        """Tidy columns for a CSV (swept parameter first, written by the caller)."""
+        cols = {"classification": np.array(self.classification, dtype=object),
+                "n_unstable": self.n_unstable, "max_real": self.abscissa, "n_complex_pairs": self.n_pairs,
+                "pair_real": self.pair.real, "pair_imag": self.pair.imag, "pair_zeta": self.pair_zeta,
+                "pair_freq": self.pair_freq,
+                "at_limit": np.array([";".join(a) for a in self.at_limit], dtype=object)}
+        for k in range(self.eigenvalues.shape[1]):
+            cols[f"re{k + 1}"] = self.eigenvalues[:, k].real
+            cols[f"im{k + 1}"] = self.eigenvalues[:, k].imag
+        units = {"max_real": "1/s", "pair_real": "1/s", "pair_imag": "rad/s", "pair_freq": "Hz",
+                 **{f"re{k + 1}": "1/s" for k in range(self.eigenvalues.shape[1])},
+                 **{f"im{k + 1}": "rad/s" for k in range(self.eigenvalues.shape[1])}}
+        return cols, units
+
+    def summary(self):
+        lines = []
+        ok = [c for c in self.classification if c != "failed"]
+        counts = {k: ok.count(k) for k in CLASSES if ok.count(k)}
+        lines.append(f"{len(self.values)} points: " + ", ".join(f"{v} {k}" for k, v in counts.items())
+                     + (f", {len(self.failed)} failed" if self.failed else ""))
+        for lo, hi in self.complex_ranges():
+            lines.append(f"complex pair for {self.param} in [{lo:.6g}, {hi:.6g}] {self.unit}")
+        for e in self.events:
+            if e["kind"] == "hopf":
+                lines.append(f"Hopf point at {self.param} = {e['value']:.6g} {self.unit}: lambda = "
+                             f"{e['eigenvalue'].real:+.3g} {e['eigenvalue'].imag:+.5g}j /s, "
+                             f"frequency {e['frequency']:.5g} Hz ({e['direction']})")
+            elif e["kind"] == "real crossing":
+                lines.append(f"real eigenvalue crosses zero at {self.param} = {e['value']:.6g} {self.unit} "
+                             f"({e['direction']})")
+        lim = sorted({n for a in self.at_limit for n in a})
+        if lim:
+            where = [self.values[i] for i, a in enumerate(self.at_limit) if a]
+            lines.append(f"states at a hard limit (linearised on the smooth steady variant): {', '.join(lim)} "
+                         f"for {self.param} in [{min(where):.6g}, {max(where):.6g}] {self.unit}")
+        return "\n".join(lines)
+
+
+# ------------------------------------------------------------------------ sweep -----------
+def stability_sweep(circuit, param="Pa.value", values="10:200:2 mmHg", t=0.0, locate=True, xtol=None,
+                    progress=False) -> StabilityResult:
+    """Eigen-analysis of the equilibria of ``circuit`` over ``param`` = ``values`` (array in the
+    parameter's declared unit, or a range string '10:200:2 mmHg'), continuing the operating point
+    from point to point.  With ``locate``, Hopf points, real crossings and complex-pair onsets
+    between sweep points are located in the parameter to ``xtol`` (default 1e-6 of the sweep's
+    step for Hopf/real crossings, 1e-4 of it for complex onsets)."""
+    from .dc import parse_range
+    from .op import operating_point
+
+    unit = circuit.param_unit(param)
+    vals = parse_range(values, unit) if isinstance(values, str) else np.atleast_1d(np.asarray(values, dtype=float))
+    if circuit.B != 1:
+        raise HemocircuitError("stability_sweep runs on a single circuit (the sweep is the batch)")
+    c = circuit.copy()
+    points, failed = [], []
+    x_prev = None
+    it = vals
+    if progress:
+        from tqdm import tqdm
+        it = tqdm(vals, desc="stability", leave=False)
+    for v in it:
+        try:
+            c.set_param(param, float(v))
+            try:
+                op = operating_point(c, t, x0=x_prev)
+            except SolverError:
+                op = operating_point(c, t)
+            pt = analyse_point(c, op.x, t)
+        except HemocircuitError as exc:
+            failed.append((float(v), str(exc)))
+            points.append(None)
+            continue
+        x_prev = op.x
+        points.append(pt)
+    events = []
+    if locate and len(vals) > 1:
+        step = float(np.min(np.abs(np.diff(vals)))) if len(vals) > 1 else 1.0
+        events = _locate_events(circuit, param, vals, points, t, xtol or 1e-6 * step, 1e-4 * step)
+    return StabilityResult(param, unit, vals, points, events, failed, list(circuit.state_names))
+
+
+def _locate_events(circuit, param, vals, points, t, xtol, xtol_onset):
+    from scipy.optimize import brentq
+
+    events = []
+    for i in range(len(vals) - 1):
+        a, b = points[i], points[i + 1]
+        if a is None or b is None:
+            continue
+        va, vb = float(vals[i]), float(vals[i + 1])
+        cache = {}
+
+        def at(v, a=a, b=b, va=va, vb=vb, cache=cache):
+            if v not in cache:
+                x0 = a["x"] if abs(v - va) <= abs(v - vb) else b["x"]
+                cc, op = _solve_at(circuit, param, v, x0, t)
+                cache[v] = analyse_point(cc, op.x, t)
+            return cache[v]
+
+        ua, ub = a["n_unstable"] > 0, b["n_unstable"] > 0
+        if ua != ub:
+            try:
+                g = lambda v: at(v)["abscissa"]  # noqa: E731
+                ga, gb = a["abscissa"], b["abscissa"]
+                if np.sign(ga) != np.sign(gb):
+                    root = brentq(g, va, vb, xtol=xtol, rtol=4 * np.finfo(float).eps, maxiter=100)
+                else:  # both within the round-off band of zero: bisect on the verdict
+                    root = _bisect(lambda v: at(v)["n_unstable"] > 0, va, vb, ua, xtol)
+                p = at(root)
+                lam = p["eigenvalues"]
+                crit = lam[np.argmin(np.abs(lam.real))]
+                hopf = abs(crit.imag) > IM_TOL * max(abs(crit), 1e-300)
+                events.append({"kind": "hopf" if hopf else "real crossing", "value": float(root),
+                               "eigenvalue": complex(crit.real, abs(crit.imag)),
+                               "frequency": abs(crit.imag) / (2 * np.pi) if hopf else 0.0,
+                               "direction": "unstable above" if (ub if vb > va else ua) else "unstable below",
+                               "between": (va, vb)})
+            except HemocircuitError as exc:
+                events.append({"kind": "failed", "value": np.nan, "between": (va, vb), "reason": str(exc)})
+        if a["n_pairs"] != b["n_pairs"]:
+            try:
+                na = a["n_pairs"]
+                root = _bisect(lambda v: at(v)["n_pairs"] == na, va, vb, True, xtol_onset)
+                events.append({"kind": "complex onset", "value": float(root), "between": (va, vb),
+                               "pairs": (a["n_pairs"], b["n_pairs"])})
+            except HemocircuitError as exc:
+                events.append({"kind": "failed", "value": np.nan, "between": (va, vb), "reason": str(exc)})
+    return events
+
+
+def _bisect(pred, a, b, pred_a, xtol):
+    """Point where pred changes from pred_a (at a) to not pred_a (at b), to xtol."""
+    while abs(b - a) > xtol:
+        m = 0.5 * (a + b)
+        if pred(m) == pred_a:
+            a = m
+        else:
+            b = m
+    return 0.5 * (a + b)
+
+
+# ------------------------------------------------------------------------ plots -----------
+def plot_stability(path, res: StabilityResult, title=""):
+    """Real parts of the eigenvalues against the parameter (symlog) and the eigenvalues in the
+    complex plane coloured by the parameter."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(13, 5.2))
+    v = res.values
+    E = res.eigenvalues
+    lin = max(float(np.nanmin(np.abs(E.real[E.real != 0]))) if np.any(E.real != 0) else 1e-3, 1e-4)
+    lin = min(lin, 0.1)
+    for lo, hi in res.complex_ranges():
+        ax1.axvspan(lo, hi, color="tab:orange", alpha=0.12, lw=0)
+    for k in range(E.shape[1]):
+        cp = np.abs(E[:, k].imag) > 0
+        ax1.plot(v, E[:, k].real, ".", ms=3, color="tab:blue")
+        ax1.plot(v[cp], E[cp, k].real, "o", ms=4, mfc="none", color="tab:orange")
+    for e in res.events:
+        if e["kind"] in ("hopf", "real crossing"):
+            ax1.axvline(e["value"], color="tab:red", lw=0.8, ls="--")
+            ax1.annotate(f"{'Hopf' if e['kind'] == 'hopf' else 'crossing'} {e['value']:.4g}", (e["value"], 0),
+                         fontsize=7, rotation=90, va="bottom", ha="right", color="tab:red")
+    ax1.axhline(0, color="k", lw=0.7)
+    ax1.set_yscale("symlog", linthresh=lin)
+    ax1.set_xlabel(f"{res.param} [{res.unit}]")
+    ax1.set_ylabel("Re(lambda) [1/s]  (orange: complex pair; shaded: complex range)")
+    ax1.grid(alpha=0.3)
+    sc = None
+    for k in range(E.shape[1]):
+        sc = ax2.scatter(E[:, k].real, E[:, k].imag, c=v, s=8, cmap="viridis")
+    if sc is not None:
+        fig.colorbar(sc, ax=ax2, label=f"{res.param} [{res.unit}]")
+    ax2.axvline(0, color="k", lw=0.7)
+    ax2.axhline(0, color="k", lw=0.4)
+    ax2.set_xscale("symlog", linthresh=lin)
+    ax2.set_xlabel("Re(lambda) [1/s]")
+    ax2.set_ylabel("Im(lambda) [rad/s]")
+    ax2.grid(alpha=0.3)
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+# ------------------------------------------------------------------------ CLI -------------
+def cmd_stability(args):
+    from .. import io
+    from ..cli import _load, _range_spacing
+
+    c, proto = _load(args)
+    if proto:
+        c = proto.apply_initial(c)
+    if not args.sweep or "=" not in args.sweep:
+        raise HemocircuitError("stability needs --sweep ID.PARAM=START:STOP:STEP UNIT (e.g. Pa.value=10:200:2mmHg)")
+    param, rng = (s.strip() for s in args.sweep.split("=", 1))
+    res = stability_sweep(c, param, _range_spacing(rng), locate=not args.no_locate, progress=args.progress)
+    head = [f"{param} [{res.unit}]", "classification", "max Re [1/s]", "pair zeta", "pair f [Hz]", "at limit"]
+    print(f"{head[0]:>16}  {head[1]:>15}  {head[2]:>13}  {head[3]:>10}  {head[4]:>11}  {head[5]}")
+    for i, v in enumerate(res.values):
+        print(f"{v:>16.6g}  {res.classification[i]:>15}  {res.abscissa[i]:>13.5g}  {res.pair_zeta[i]:>10.4g}  "
+              f"{res.pair_freq[i]:>11.4g}  {';'.join(res.at_limit[i])}")
+    print(res.summary())
+    for v, why in res.failed:
+        print(f"failed at {param}={v:g}: {why}", file=__import__('sys').stderr)
+    if args.out:
+        cols, units = res.columns()
+        io.write_csv(args.out, cols, units, first=(param, res.values, res.unit))
+        print(f"wrote {args.out}")
+    if args.plot:
+        plot_stability(args.plot, res, title=f"{c.netlist.name}: eigenvalues along {param}")
+        print(f"wrote {args.plot}")
+
+
+def register_cli(sub, common):
+    sp = common(sub.add_parser("stability", help="eigenvalues of the equilibria along a sweep; Hopf points"))
+    sp.add_argument("--sweep", help="ID.PARAM=START:STOP:STEP UNIT, e.g. Pa.value=10:200:2mmHg")
+    sp.add_argument("--no-locate", action="store_true", help="do not locate Hopf points / complex onsets")
+    sp.add_argument("--progress", action="store_true", help="show a progress bar")
+    sp.set_defaults(func=cmd_stability)
