@@ -81,7 +81,7 @@ def integrate(circuit, x0, t_out, rtol=1e-5, atol=None, h0=1e-3, max_steps=50000
     while active.any() and nsteps < max_steps:
         idx = np.nonzero(active)[0]
         ti, xi, hi, fi = t[idx], x[idx], np.minimum(h[idx], t_end[idx] - t[idx]), f_cur[idx]
-        hi = np.minimum(hi, h_max)
+        hi = np.minimum(hi, h_max if np.ndim(h_max) == 0 else np.asarray(h_max)[idx])
         c = circuit.subset(idx)
         try:
             stale = age[idx] >= JAC_REUSE

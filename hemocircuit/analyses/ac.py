@@ -19,6 +19,7 @@ Reported per output:
 from __future__ import annotations
 
 import re
+import sys
 
 import numpy as np
 
@@ -109,6 +110,11 @@ class ACResult:
         self.units = units
         self.lin = lin
         self.op = op
+        # an unstable equilibrium still has a (formal) transfer function, but no periodic
+        # steady state to measure it in: flag it
+        lam = np.linalg.eigvals(lin.A_red)  # (n,) or (B, n)
+        self.eigenvalues = lam
+        self.stable = bool(np.all(lam.real < 1e-9 * np.max(np.abs(lam), initial=1e-300)))
 
     def columns(self):
         """Tidy columns for a CSV (single circuit): per output gain, rel_gain, phase, Re, Im."""
@@ -194,6 +200,12 @@ def cmd_ac(args):
     res = ac_response(c, input=args.input, outputs=outputs, freqs=args.freq, per_decade=args.per_decade)
     print(f"AC: {res.input} = {res.p0:.6g} {res.units['input']} -> {', '.join(outputs)}; "
           f"{len(res.freq)} frequencies {res.freq[0]:.4g}..{res.freq[-1]:.4g} Hz")
+    sys.stdout.flush()
+    if not res.stable:
+        lam = res.eigenvalues.reshape(-1)
+        k = int(np.argmax(lam.real))
+        print(f"warning: the operating point is unstable (eigenvalue {lam[k].real:+.4g}{lam[k].imag:+.4g}j /s); "
+              "the transfer function is formal (no periodic steady state to observe it in)", file=sys.stderr)
     for n in outputs:
         g = res.rel_gain[n]
         k = int(np.nanargmax(g))

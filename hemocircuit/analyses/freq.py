@@ -78,7 +78,8 @@ def _run_chunk(job):
         sub = bc.subset(idx)
         n_pts = block * SAMPLES
         grid = t[idx, None] + period[idx, None] * np.arange(n_pts + 1)[None, :] / SAMPLES
-        r = integrate(sub, x[idx], grid, rtol=opt["rtol"], atol=opt["rtol"])
+        # at most 1/32 period per step: the forcing and the output grid stay resolved
+        r = integrate(sub, x[idx], grid, rtol=opt["rtol"], atol=opt["rtol"], h_max=period[idx] / 32)
         for j, m in enumerate(idx):
             if not r.ok[j]:
                 failed[m] = True
@@ -91,7 +92,9 @@ def _run_chunk(job):
             a0 = _dft(Y[:, -2 * SAMPLES:-SAMPLES], SAMPLES, 1)
             x1 = _dft(X_in[-SAMPLES:], SAMPLES, 1)
             total_periods[m] += block
-            rel = np.abs(a1 - a0) / np.maximum(np.abs(a1), 1e-300)
+            # change of the fundamental between the last two periods, relative to its size (or
+            # to 1 % of the steady output, so a vanishing response does not block settling)
+            rel = np.abs(a1 - a0) / np.maximum(np.abs(a1), 0.01 * np.abs(y0[m]) + 1e-300)
             if np.all(rel < opt["settle_tol"]) or total_periods[m] >= opt["max_periods"]:
                 settled[m] = True
                 n = opt["n_periods"] * SAMPLES
@@ -111,7 +114,7 @@ def _run_chunk(job):
 
 
 def frequency_response(circuit, freqs, outputs=("Q(Rla)", "Q(Rsv)"), input="Pa", step=0.1, amplitude=0.1,
-                       grid=None, settle_tol=1e-3, n_periods=2, block_periods=4, max_periods=400, rtol=1e-6,
+                       grid=None, settle_tol=1e-3, n_periods=2, block_periods=4, max_periods=400, rtol=1e-8,
                        scheduler=None, workers=None, progress=False):
     """Batched nonlinear frequency response.  ``grid``: [(ID.PARAM, [values])].  Returns a list
     of rows (dicts), one per (grid point, frequency, output): tidy data."""
@@ -225,7 +228,7 @@ def register_cli(sub, common):
     sp.add_argument("--grid", action="append", help="ID.PARAM=V1,V2,... (repeatable; cartesian product)")
     sp.add_argument("--scheduler", help="Dask scheduler address tcp://HOST:PORT (default: local processes)")
     sp.add_argument("--workers", type=int, help="local worker processes (default: all cores)")
-    sp.add_argument("--rtol", type=float, default=1e-6)
+    sp.add_argument("--rtol", type=float, default=1e-8)
     sp.add_argument("--out", help="tidy CSV")
     sp.add_argument("--plot", help="Bode plot PNG")
     sp.set_defaults(func=cmd_freq)

@@ -17,8 +17,10 @@ damping ratio zeta = -Re/|lambda|; its frequency is Im/(2 pi) Hz.
 
 Events between neighbouring sweep points are located by bracketing in the parameter, with the
 operating point continued from the nearer bracket end:
-  'hopf'            the spectral abscissa max Re(lambda) changes sign and the critical
-                    eigenvalue is a complex pair (frequency reported); Brent's method
+  'hopf'            the number of eigenvalues with Re > 0 changes (the spectral abscissa
+                    crosses zero, or a further pair does) through a complex pair (frequency
+                    reported); the crossing real part is bracketed with Brent's method;
+                    'unstable above' when the count grows with the parameter
   'real crossing'   it changes sign through a real eigenvalue (fold / branch point)
   'complex onset'   the number of complex pairs changes (two real eigenvalues collide and
                     leave the real axis, or a pair lands on it); bisection
@@ -83,17 +85,36 @@ def analyse_point(circuit, x, t=0.0):
     return out
 
 
-def _solve_at(circuit, param, value, x0, t=0.0):
-    """Operating point at param = value continued from x0 (fresh DC guess as a fallback)."""
-    from .op import operating_point
+def equilibrium(c, x0=None, t=0.0, tol=1e-10):
+    """States of the operating point of ``c``, continued from x0.
 
+    If x0 already balances (scaled residual below ``tol``, e.g. when the swept parameter does
+    not move the equilibrium: zeta, omega_n, tau_Ca), it is returned as it is -- Newton started
+    on a converged point can spend a long time in its line search at round-off level."""
+    from .op import operating_point, residual
+
+    if x0 is not None and all(v is not None for v in c.law_totals):
+        sv = c.steady_variant()
+        totals = [np.atleast_1d(v) for v in c.law_totals]
+        try:
+            F = residual(sv, t, np.asarray(x0, dtype=float)[None, :], totals)
+            if np.all(np.isfinite(F)) and np.max(np.abs(F) / sv.state_scales) < tol:
+                return np.asarray(x0, dtype=float).copy()
+        except HemocircuitError:
+            pass
+    try:
+        return operating_point(c, t, x0=x0).x
+    except SolverError:
+        if x0 is None:
+            raise
+        return operating_point(c, t).x
+
+
+def _solve_at(circuit, param, value, x0, t=0.0):
+    """(circuit with param = value, its equilibrium continued from x0)."""
     c = circuit.copy()
     c.set_param(param, float(value))
-    try:
-        op = operating_point(c, t, x0=x0)
-    except SolverError:
-        op = operating_point(c, t)
-    return c, op
+    return c, equilibrium(c, x0, t)
 
 
 # ------------------------------------------------------------------------ result ----------
@@ -119,7 +140,7 @@ class StabilityResult:
         self.n_unstable = np.full(N, -1)
         self.n_pairs = np.full(N, -1)
         self.abscissa = np.full(N, np.nan)
-        self.pair = np.full(N, np.nan + 0j)
+        self.pair = np.full(N, complex(np.nan, np.nan))
         self.pair_zeta = np.full(N, np.nan)
         self.pair_freq = np.full(N, np.nan)
         for i, p in enumerate(points):
@@ -212,9 +233,8 @@ def stability_sweep(circuit, param="Pa.value", values="10:200:2 mmHg", t=0.0, lo
     parameter's declared unit, or a range string '10:200:2 mmHg'), continuing the operating point
     from point to point.  With ``locate``, Hopf points, real crossings and complex-pair onsets
     between sweep points are located in the parameter to ``xtol`` (default 1e-6 of the sweep's
-    step for Hopf/real crossings, 1e-4 of it for complex onsets)."""
+    step for Hopf/real crossings, 1e-3 of it for complex onsets)."""
     from .dc import parse_range
-    from .op import operating_point
 
     unit = circuit.param_unit(param)
     vals = parse_range(values, unit) if isinstance(values, str) else np.atleast_1d(np.asarray(values, dtype=float))
@@ -230,21 +250,18 @@ def stability_sweep(circuit, param="Pa.value", values="10:200:2 mmHg", t=0.0, lo
     for v in it:
         try:
             c.set_param(param, float(v))
-            try:
-                op = operating_point(c, t, x0=x_prev)
-            except SolverError:
-                op = operating_point(c, t)
-            pt = analyse_point(c, op.x, t)
+            x = equilibrium(c, x_prev, t)
+            pt = analyse_point(c, x, t)
         except HemocircuitError as exc:
             failed.append((float(v), str(exc)))
             points.append(None)
             continue
-        x_prev = op.x
+        x_prev = x
         points.append(pt)
     events = []
     if locate and len(vals) > 1:
         step = float(np.min(np.abs(np.diff(vals)))) if len(vals) > 1 else 1.0
-        events = _locate_events(circuit, param, vals, points, t, xtol or 1e-6 * step, 1e-4 * step)
+        events = _locate_events(c, param, vals, points, t, xtol or 1e-6 * step, 1e-3 * step)
     return StabilityResult(param, unit, vals, points, events, failed, list(circuit.state_names))
 
 
@@ -262,28 +279,36 @@ def _locate_events(circuit, param, vals, points, t, xtol, xtol_onset):
         def at(v, a=a, b=b, va=va, vb=vb, cache=cache):
             if v not in cache:
                 x0 = a["x"] if abs(v - va) <= abs(v - vb) else b["x"]
-                cc, op = _solve_at(circuit, param, v, x0, t)
-                cache[v] = analyse_point(cc, op.x, t)
+                cc, x = _solve_at(circuit, param, v, x0, t)
+                cache[v] = analyse_point(cc, x, t)
             return cache[v]
 
-        ua, ub = a["n_unstable"] > 0, b["n_unstable"] > 0
-        if ua != ub:
+        na_u, nb_u = a["n_unstable"], b["n_unstable"]
+        if na_u != nb_u:
+            # the real part of rank min(na_u, nb_u) (largest first) crosses zero: the
+            # spectral abscissa when the equilibrium loses stability, the next eigenvalue(s)
+            # when a second pair or eigenvalue crosses
+            rank = min(na_u, nb_u)
+
+            def g(v, rank=rank):
+                return float(np.sort(at(v)["eigenvalues"].real)[::-1][rank])
+
             try:
-                g = lambda v: at(v)["abscissa"]  # noqa: E731
-                ga, gb = a["abscissa"], b["abscissa"]
-                if np.sign(ga) != np.sign(gb):
+                ga = float(np.sort(a["eigenvalues"].real)[::-1][rank])
+                gb = float(np.sort(b["eigenvalues"].real)[::-1][rank])
+                if np.sign(ga) != np.sign(gb) and ga != 0 and gb != 0:
                     root = brentq(g, va, vb, xtol=xtol, rtol=4 * np.finfo(float).eps, maxiter=100)
-                else:  # both within the round-off band of zero: bisect on the verdict
-                    root = _bisect(lambda v: at(v)["n_unstable"] > 0, va, vb, ua, xtol)
+                else:  # within the round-off band of zero: bisect on the count
+                    root = _bisect(lambda v: at(v)["n_unstable"] == na_u, va, vb, True, xtol)
                 p = at(root)
                 lam = p["eigenvalues"]
-                crit = lam[np.argmin(np.abs(lam.real))]
+                crit = lam[np.argmin(np.abs(lam.real - g(root)))]
                 hopf = abs(crit.imag) > IM_TOL * max(abs(crit), 1e-300)
                 events.append({"kind": "hopf" if hopf else "real crossing", "value": float(root),
                                "eigenvalue": complex(crit.real, abs(crit.imag)),
                                "frequency": abs(crit.imag) / (2 * np.pi) if hopf else 0.0,
-                               "direction": "unstable above" if (ub if vb > va else ua) else "unstable below",
-                               "between": (va, vb)})
+                               "direction": "unstable above" if (nb_u > na_u) == (vb > va) else "unstable below",
+                               "n_unstable": (na_u, nb_u), "between": (va, vb)})
             except HemocircuitError as exc:
                 events.append({"kind": "failed", "value": np.nan, "between": (va, vb), "reason": str(exc)})
         if a["n_pairs"] != b["n_pairs"]:
