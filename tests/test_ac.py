@@ -10,7 +10,7 @@ from hemocircuit.analyses.ac import ac_response, parse_freqs, transfer
 from hemocircuit.analyses.linearize import linearize
 from hemocircuit.cli import main
 
-from conftest import ROOT
+from paths import ROOT
 
 NETS = ROOT / "netlists"
 

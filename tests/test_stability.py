@@ -8,7 +8,7 @@ from hemocircuit.analyses.linearize import law_gradients, linearize, state_jacob
 from hemocircuit.analyses.stability import analyse_eigenvalues, analyse_point, equilibrium, stability_sweep
 from hemocircuit.cli import main
 
-from conftest import ROOT
+from paths import ROOT
 
 NETS = ROOT / "netlists"
 

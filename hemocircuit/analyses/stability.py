@@ -27,6 +27,8 @@ operating point continued from the nearer bracket end:
 """
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 
 from ..errors import HemocircuitError, SolverError
@@ -400,7 +402,7 @@ def cmd_stability(args):
               f"{res.pair_freq[i]:>11.4g}  {';'.join(res.at_limit[i])}")
     print(res.summary())
     for v, why in res.failed:
-        print(f"failed at {param}={v:g}: {why}", file=__import__('sys').stderr)
+        print(f"failed at {param}={v:g}: {why}", file=sys.stderr)
     if args.out:
         cols, units = res.columns()
         io.write_csv(args.out, cols, units, first=(param, res.values, res.unit))
