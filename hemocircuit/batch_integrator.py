@@ -84,11 +84,11 @@ def integrate(circuit, x0, t_out, rtol=1e-5, atol=None, h0=1e-3, max_steps=50000
         hi = np.minimum(hi, h_max if np.ndim(h_max) == 0 else np.asarray(h_max)[idx])
         c = circuit.subset(idx)
         try:
-            stale = age[idx] >= JAC_REUSE
-            if stale.any():
-                cs = circuit.subset(idx[stale])
-                Jn, Fn = jac_and_ft(cs, ti[stale], xi[stale], fi[stale])
-                Jac[idx[stale]], Ft[idx[stale]], age[idx[stale]] = Jn, Fn, 0
+            # all active members refresh their Jacobians together (one batched evaluation on the
+            # same member set, so the subset view is reused) once any is JAC_REUSE steps old
+            if np.any(age[idx] >= JAC_REUSE):
+                Jn, Fn = jac_and_ft(c, ti, xi, fi)
+                Jac[idx], Ft[idx], age[idx] = Jn, Fn, 0
             x_new, err_vec = _step(c, ti, xi, fi, hi, Jac[idx], Ft[idx], eye)
         except Exception as exc:  # a member left the physical domain: find which
             _fail_members(circuit, idx, ti, xi, hi, ok, active, message, exc)
@@ -101,7 +101,7 @@ def integrate(circuit, x0, t_out, rtol=1e-5, atol=None, h0=1e-3, max_steps=50000
         # step-size control (embedded order 2 -> exponent 1/3)
         fac = np.clip(0.9 * np.where(err > 0, err, 1e-10) ** (-1.0 / ORDER), 0.2, 5.0)
         h[idx] = hi * np.where(accept, fac, np.where(np.isfinite(err), np.minimum(fac, 0.5), 0.25))
-        age[idx] = np.where(accept, age[idx] + 1, JAC_REUSE)  # refresh J after a rejection
+        age[idx] = age[idx] + 1
         nrej += int(np.sum(~accept))
         if accept.any():
             a = idx[accept]

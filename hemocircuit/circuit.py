@@ -338,8 +338,8 @@ class Circuit:
         c._rep_cache = {}
         c.law_totals = [None if v is None else np.atleast_1d(v)[members] if np.size(v) > 1 else v
                         for v in self.law_totals]
-        if len(cache) > 64:
-            cache.clear()
+        if len(cache) > 256:
+            cache.pop(next(iter(cache)))
         cache[key] = c
         return c
 

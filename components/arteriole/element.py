@@ -86,7 +86,11 @@ class Arteriole(Component):
 
     @property
     def model_options(self):
-        return {k: self.opts[k] for k in ("ca_order", "kinetics", "passive")}
+        o = self.__dict__.get("_model_options")
+        if o is None or any(o[k] != self.opts[k] for k in ("ca_order", "kinetics", "passive")):
+            o = model.resolve_options({k: self.opts[k] for k in ("ca_order", "kinetics", "passive")})
+            self.__dict__["_model_options"] = o
+        return o
 
     # --- structure --------------------------------------------------------------------
     def internal_nodes(self):
@@ -165,8 +169,12 @@ class Arteriole(Component):
 
     def derivatives(self, p, x, u, t, src=None):
         P_im, dP = self._pressures(u)
-        d = model.derivatives(self._states(x), P_im, dP, p, self.model_options)
-        return np.stack([d[s.name] for s in self.states()], axis=-1)
+        o = self.model_options
+        d, _ = model._evaluate(self._states(x), P_im, dP, p, o)
+        out = np.stack([d[n] for n in model.state_names(o)], axis=-1)
+        if not np.isfinite(out).all():  # one check for all states (model.derivatives checks each)
+            model._check_finite(d, "derivatives")
+        return out
 
     def observe(self, p, x, u, t, src=None):
         s = self._states(x)

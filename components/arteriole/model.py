@@ -49,9 +49,17 @@ class ArterioleError(HemocircuitError, ValueError):
     """Non-finite derivatives or observables (invalid states, inputs or parameters)."""
 
 
+class ResolvedOptions(dict):
+    """Options already checked by resolve_options (passed through without re-checking)."""
+
+
 def resolve_options(options=None) -> dict:
     """``DEFAULT_OPTIONS`` updated with ``options``; raises ValueError on unknown keys/values."""
-    o = dict(DEFAULT_OPTIONS)
+    if isinstance(options, ResolvedOptions):
+        return options
+    if options:
+        options = {k: v for k, v in options.items() if k != "_names"}
+    o = ResolvedOptions(DEFAULT_OPTIONS)
     if options:
         unknown = set(options) - set(o)
         if unknown:
@@ -67,10 +75,14 @@ def resolve_options(options=None) -> dict:
 def state_names(options=None) -> list[str]:
     """Ordered state names: ['Ca', ('dCa',) 'Cw', 'lambda' (, 'M', 'Mp', 'AMp', 'AM')]."""
     o = resolve_options(options)
+    if "_names" in o:
+        return o["_names"]
     names = ["Ca", "dCa"] if o["ca_order"] == 2 else ["Ca"]
     names += ["Cw", "lambda"]
     if o["kinetics"] == "dynamic":
         names += list(kin.STATES)
+    if isinstance(o, ResolvedOptions):
+        o["_names"] = names
     return names
 
 
