@@ -19,6 +19,7 @@ import copy
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
 
 from .build import ElementData, check_values, parse_netlist
 from .component import Component
@@ -27,6 +28,12 @@ from .graph import check_topology, local_node_map
 from .linalg import solve_batched
 from .netlist import GROUND, Netlist, load_netlist
 from .units import UnitError, parse_quantity, parse_with_unit
+
+
+def _scatter(ST, local):
+    """Global contributions (rows, N) of local stamps (rows, ...) through a sparse scatter."""
+    flat = local.reshape(local.shape[0], -1)
+    return np.asarray((ST @ flat.T).T)
 
 
 class Group:
@@ -109,10 +116,11 @@ class Circuit:
             g.cols = np.repeat(ui[:, None, :], g.L, axis=1)
             N1 = self.n + 1
             g.flat = (g.rows * N1 + g.cols).reshape(-1)
-            g.S_A = np.zeros((g.E * g.L * g.L, N1 * N1))
-            g.S_A[np.arange(g.S_A.shape[0]), g.flat] = 1.0
-            g.S_b = np.zeros((g.E * g.L, N1))
-            g.S_b[np.arange(g.E * g.L), ui.reshape(-1)] = 1.0
+            # scatter of local stamps into the global system, as sparse 0/1 matrices (duplicates
+            # add up); sparse products beat dense BLAS for these thin shapes by far
+            nA, nb = g.E * g.L * g.L, g.E * g.L
+            g.ST_A = sp.csr_matrix((np.ones(nA), (g.flat, np.arange(nA))), shape=(N1 * N1, nA))
+            g.ST_b = sp.csr_matrix((np.ones(nb), (ui.reshape(-1), np.arange(nb))), shape=(N1, nb))
         # --- states -------------------------------------------------------------------
         names, units, scales, owners = [], [], [], []
         for g in self.groups:
@@ -157,10 +165,10 @@ class Circuit:
             if g.constant:
                 A_loc, b_loc = g.comp.stamp(g.p, np.zeros((1, g.E, g.S)), None, 0.0, None)
                 A_loc = np.broadcast_to(A_loc, (A_loc.shape[0], g.E, g.L, g.L))
-                self.A_const = self.A_const + A_loc.reshape(A_loc.shape[0], -1) @ g.S_A
+                self.A_const = self.A_const + _scatter(g.ST_A, A_loc)
                 if g.static:
                     b_loc = np.broadcast_to(b_loc, (b_loc.shape[0], g.E, g.L))
-                    self.b_const = self.b_const + b_loc.reshape(b_loc.shape[0], -1) @ g.S_b
+                    self.b_const = self.b_const + _scatter(g.ST_b, b_loc)
             else:
                 self.all_constant = False
             if not g.static:
@@ -513,13 +521,13 @@ class Circuit:
                 b_loc = np.broadcast_to(b_loc, (b_loc.shape[0], g.E, g.L))
             if dc and (g.comp.dc_open() or g.comp.dc_short()):
                 A_loc, b_loc = self._dc_stamp(g, A_loc, b_loc)
-                A = A + A_loc.reshape(A_loc.shape[0], -1) @ g.S_A
+                A = A + _scatter(g.ST_A, A_loc)
                 if g.constant:
                     A = A - self._const_part(g, Bx)
             elif need_A and not g.constant:
-                A = A + A_loc.reshape(A_loc.shape[0], -1) @ g.S_A
+                A = A + _scatter(g.ST_A, A_loc)
             if not g.static:  # static groups are already in b_const
-                b = b + b_loc.reshape(b_loc.shape[0], -1) @ g.S_b
+                b = b + _scatter(g.ST_b, b_loc)
             stamps[k] = (A_loc, b_loc, src)
         n = self.n
         if A is not None:
@@ -529,7 +537,7 @@ class Circuit:
     def _const_part(self, g, Bx):
         A_loc, _ = g.comp.stamp(g.p, np.zeros((1, g.E, g.S)), None, 0.0, None)
         A_loc = np.broadcast_to(A_loc, (A_loc.shape[0], g.E, g.L, g.L))
-        return self._rep(A_loc.reshape(A_loc.shape[0], -1) @ g.S_A, Bx)
+        return self._rep(_scatter(g.ST_A, A_loc), Bx)
 
     def _dc_stamp(self, g, A_loc, b_loc):
         A_loc = np.array(A_loc)

@@ -91,6 +91,8 @@ def newton(circuit, X, law_totals, t=0.0, tol=1e-10, max_iter=50, ptc=False):
         norm = np.max(np.abs(F) / scales, axis=1)
         if not np.all(np.isfinite(F)):
             return X, False, norm
+        if not ptc and np.all(norm < 1e-11):  # already at the residual floor: nothing to improve
+            return X, True, norm
         if ptc:
             M = np.eye(nx)[None] / dt[:, None, None] - J
         else:
