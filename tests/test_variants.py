@@ -126,3 +126,24 @@ def test_icp_transient_conserves_volume():
     total = r["V(Ca)"] + r["V(Cv)"] - r["V(Cic)"]
     assert np.ptp(total) < 1e-6 * np.mean(np.abs(total))
     assert np.ptp(r["P(ic)"]) > 0.01  # P_ic moves during the step
+
+
+@pytest.mark.parametrize("name", ["payne06", "arterial_compliance", "icp", "inertia"])
+def test_blood_volume_balance_in_step(name):
+    """Mass conservation in every variant's transient: the change of the blood volume held in
+    the compliances (and in the bed, where its volume flow is drawn) equals the integrated net
+    inflow Q(Rla) - Q(Rlv)."""
+    c = load(name)
+    r = _step_run(c, dt=0.01)
+    stores = [k for k in ("V(Cv)", "V(Ca)") if k in r.columns]
+    vol = sum(r[k] for k in stores)
+    if c.elements["art"].opts["volume_flow"]:
+        vol = vol + r["V(art)"]
+    # after the event (the inflow jumps at the step; the trapezoid must not straddle it)
+    k = int(np.searchsorted(r.t, 6.0))  # 1 s after the step: its millisecond transient is over
+    t, vol = r.t[k:], vol[k:]
+    net = (r["Q(Rla)"] - r["Q(Rlv)"])[k:]
+    inflow = np.concatenate([[0.0], np.cumsum(0.5 * (net[1:] + net[:-1]) * np.diff(t))])
+    dv = vol - vol[0]
+    assert np.max(np.abs(dv)) > 0.1  # the step moves blood
+    assert np.max(np.abs(dv - inflow)) < 1e-3 * np.max(np.abs(dv))
