@@ -60,7 +60,9 @@ class Expression:
         self._tree = tree
         self._key = {}
         self._collect(tree.body, resolve)
-        code = compile(ast.fix_missing_locations(_Rename(self._key).visit(tree)), "<expr>", "eval")
+        renamed = ast.fix_missing_locations(_Rename(self._key).visit(tree))
+        self._source = ast.unparse(renamed)  # kept so the compiled code can be rebuilt after pickling
+        code = compile(self._source, "<expr>", "eval")
         self._code = code
         # dimension check and output factor, evaluated once with pint
         env = {"pi": np.pi, **_FUNCS}
@@ -75,6 +77,17 @@ class Expression:
                                **where) from None
         self.out_factor = 1.0 / si_factor(target_unit)
         self.si = {k: (si_factor(r.unit) if r.kind != "constant" else None) for k, r in self._named().items()}
+
+    def __getstate__(self):
+        # code objects do not pickle (circuits are sent to worker processes): rebuild on load
+        state = dict(self.__dict__)
+        state.pop("_code", None)
+        state.pop("_tree", None)
+        return state
+
+    def __setstate__(self, state):
+        self.__dict__.update(state)
+        self._code = compile(self._source, "<expr>", "eval")
 
     def _named(self):
         return {self._key[k]: r for k, r in self.refs.items()}

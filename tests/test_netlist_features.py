@@ -12,7 +12,7 @@ from hemocircuit.cli import main
 from hemocircuit.errors import NetlistError, TopologyError
 from hemocircuit.protocol import Protocol
 
-from paths import NETLISTS, PAYNE06
+from paths import NETLISTS, PAYNE06, ROOT
 
 MMHG, CMH2O = 133.322387415, 98.0665
 
@@ -480,3 +480,12 @@ def test_cli_graph_png(tmp_path, capsys):
     out = tmp_path / "g.png"
     assert main(["graph", str(PAYNE06), "--out", str(out)]) == 0
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_circuit_with_expressions_pickles(tmp_path):
+    """Batches send circuits to worker processes: an expression-bound parameter must survive."""
+    import pickle
+    c = hc.load(str(ROOT / "netlists" / "inertia.yaml"))
+    x = c.operating_point().x
+    c2 = pickle.loads(pickle.dumps(c))
+    assert np.array_equal(c2.rhs(0.0, x), c.rhs(0.0, x))
