@@ -138,7 +138,8 @@ def _plot(path, table, summary):
         for o in OUTPUTS:
             ts, ph = table[vf, o][0], table[vf, o][1]
             col, st = styles[vf, o]
-            ax.semilogx(ts, ph, st, color=col, ms=4, label=f"{LABEL[o]}, {name}")
+            same = (not vf and o == "Q(Rsv)" and np.allclose(ph, table[vf, "Q(Rla)"][1], atol=1e-6))
+            ax.semilogx(ts, ph, st, color=col, ms=4, label=f"{LABEL[o]}, {name}" + (" (= q1)" if same else ""))
             for v in summary[vf, o]:
                 ax.axvline(v, color=col, lw=0.6, ls=":")
     ax.axhline(0.0, color="k", lw=0.8)

@@ -84,11 +84,14 @@ def integrate(circuit, x0, t_out, rtol=1e-5, atol=None, h0=1e-3, max_steps=50000
         hi = np.minimum(hi, h_max if np.ndim(h_max) == 0 else np.asarray(h_max)[idx])
         c = circuit.subset(idx)
         try:
-            # all active members refresh their Jacobians together (one batched evaluation on the
-            # same member set, so the subset view is reused) once any is JAC_REUSE steps old
-            if np.any(age[idx] >= JAC_REUSE):
+            # one batched evaluation on the whole active set (so the subset view is reused) once
+            # any member is due; only the due members take the new Jacobian, so a member's
+            # trajectory does not depend on which other members share its batch
+            due = age[idx] >= JAC_REUSE
+            if due.any():
                 Jn, Fn = jac_and_ft(c, ti, xi, fi)
-                Jac[idx], Ft[idx], age[idx] = Jn, Fn, 0
+                d = idx[due]
+                Jac[d], Ft[d], age[d] = Jn[due], Fn[due], 0
             x_new, err_vec = _step(c, ti, xi, fi, hi, Jac[idx], Ft[idx], eye)
         except Exception as exc:  # a member left the physical domain: find which
             _fail_members(circuit, idx, ti, xi, hi, ok, active, message, exc)

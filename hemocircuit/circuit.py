@@ -155,6 +155,7 @@ class Circuit:
         every right-hand-side evaluation.
         """
         N1 = self.n + 1
+        self.__dict__.pop("_subset_cache", None)  # subset views hold the old parameters
         self.A_const = np.zeros((self.B, N1 * N1))
         self.b_const = np.zeros((self.B, N1))
         self.all_constant = True
@@ -338,7 +339,15 @@ class Circuit:
             ng = copy.copy(g)
             ng.p = {k: (v[members] if v.shape[0] > 1 else v) for k, v in g.p.items()}
             c.groups.append(ng)
-        c._locate = {eid: (c.groups[self.groups.index(g)], i) for eid, (g, i) in self._locate.items()}
+        remap = {id(g): ng for g, ng in zip(self.groups, c.groups)}
+        c._locate = {eid: (remap[id(g)], i) for eid, (g, i) in self._locate.items()}
+        # conservation-law specs hold group references: point them at the new groups
+        c.law_specs = []
+        for spec in self.law_specs:
+            ns = dict(spec)
+            ns["terms"] = [(remap[id(g)], i, vol, sign) for g, i, vol, sign in spec["terms"]]
+            ns["anchor"] = (remap[id(spec["anchor"][0])], spec["anchor"][1])
+            c.law_specs.append(ns)
         c.B = len(members)
         c.A_const = self.A_const[members] if self.A_const.shape[0] > 1 else self.A_const
         c.b_const = self.b_const[members] if self.b_const.shape[0] > 1 else self.b_const

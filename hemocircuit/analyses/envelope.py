@@ -31,44 +31,53 @@ def _law_states(c):
 
 def _run_chunk(job):
     bc, opt = job
-    from .op import operating_point
+    from .op import operating_points
     B = bc.B
-    try:
-        op = operating_point(bc)
-    except Exception as exc:  # noqa: BLE001
-        return [{"error": f"operating point: {exc}"} for _ in range(B)]
-    X0 = np.atleast_2d(op.x).copy()
+    X0, opv, errors = operating_points(bc)
+    good = np.array([e is None for e in errors])
     free = [j for j in range(bc.nx) if j not in _law_states(bc)]
     X0[:, free] += opt["kick"] * bc.state_scales[free]
     grid = np.arange(0.0, opt["t_end"] + 0.5 * opt["dt"], opt["dt"])
-    r = integrate(bc, X0, grid, rtol=opt["rtol"], atol=opt["rtol"])
-    out = []
-    n_win = max(int(len(grid) * opt["window"]), 4)
-    for k in range(B):
+    out = [{"error": e} for e in errors]
+    if not good.any():
+        return out
+    gidx = np.nonzero(good)[0]
+    sub = bc.subset(gidx)
+    r = integrate(sub, X0[gidx], grid, rtol=opt["rtol"], atol=opt["rtol"])
+    for j, k in enumerate(gidx):
+        out[k] = _summary(sub, j, r, grid, opv, k, opt)
+    return out
+
+
+def _summary(bc, k, r, grid, opv, kk, opt):
+    """Statistics of member k of the integrated batch over the settled window."""
+    if True:
+        n_win = max(int(len(grid) * opt["window"]), 4)
         if not r.ok[k]:
-            out.append({"error": r.message[k]})
-            continue
-        m = bc.member(k)
-        cols = m.outputs(grid[-n_win:], r.x[k, -n_win:])
-        steady = {o: float(np.atleast_1d(op.values[o])[k]) for o in opt["outputs"]}
-        row = {}
-        osc_any = False
+            return {"error": r.message[k]}
+        cols = bc.member(k).outputs(grid[-n_win:], r.x[k, -n_win:])
+        tw = grid[-n_win:]
+        osc = {}
         for o in opt["outputs"]:
             y = cols[o]
-            ptp = float(np.ptp(y))
             half = len(y) // 2
-            sustained = ptp > opt["osc_tol"] * abs(np.mean(y)) and np.ptp(y[half:]) >= 0.5 * np.ptp(y[:half])
-            osc_any |= sustained
-            row.update({f"{o} min": float(y.min()), f"{o} max": float(y.max()), f"{o} mean": float(y.mean()),
-                        f"{o} steady": steady[o]})
-        y = cols[opt["outputs"][0]]
-        row["oscillating"] = bool(osc_any)
-        row["period [s]"] = _period(grid[-n_win:], y) if osc_any else float("nan")
+            osc[o] = bool(np.ptp(y) > opt["osc_tol"] * abs(np.mean(y)) and np.ptp(y[half:]) >= 0.5 * np.ptp(y[:half]))
+        y0 = cols[opt["outputs"][0]]
+        # means over whole periods: between the first and last upward crossing of the mean
+        z = y0 - y0.mean()
+        up = np.nonzero((z[:-1] < 0) & (z[1:] >= 0))[0]
+        sel = slice(up[0], up[-1] + 1) if any(osc.values()) and len(up) >= 2 else slice(None)
+        row = {}
+        for o in opt["outputs"]:
+            y = cols[o]
+            row.update({f"{o} min": float(y.min()), f"{o} max": float(y.max()), f"{o} mean": float(y[sel].mean()),
+                        f"{o} steady": float(opv[o][kk])})
+        row["oscillating"] = bool(any(osc.values()))
+        row["period [s]"] = _period(tw, y0) if row["oscillating"] else float("nan")
         if opt.get("keep_series"):
             row["series"] = {o: cols[o] for o in opt["keep_series"] if o in cols}
-            row["t"] = grid[-n_win:]
-        out.append(row)
-    return out
+            row["t"] = tw
+        return row
 
 
 def _period(t, y):

@@ -265,3 +265,33 @@ def operating_point(circuit, t: float = 0.0, x0=None) -> OperatingPoint:
         vals = {k: np.array(v) for k, v in vals.items()}
     return OperatingPoint(circuit, X[0] if single else X, vals, circuit.column_units(), method,
                           float(np.max(res)))
+
+
+def operating_points(circuit):
+    """Operating points of every member of a batch circuit, failures kept per member.
+
+    Returns (X (B, nx) with NaN rows for failed members, {column: (B,) array}, [error or None]).
+    The whole batch is solved together; if that fails, member by member, so one bad
+    parameter set does not lose the others.
+    """
+    B = circuit.B
+    try:
+        op = operating_point(circuit)
+        X = np.atleast_2d(op.x)
+        vals = {k: np.broadcast_to(np.atleast_1d(v), (B,)).copy() for k, v in op.values.items()}
+        return X, vals, [None] * B
+    except HemocircuitError:
+        pass
+    X = np.full((B, circuit.nx), np.nan)
+    vals, errors = {}, []
+    for k in range(B):
+        try:
+            op = operating_point(circuit.subset([k]))
+        except HemocircuitError as exc:
+            errors.append(f"operating point: {exc}")
+            continue
+        errors.append(None)
+        X[k] = np.atleast_2d(op.x)[0]
+        for key, v in op.values.items():
+            vals.setdefault(key, np.full(B, np.nan))[k] = float(np.atleast_1d(v)[0])
+    return X, vals, errors

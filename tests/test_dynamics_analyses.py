@@ -1,0 +1,370 @@
+"""Acceptance tests of issue 5's dynamics analyses: AC against the nonlinear frequency response,
+the thesis's frequency-response numbers (arterial_compliance), identical results on every
+executor, per-member failure recording, the vasomotion envelope, limit cycles and forced
+periodic steady states by shooting.
+
+Kept cheap (the machine has 2 shared cores): small frequency sets, short runs, module fixtures
+shared between tests, scheduler='serial' except where executors are under test.  Measured
+values (for the record; see the asserts for the accepted bands):
+
+  AC vs nonlinear (1 % sine, no step), 0.005-1 Hz: gain within 0.01 %, phase within 0.06 deg.
+  Nonlinear 10 % + 10 %, Pa = 80, tau_Ca = 1 s: q2 relative amplitude peaks at 0.12 Hz on the
+    grid 0.01..1 Hz (0.1436; 0.1425 at 0.1 Hz); at 0.1 Hz q1 leads by 25.9 deg, q2 by 20.6 deg;
+    maximum lead (low band) q1 63.9 deg, q2 62.3 deg, at 0.02 Hz.
+  tau_Ca = 10 s: the peak moves to ~0.03 Hz and grows to 0.314.
+  Pa = 30 mmHg: q2 flat (0.135..0.152 over 0.01..1 Hz, max/min 1.12; AC 1.38..1.51).
+  |q1| at 1 Hz: 0.398 (Pa = 30) / 0.180 (Pa = 80) = 2.21 (AC: 4.43 / 1.99 = 2.22).
+  Vasomotion, Pa = 80: r 60.68..101.95-102.07 um (sampled at dt = 0.1 s; the orbit's true max,
+    at a 2 ms jump when Ca leaves its floor, is 102.17 um) around 76.46 um, period 7.71 s,
+    mean Q 9.3-9.6 > steady 7.47 mL/s; zeta = 0.5: steady.  Shooting: period 7.7126 s,
+    non-trivial Floquet multipliers |mu| <= 0.688.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import hemocircuit as hc
+from hemocircuit.analyses.ac import ac_response
+from hemocircuit.analyses.envelope import envelope
+from hemocircuit.analyses.freq import _dft, frequency_response
+from hemocircuit.analyses.op import operating_point
+from hemocircuit.analyses.periodic import guess_from_run, shoot
+from hemocircuit.batch_integrator import integrate
+from hemocircuit.execution import run_chunks
+
+from paths import ROOT
+
+NETS = ROOT / "netlists"
+Q1, Q2 = "Q(Rla)", "Q(Rsv)"
+NUMERIC = ("rel_amplitude", "gain", "abs_gain", "phase [deg]", "thd", "steady", "mean", "periods")
+
+pytestmark = pytest.mark.filterwarnings("ignore::RuntimeWarning")
+
+
+@pytest.fixture(scope="module")
+def artc():
+    return hc.load(NETS / "arterial_compliance.yaml")
+
+
+@pytest.fixture(scope="module")
+def vaso():
+    return hc.load(NETS / "vasomotion.yaml")
+
+
+def pick(rows, output, f=None, **grid):
+    """Rows of one output (and grid point), sorted by frequency; or the single row at f."""
+    rs = [r for r in rows if r["output"] == output and all(np.isclose(r[k], v) for k, v in grid.items())]
+    rs.sort(key=lambda r: r["frequency [Hz]"])
+    if f is None:
+        return rs
+    (r,) = [r for r in rs if np.isclose(r["frequency [Hz]"], f)]
+    return r
+
+
+def series(rows, output, key, **grid):
+    rs = pick(rows, output, **grid)
+    return np.array([r["frequency [Hz]"] for r in rs]), np.array([r[key] for r in rs])
+
+
+# ------------------------------------------------------------ 1. AC = small-signal limit --------
+def test_ac_matches_nonlinear_frequency_response_at_small_amplitude(artc):
+    freqs = [0.005, 0.05, 0.1, 0.5, 1.0]
+    ac = ac_response(artc, "Pa", [Q1, Q2], freqs)
+    rows = frequency_response(artc, freqs, [Q1, Q2], step=0.0, amplitude=0.01, scheduler="serial")
+    assert not any(r["error"] for r in rows)
+    for o in (Q1, Q2):
+        f, gain = series(rows, o, "gain")
+        _, phase = series(rows, o, "phase [deg]")
+        np.testing.assert_allclose(f, freqs)
+        assert all(r["settled"] for r in pick(rows, o))
+        np.testing.assert_allclose(gain, ac.rel_gain[o], rtol=0.02, err_msg=o)
+        # arg difference, wrapped (AC phase is unwrapped along frequency, the batch's is not)
+        dphi = (phase - ac.phase[o] + 180.0) % 360.0 - 180.0
+        assert np.max(np.abs(dphi)) < 2.0, (o, phase, ac.phase[o])
+
+
+# ------------------------------------------------------------ 2. thesis numbers ----------------
+F_NL = [0.01, 0.02, 0.04, 0.07, 0.1, 0.12, 0.2, 0.4, 1.0]
+
+
+@pytest.fixture(scope="module")
+def nl_pa(artc):
+    """Thesis forcing (10 % step + 10 % sine), tau_Ca = 1 s, Pa = 30 and 80 mmHg: one batch."""
+    rows = frequency_response(artc, F_NL, [Q1, Q2], step=0.1, amplitude=0.1,
+                              grid=[("Pa.value", [30.0, 80.0])], scheduler="serial")
+    assert not any(r["error"] for r in rows)
+    return rows
+
+
+@pytest.fixture(scope="module")
+def ac_cases(artc):
+    f = np.logspace(-3, 0, 121)
+    out = {}
+    for name, sets in (("80", {}), ("tau10", {"art.tau_Ca": 10.0}), ("30", {"Pa.value": 30.0})):
+        c = artc.copy()
+        if sets:
+            c.set_params(sets)
+        out[name] = ac_response(c, "Pa", [Q1, Q2], f)
+    return out
+
+
+def test_resonance_of_q2_between_008_and_014_hz(nl_pa, ac_cases):
+    f, amp = series(nl_pa, Q2, "rel_amplitude", **{"Pa.value": 80.0})
+    k = int(np.argmax(amp))
+    assert 0.08 <= f[k] <= 0.14, (f[k], amp)
+    assert 0 < k < len(f) - 1  # an interior maximum: a resonance, not an edge
+    assert amp[k] > 1.5 * amp[0]
+    ac = ac_cases["80"]
+    kac = int(np.argmax(ac.rel_gain[Q2]))
+    assert 0.08 <= ac.freq[kac] <= 0.14  # linear: 1.53 at 0.115 Hz
+
+
+def test_flow_leads_pa_by_20_to_35_deg_at_01_hz(nl_pa, ac_cases):
+    # measured: q1 +25.9 deg, q2 +20.6 deg (nonlinear); AC +25.6 / +20.0.  Both inside the
+    # thesis band; q2 only just (0.6 deg), q1 comfortably.
+    for o in (Q1, Q2):
+        ph = pick(nl_pa, o, 0.1, **{"Pa.value": 80.0})["phase [deg]"]
+        assert 20.0 <= ph <= 35.0, (o, ph)
+
+
+def test_maximum_lead_55_to_75_deg_in_the_low_band(nl_pa, ac_cases):
+    for o in (Q1, Q2):
+        f, ph = series(nl_pa, o, "phase [deg]", **{"Pa.value": 80.0})
+        low = f <= 0.1
+        k = int(np.argmax(ph[low]))
+        assert 55.0 <= ph[low][k] <= 75.0, (o, f[low], ph[low])
+        assert 0 < k < np.count_nonzero(low) - 1  # interior: the band brackets the maximum
+    ac = ac_cases["80"]
+    assert 55.0 <= np.max(ac.phase[Q1]) <= 75.0  # linear: 60 deg near 0.02 Hz
+
+
+def test_slower_calcium_moves_the_peak_lower_and_raises_it(artc, nl_pa, ac_cases):
+    # rtol 1e-7 (not the default 1e-8): 2x faster, amplitudes unchanged to 5 digits
+    rows = frequency_response(artc, [0.02, 0.03, 0.045], [Q2], step=0.1, amplitude=0.1, rtol=1e-7,
+                              grid=[("art.tau_Ca", [10.0])], scheduler="serial")
+    assert all(r["settled"] and not r["error"] for r in rows)
+    f10, a10 = series(rows, Q2, "rel_amplitude")
+    f1, a1 = series(nl_pa, Q2, "rel_amplitude", **{"Pa.value": 80.0})
+    k = int(np.argmax(a10))
+    assert k == 1, (f10, a10)  # interior maximum near 0.03 Hz
+    assert f10[k] < f1[np.argmax(a1)]
+    assert a10[k] > 1.5 * a1.max()
+    # linear (AC, dense grid): the same shift
+    g1, g10 = ac_cases["80"].rel_gain[Q2], ac_cases["tau10"].rel_gain[Q2]
+    fa = ac_cases["80"].freq
+    assert fa[np.argmax(g10)] < 0.6 * fa[np.argmax(g1)]
+    assert g10.max() > 1.5 * g1.max()
+
+
+def test_no_peak_at_30_mmhg(nl_pa, ac_cases):
+    # 'no peak': q2's relative amplitude is flat over 0.01-1 Hz (within 20 %), against a factor
+    # ~6 and a resonance at 80 mmHg.  (It is not strictly monotone: a 1 % rise to 0.1 Hz.)
+    _, a30 = series(nl_pa, Q2, "rel_amplitude", **{"Pa.value": 30.0})
+    _, a80 = series(nl_pa, Q2, "rel_amplitude", **{"Pa.value": 80.0})
+    assert a30.max() / a30.min() < 1.2, a30
+    assert a80.max() / a80.min() > 3.0
+    g = ac_cases["30"].rel_gain[Q2]
+    assert g.max() / g.min() < 1.2
+
+
+def test_q1_at_1hz_about_twice_as_large_at_30_as_at_80_mmhg(nl_pa, ac_cases):
+    a30 = pick(nl_pa, Q1, 1.0, **{"Pa.value": 30.0})["rel_amplitude"]
+    a80 = pick(nl_pa, Q1, 1.0, **{"Pa.value": 80.0})["rel_amplitude"]
+    assert 1.6 <= a30 / a80 <= 2.6, (a30, a80)
+    r_ac = ac_cases["30"].rel_gain[Q1][-1] / ac_cases["80"].rel_gain[Q1][-1]
+    assert 1.6 <= r_ac <= 2.6
+
+
+def test_settle_detection_is_not_fooled_by_a_slow_drift(artc, nl_pa):
+    """The frequency response at Pa = 30 mmHg, 1 Hz (10 % step) against the exact periodic steady
+    state from forced shooting.  The settle test compares the fundamental of two consecutive
+    periods; a slow mode (-0.048 /s, time constant 21 s) drifts the mean during the first
+    4 periods, leaks about the same amount into both periods' fundamental, and passes the test:
+    the batch stops after 4 periods with q2 at 0.13690 against 0.13583 (+0.79 %), q1 at 0.39838
+    against 0.39795 (+0.11 %), well above the 1e-3 settle tolerance for q2.  (With
+    settle_tol = 1e-12 and 60 periods the batch gives 0.135827, the shooting value.)"""
+    c = artc.copy()
+    c.set_param("Pa.value", 30.0)
+    op = operating_point(c)
+    c.set_param("Pa.value", 33.0)
+    c.set_param("Pa.amplitude", 3.0)
+    c.set_param("Pa.frequency", 1.0)
+    orb = shoot(c, op.x, 1.0, forced=True, rtol=1e-8, tol=1e-7)
+    assert orb.converged
+    n = len(orb.t) - 1
+    assert abs(abs(_dft(orb.columns["P(in)"][:n], n, 1)) - 3.0) < 1e-6
+    for o in (Q1, Q2):
+        exact = abs(_dft(orb.columns[o][:n], n, 1)) / abs(op.values[o])
+        got = pick(nl_pa, o, 1.0, **{"Pa.value": 30.0})["rel_amplitude"]
+        assert abs(got / exact - 1) <= 2e-3, (o, got, exact)
+
+
+# ------------------------------------------------------------ 3. executors ---------------------
+def _small_batch(artc, **kw):
+    return frequency_response(artc, [0.2, 0.5, 1.0], [Q1, Q2], step=0.0, amplitude=0.05, rtol=1e-6,
+                              grid=[("art.tau_Ca", [1.0, 2.0])], **kw)
+
+
+def _assert_same_rows(a, b):
+    assert len(a) == len(b)
+    for ra, rb in zip(a, b):
+        assert (ra["art.tau_Ca"], ra["frequency [Hz]"], ra["output"]) == (rb["art.tau_Ca"], rb["frequency [Hz]"],
+                                                                          rb["output"])
+        assert not ra["error"] and not rb["error"]
+        for k in NUMERIC:
+            assert ra[k] == pytest.approx(rb[k], rel=1e-12, abs=0), (k, ra, rb)
+
+
+@pytest.fixture(scope="module")
+def serial_batch(artc):
+    return _small_batch(artc, scheduler="serial")
+
+
+def test_local_processes_give_identical_numbers(artc, serial_batch):
+    _assert_same_rows(serial_batch, _small_batch(artc, scheduler="processes", workers=2))
+
+
+def test_dask_in_process_cluster_gives_identical_numbers(artc, serial_batch):
+    distributed = pytest.importorskip("dask.distributed")
+    with distributed.LocalCluster(n_workers=1, processes=False, dashboard_address=None) as cluster, \
+            distributed.Client(cluster) as client:
+        rows = _small_batch(artc, scheduler=client, workers=2)
+    _assert_same_rows(serial_batch, rows)
+
+
+def test_member_trajectory_does_not_depend_on_its_batch_companions(vaso):
+    """execution.py: 'A member's numbers do not depend on which chunk or executor ran it'.  Two
+    vasomotion members that both reach the Ca floor (second-order Ca), together and alone."""
+    x = np.array(operating_point(vaso).x, float).reshape(-1)
+    b = vaso.batch(2)
+    b.set_param("art.zeta", np.array([0.1, 0.2]))
+    i = vaso.state_names.index("art.dCa")
+    x0 = np.repeat(x[None], 2, axis=0)
+    x0[0, i], x0[1, i] = -5 * vaso.state_scales[i], -8 * vaso.state_scales[i]
+    grid = np.linspace(0.0, 10.0, 101)
+    together = integrate(b, x0, grid, rtol=1e-6, atol=1e-6)
+    assert together.ok.all()
+    for k in range(2):
+        alone = integrate(b.subset([k]).copy(), x0[k:k + 1], grid, rtol=1e-6, atol=1e-6)
+        diff = np.max(np.abs(alone.x[0] - together.x[k]) / vaso.state_scales)
+        assert diff <= 1e-12, (k, diff)  # measured: 5.9e-8 and 1.5e-4
+
+
+# ------------------------------------------------------------ 4. failures ----------------------
+BAD_PA = -500.0  # mmHg: the operating point fails cleanly (SolverError, Newton + fallbacks)
+
+
+def _check_failure_rows(rows):
+    good = [r for r in rows if r["Pa.value"] == 80.0]
+    bad = [r for r in rows if r["Pa.value"] == BAD_PA]
+    assert len(good) == len(bad) == 2
+    for r in bad:
+        assert "operating point" in r["error"] and "no operating point found" in r["error"], r
+    for r in good:
+        assert r["error"] == "", r["error"]
+        assert 1.0 < r["gain"] < 2.5
+
+
+def test_failing_member_recorded_others_complete_with_worker_processes(artc):
+    # two chunks (one per member): the failure stays in its chunk
+    rows = frequency_response(artc, [1.0], [Q1, Q2], step=0.0, amplitude=0.05, rtol=1e-6,
+                              grid=[("Pa.value", [80.0, BAD_PA])], scheduler="processes", workers=2)
+    _check_failure_rows(rows)
+
+
+def test_failing_member_recorded_others_complete_in_one_chunk(artc):
+    rows = frequency_response(artc, [1.0], [Q1, Q2], step=0.0, amplitude=0.05, rtol=1e-6,
+                              grid=[("Pa.value", [80.0, BAD_PA])], scheduler="serial")
+    _check_failure_rows(rows)
+
+
+def test_run_chunks_propagates_an_exception_from_a_chunk():
+    """The executor layer itself does not catch: per-member failure recording lives inside the
+    analyses' chunk functions (freq, envelope), which return error rows instead of raising."""
+    def fn(chunk):
+        if 3 in chunk:
+            raise ValueError("boom")
+        return [2 * v for v in chunk]
+
+    assert run_chunks(fn, [[1, 2], [4]], scheduler="serial") == [[2, 4], [8]]
+    with pytest.raises(ValueError, match="boom"):
+        run_chunks(fn, [[1, 2], [3], [4]], scheduler="serial")
+
+
+# ------------------------------------------------------------ 5. envelope ----------------------
+@pytest.fixture(scope="module")
+def vaso_env(vaso):
+    # the instability grows at +0.067 /s: from the 1e-3 kick the cycle is full-size after
+    # ~100 s; window = last 30 % (168-240 s).  t_end 200/250/300/400 s give the same min/max
+    # within 0.15 um.
+    rows = envelope(vaso, ("art.zeta", [0.1, 0.5]), outputs=["art.r", Q1], t_end=240.0, dt=0.1, rtol=1e-5,
+                    keep_series=["art.r"], scheduler="serial")
+    assert not any("error" in r for r in rows)
+    return {r["art.zeta"]: r for r in rows}
+
+
+def test_vasomotion_limit_cycle_envelope(vaso_env):
+    r = vaso_env[0.1]
+    assert r["oscillating"]
+    assert 57.0 <= r["art.r min"] <= 64.0, r["art.r min"]
+    assert 99.0 <= r["art.r max"] <= 106.0, r["art.r max"]
+    assert 76.0 <= r["art.r steady"] <= 78.0, r["art.r steady"]
+    assert 7.0 <= r["period [s]"] <= 9.0, r["period [s]"]
+    assert r[f"{Q1} mean"] > 1.1 * r[f"{Q1} steady"]  # oscillation raises the mean flow
+    # the limit cycle has been reached: both halves of the window have the same range
+    y = r["series"]["art.r"]
+    h = len(y) // 2
+    assert abs(y[:h].min() - y[h:].min()) < 0.3 and abs(y[:h].max() - y[h:].max()) < 0.5
+
+
+def test_more_damping_removes_the_oscillation(vaso_env):
+    r = vaso_env[0.5]
+    assert not r["oscillating"]
+    assert np.isnan(r["period [s]"])
+    assert r["art.r max"] - r["art.r min"] < 1e-3
+    assert r["art.r mean"] == pytest.approx(r["art.r steady"], abs=1e-3)
+
+
+# ------------------------------------------------------------ 6. periodic orbits ---------------
+def test_shooting_converges_on_the_vasomotion_limit_cycle(vaso, vaso_env):
+    x, T = guess_from_run(vaso, "art.r", t_settle=300.0, rtol=1e-5)
+    orb = shoot(vaso, x, T, rtol=1e-7, tol=1e-6)
+    env = vaso_env[0.1]
+    assert orb.converged
+    assert orb.period == pytest.approx(env["period [s]"], rel=0.02)
+    r = orb.columns["art.r"]
+    assert abs(r.min() - env["art.r min"]) < 1.0
+    assert abs(r.max() - env["art.r max"]) < 1.0
+    # orbital stability: the flow direction and the ICP conservation law give multipliers ~1;
+    # the others lie inside the unit circle (measured: |mu| <= 0.688)
+    assert len(orb.nontrivial_multipliers) == vaso.nx - 2
+    assert np.all(np.abs(orb.nontrivial_multipliers) < 1.0)
+    assert orb.stable
+    # the time-averaged flow over the exact cycle exceeds the steady flow
+    assert orb.columns[Q1][:-1].mean() > env[f"{Q1} steady"]
+    # phi_T(x0) = x0 with an independent integrator (LSODA)
+    res = vaso.simulate(orb.period, dt=orb.period / 50, x0=orb.x0, method="LSODA", rtol=1e-9, atol=1e-9)
+    assert np.max(np.abs(res.x[-1] - orb.x0) / vaso.state_scales) < 1e-3
+
+
+def test_forced_periodic_steady_state_matches_the_frequency_response(artc, nl_pa):
+    """Pa = 88 + 8 sin(2 pi 0.1 t) mmHg = the thesis forcing (10 % step + 10 % sine of 80 mmHg):
+    shooting from the 80 mmHg operating point gives the periodic steady state directly."""
+    x_op = operating_point(artc).x
+    c = artc.copy()
+    c.set_param("Pa.value", 88.0)
+    c.set_param("Pa.amplitude", 8.0)
+    c.set_param("Pa.frequency", 0.1)
+    orb = shoot(c, x_op, 10.0, forced=True, rtol=1e-8, tol=1e-7)
+    assert orb.converged and orb.period == 10.0
+    assert orb.stable  # a stable equilibrium forced: every multiplier inside (|mu| <= 0.62)
+    res = c.simulate(10.0, dt=0.5, x0=orb.x0, method="LSODA", rtol=1e-10, atol=1e-10)
+    assert np.max(np.abs(res.x[-1] - orb.x0) / c.state_scales) < 1e-5  # phi_T(x0) = x0
+    n = len(orb.t) - 1
+    X1 = _dft(orb.columns["P(in)"][:n], n, 1)
+    for o in (Q1, Q2):
+        H_orb = _dft(orb.columns[o][:n], n, 1) / X1
+        row = pick(nl_pa, o, 0.1, **{"Pa.value": 80.0})
+        H_fr = row["abs_gain"] * np.exp(1j * np.radians(row["phase [deg]"]))
+        assert abs(H_orb - H_fr) <= 0.01 * abs(H_fr), (o, H_orb, H_fr)
