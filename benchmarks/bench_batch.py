@@ -61,29 +61,31 @@ def bench_freq(loop_sample=6):
     save("freq_sweep", res)
 
 
-def bench_envelope(n_pressures=40, t_end=1000.0):
+def bench_envelope(n_pressures=40, t_end=1000.0, rtol=1e-6):
     c = hc.load(os.path.join(NET, "vasomotion.yaml"))
     pressures = np.linspace(20, 200, n_pressures)
     zetas = [0.0, 0.05, 0.1, 0.15, 0.2, 0.3]
     workers = default_workers()
     t0 = time.perf_counter()
     rows = envelope(c, ("Pa.value", list(pressures)), [("art.zeta", zetas)], outputs=["art.r", "Q(Rla)"],
-                    t_end=t_end, workers=workers)
+                    t_end=t_end, workers=workers, rtol=rtol)
     wall = time.perf_counter() - t0
     n = len(rows)
-    res = {"runs": n, "t_end_s": t_end, "wall_s": wall, "workers": workers, "runs_per_s_per_core": n / wall / workers,
+    i80 = [r for r in rows if abs(float(r["Pa.value"]) - 80.0) < 3 and r["art.zeta"] == 0.1]
+    res = {"rtol": rtol, "r_range_Pa80_zeta0.1": [(r["art.r min"], r["art.r max"]) for r in i80 if "art.r min" in r],
+           "runs": n, "t_end_s": t_end, "wall_s": wall, "workers": workers, "runs_per_s_per_core": n / wall / workers,
            "oscillating": sum(1 for r in rows if r.get("oscillating")),
            "errors": sum(1 for r in rows if "error" in r)}
     # one by one: a few members alone
     t1 = time.perf_counter()
     picks = [(80.0, 0.1), (120.0, 0.0), (40.0, 0.3)]
     for pa, z in picks:
-        envelope(c, ("Pa.value", [pa]), [("art.zeta", [z])], t_end=t_end, scheduler="serial")
+        envelope(c, ("Pa.value", [pa]), [("art.zeta", [z])], t_end=t_end, scheduler="serial", rtol=rtol)
     res["one_by_one_sample_s_per_run"] = (time.perf_counter() - t1) / len(picks)
     res["one_by_one_estimate_s"] = res["one_by_one_sample_s_per_run"] * n
     res["speedup"] = res["one_by_one_estimate_s"] / wall
     print(json.dumps(res, indent=1))
-    save(f"envelope_{len(zetas)}x{n_pressures}", res)
+    save(f"envelope_{len(zetas)}x{n_pressures}_rtol{rtol:g}", res)
 
 
 if __name__ == "__main__":
@@ -91,8 +93,9 @@ if __name__ == "__main__":
     ap.add_argument("which", choices=["freq", "envelope"])
     ap.add_argument("--pressures", type=int, default=40)
     ap.add_argument("--t-end", type=float, default=1000.0)
+    ap.add_argument("--rtol", type=float, default=1e-5)
     a = ap.parse_args()
     if a.which == "freq":
         bench_freq()
     else:
-        bench_envelope(a.pressures, a.t_end)
+        bench_envelope(a.pressures, a.t_end, a.rtol)

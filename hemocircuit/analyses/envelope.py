@@ -91,7 +91,7 @@ def _period(t, y):
 
 
 def envelope(circuit, sweep, grid=None, outputs=("art.r", "Q(Rla)"), t_end=1000.0, dt=0.1, window=0.3,
-             kick=1e-3, osc_tol=1e-3, rtol=1e-6, keep_series=None, scheduler=None, workers=None, progress=False):
+             kick=1e-3, osc_tol=1e-3, rtol=1e-5, keep_series=None, scheduler=None, workers=None, progress=False):
     """sweep: (ID.PARAM, values) ; grid: [(ID.PARAM, values)].  Returns tidy rows (dicts)."""
     outputs = list(outputs)
     grids = resolve_values(circuit, ([sweep] if sweep else []) + list(grid or []))
@@ -172,7 +172,7 @@ def register_cli(sub, common):
     sp.add_argument("--output", action="append", help="outputs to report (default art.r, Q(Rla))")
     sp.add_argument("--t-end", type=float, default=1000.0, help="s (default 1000)")
     sp.add_argument("--dt", type=float, default=0.1, help="output interval, s")
-    sp.add_argument("--rtol", type=float, default=1e-6)
+    sp.add_argument("--rtol", type=float, default=1e-5)
     sp.add_argument("--scheduler")
     sp.add_argument("--workers", type=int)
     sp.add_argument("--out", help="tidy CSV")
