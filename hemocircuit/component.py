@@ -203,9 +203,6 @@ class Component:
         """True if, for the DC guess, the element is a short circuit (inductors)."""
         return False
 
-    def clip_states(self, x):
-        """Project states onto their physical domain (e.g. Ca >= floor); identity by default."""
-        return x
 
 
 def two_terminal_conductance(g: np.ndarray, j: np.ndarray | None = None):

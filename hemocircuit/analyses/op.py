@@ -37,11 +37,6 @@ class OperatingPoint:
                 for k, v in self.values.items()}
 
 
-def _scaled_residual(circuit, t, x, F):
-    """Residual in 'state scales per second' so states of very different size compare."""
-    return np.abs(F) / circuit.state_scales
-
-
 def residual(circuit, t, X, law_totals):
     """f(x) with the conservation-law rows replaced by their constraints."""
     F = circuit.evaluate(t, X)
@@ -82,7 +77,6 @@ def newton(circuit, X, law_totals, t=0.0, tol=1e-10, max_iter=50, ptc=False):
     scales = circuit.state_scales
     dt = np.full(B, 1e-3)
     done = np.zeros(B, bool)
-    norm_prev = None
     for it in range(max_iter if not ptc else 400):
         try:
             J, F = _jac(circuit, t, X, law_totals)
@@ -124,7 +118,6 @@ def newton(circuit, X, law_totals, t=0.0, tol=1e-10, max_iter=50, ptc=False):
         if np.all(done) and (not ptc or np.all(dt > 1e6)):
             Fn = residual(circuit, t, X, law_totals)
             return X, True, np.max(np.abs(Fn) / scales, axis=1)
-        norm_prev = norm
     Fn = residual(circuit, t, X, law_totals)
     nn = np.max(np.abs(Fn) / scales, axis=1)
     return X, bool(np.all(nn < 1e-8)), nn

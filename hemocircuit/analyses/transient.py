@@ -125,7 +125,7 @@ def simulate(circuit, t_end, dt=None, t0=0.0, x0=None, protocol=None, method="BD
                 segs.append(c)
                 x = sol.y[:, -1].copy() if sol.y.size else x
                 if sol.status == 1:  # a hard limit was reached: put the state on it, reset its rate
-                    k_ev = min((k for k, e in enumerate(sol.t_events) if len(e)), key=lambda k: sol.t_events[k][0])
+                    k_ev = min((j for j, e in enumerate(sol.t_events) if len(e)), key=lambda j: sol.t_events[j][0])
                     cur = float(sol.t_events[k_ev][0])
                     x = sol.y_events[k_ev][0].copy()
                     idx, bound, reset = limits[k_ev]
