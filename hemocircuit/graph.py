@@ -45,7 +45,7 @@ def circuit_graph(elements, comps):
         m = local_node_map(elem, comp)
         g.add_nodes_from(m.values())
         for a, b, role in comp.edges():
-            g.add_edge(m[a], m[b], element=elem.id, role=role)
+            g.add_edge(m[a], m[b], element=elem.id, role=role, short=comp.dc_short())
     return g
 
 
@@ -79,16 +79,25 @@ def check_topology(elements, comps, file=None):
             eid = _element_at(g, node)
             raise TopologyError(f"this sub-network {sorted(comp_nodes)} has no path to '{GROUND}' "
                                 "(no pressure reference)", file=_file_of(elements, eid) or file, element=eid, node=node)
-    # a loop of pressure-defining elements over-determines pressures (singular MNA)
+    # a loop of pressure-defining elements over-determines pressures (singular MNA); with
+    # inductors in it (a short at DC, as SPICE counts them) there is no steady state
     pg = nx.Graph()
-    for a, b, d in g.edges(data=True):
-        if d["role"] == "pressure":
+    shorts = set()
+    for a, b, d in sorted(g.edges(data=True), key=lambda e: bool(e[2].get("short"))):
+        if d["role"] == "pressure" or d.get("short"):
+            if d.get("short"):
+                shorts.add(d["element"])
             if pg.has_edge(a, b) or (a in pg and b in pg and nx.has_path(pg, a, b)):
                 path = nx.shortest_path(pg, a, b) if (a in pg and b in pg and nx.has_path(pg, a, b)) else [a, b]
                 loop = [pg.edges[u, v]["element"] for u, v in zip(path, path[1:])] + [d["element"]]
-                raise TopologyError(f"a loop made only of pressure-defining elements {loop}: their pressures "
-                                    "over-determine each other", file=_file_of(elements, d["element"]) or file,
-                                    element=d["element"], node=a)
+                if any(e in shorts for e in loop):
+                    msg = (f"a loop of pressure-defining elements and inductors {loop}: an inductor is a short "
+                           "circuit at steady state, so the loop's pressures over-determine each other and "
+                           "there is no operating point")
+                else:
+                    msg = (f"a loop made only of pressure-defining elements {loop}: their pressures "
+                           "over-determine each other")
+                raise TopologyError(msg, file=_file_of(elements, d["element"]) or file, element=d["element"], node=a)
             pg.add_edge(a, b, element=d["element"])
     # nodes reached only through flow-defining elements have no defined pressure
     ng = nx.Graph()

@@ -27,6 +27,7 @@ CASES = [
     ("no_ground_path.yaml", TopologyError, "Rf1", "x", ["no path to 'ground'", "'y'"]),
     ("no_ground_at_all.yaml", TopologyError, "Ps", "in", ["no element connects to 'ground'"]),
     ("pressure_loop.yaml", TopologyError, "Cp", "in", ["loop made only of pressure-defining", "Ps", "Cp"]),
+    ("inductor_across_source.yaml", TopologyError, "Lx", None, ["inductor", "Ps", "Lx", "no operating point"]),
     ("pressure_loop_sources.yaml", TopologyError, "Cb", None, ["loop made only of pressure-defining", "Ps1", "Ps2"]),
     ("flow_only_node.yaml", TopologyError, "L1", "m", ["only through flow-defining"]),
     ("store_only_node.yaml", TopologyError, "Ca", "ic", ["constraints:", "{node: ic, volume:",
@@ -153,4 +154,5 @@ def test_constraint_errors(write):
     p = write(base + "constraints:\n  - {node: ic, pressure: 10 mmHg, when: {Px.value: 80 mmHg}}\n", "c5.yaml")
     with pytest.raises(NetlistError, match="no element 'Px'"):
         hc.load(str(p))
+
 
