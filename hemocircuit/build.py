@@ -10,7 +10,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .component import Component
 from .errors import NetlistError
 from .expressions import Expression, Reference, constant_reference, is_expression
 from .netlist import Netlist

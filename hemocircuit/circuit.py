@@ -23,11 +23,11 @@ import scipy.sparse as sp
 
 from .build import ElementData, check_values, parse_netlist
 from .component import Component
-from .errors import HemocircuitError, NetlistError, TopologyError
+from .errors import HemocircuitError, NetlistError, SolverError, TopologyError
 from .graph import check_topology, local_node_map
 from .linalg import solve_batched
 from .netlist import GROUND, Netlist, load_netlist
-from .units import UnitError, parse_quantity, parse_with_unit
+from .units import UnitError, parse_quantity
 
 
 def _scatter(ST, local):
@@ -53,7 +53,7 @@ class Group:
         self.observables = comp.observables()
         self.waves = [(i, name, wf) for i, e in enumerate(elements) for name, wf in e.waveforms.items()]
         self.exprs = [(i, name, ex) for i, e in enumerate(elements) for name, ex in e.expressions.items()]
-        self.constant = comp.constant_matrix and not self.exprs
+        self.constant = comp.constant_matrix and not self.exprs and comp.linear_in_pressure
         self.time_dependent = comp.time_dependent or bool(self.waves)
 
     def source_values(self, t, B):
@@ -412,6 +412,7 @@ class Circuit:
         # the state whose equation the law replaces (and, in the DC guess, the store kept
         # closed to anchor the group's pressure): preferably a store leading to ground
         row = anchor = None
+        anchor_to_ground = False
         terms = []
         for eid, si, sign in law.terms:
             g, i = self._locate[eid]
@@ -506,7 +507,7 @@ class Circuit:
             out.append(p)
         return out
 
-    def _assemble(self, t, x, plist, dc=False):
+    def _assemble(self, t, x, plist, dc=False, u=None):
         """Stamp the non-static groups onto the cached static part.
 
         Returns (A (Bx,n,n), or None when the cached inverse applies; b (Bx,n); per-group
@@ -523,7 +524,9 @@ class Circuit:
                 continue
             xl = x[:, g.sidx]
             src = g.source_values(t, Bx) if g.waves else None
-            A_loc, b_loc = g.comp.stamp(p, xl, None, t, src)
+            # u: the current pressure iterate, for elements that are nonlinear in the pressures
+            ul = None if (u is None or g.comp.linear_in_pressure) else u[:, g.uidx]
+            A_loc, b_loc = g.comp.stamp(p, xl, ul, t, src)
             if A_loc.ndim != 4 or A_loc.shape[1] != g.E:
                 A_loc = np.broadcast_to(A_loc, (A_loc.shape[0], g.E, g.L, g.L))
             if b_loc.shape[1:] != (g.E, g.L):
@@ -542,6 +545,24 @@ class Circuit:
         if A is not None:
             A = A.reshape(Bx, N1, N1)[:, :n, :n]
         return A, b[:, :n], stamps
+
+    @property
+    def nonlinear(self):
+        """True if some element is nonlinear in the pressures (Newton on the nodal equations)."""
+        return any(not g.comp.linear_in_pressure for g in self.groups)
+
+    def _newton_pressures(self, t, x, plist, dc, u, tol=1e-12, max_iter=50):
+        """Newton on the nodal equations: such elements stamp their linearisation at the
+        current pressures (A_loc = d flow/d P, b_loc so that A_loc u - b_loc = flow(u))."""
+        for _ in range(max_iter):
+            A, b, stamps = self._assemble(t, x, plist, dc=dc, u=u)
+            u_new = self._solve(A, b)
+            done = np.max(np.abs(u_new - u) / (1.0 + np.abs(u_new))) < tol
+            u = u_new
+            if done:
+                return u, stamps
+        raise SolverError(f"the nodal equations did not converge in {max_iter} Newton iterations "
+                          "(an element nonlinear in the pressures)", time=float(np.ravel(t)[0]) if np.ndim(t) else t)
 
     def _const_part(self, g, Bx):
         A_loc, _ = g.comp.stamp(g.p, np.zeros((1, g.E, g.S)), None, 0.0, None)
@@ -598,6 +619,8 @@ class Circuit:
         plist = self._bound_params(x, self._params_for(Bx), t)
         A, b, stamps = self._assemble(t, x, plist, dc=dc)
         u = self._solve(A, b)
+        if self.nonlinear:
+            u, stamps = self._newton_pressures(t, x, plist, dc, u)
         if want == "u":
             return u, plist, stamps
         dx = np.empty((Bx, self.nx))

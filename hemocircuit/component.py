@@ -24,8 +24,8 @@ element draws from each of its nodes, which is how element flows are reported ge
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import Any, Sequence
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -174,6 +174,9 @@ class Component:
 
     # --- numerical hooks (vectorised: see module docstring) -----------------------------
     def stamp(self, p, x, u, t, src=None):
+        """(A_loc, b_loc): see the module docstring.  ``u`` is None for elements affine in the
+        pressures; for ``linear_in_pressure = False`` it is the current Newton iterate of the
+        local unknowns and the stamp is the linearisation there."""
         raise NotImplementedError
 
     def derivatives(self, p, x, u, t, src=None) -> np.ndarray:

@@ -51,7 +51,6 @@ def circuit_graph(elements, comps):
 
 def check_topology(elements, comps, file=None):
     """Run every check; return the conservation laws.  Raises TopologyError."""
-    where = {"file": file}
     for elem, comp in zip(elements, comps):
         if len(set(elem.nodes)) < len(elem.nodes) and len(elem.nodes) == 2:
             raise TopologyError(f"both terminals are on node '{elem.nodes[0]}' (the element is shorted out)",

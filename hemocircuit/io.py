@@ -43,12 +43,27 @@ def write_json(path, flat: dict):
         json.dump(flat, fh, indent=1)
 
 
-def plot_series(path, x, xlabel, columns: dict, units: dict, title="", select=None):
-    """One panel per unit (pressures, flows, volumes, ...), every selected column drawn."""
+def pyplot():
+    """matplotlib.pyplot on the non-interactive Agg backend (figures go to files only)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    return plt
+
+
+def save_figure(fig, path, dpi=110):
+    """Lay out, write and close a figure."""
+    import matplotlib.pyplot as plt
+
+    fig.tight_layout()
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+
+
+def plot_series(path, x, xlabel, columns: dict, units: dict, title="", select=None):
+    """One panel per unit (pressures, flows, volumes, ...), every selected column drawn."""
+    plt = pyplot()
 
     names = [n for n in (select or columns) if n in columns and np.ndim(columns[n]) == 1
              and np.all(np.isfinite(columns[n])) is not None]
@@ -66,6 +81,4 @@ def plot_series(path, x, xlabel, columns: dict, units: dict, title="", select=No
     axes[-1, 0].set_xlabel(xlabel)
     if title:
         axes[0, 0].set_title(title)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path)

@@ -5,15 +5,13 @@ import networkx as nx
 
 from .graph import local_node_map
 from .netlist import GROUND
+from .io import pyplot, save_figure
 
 _COLORS = {"conductive": "tab:blue", "pressure": "tab:red", "flow": "tab:green"}
 
 
 def draw_circuit(circuit, path):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     g = nx.MultiGraph()
     labels = {}
@@ -36,6 +34,4 @@ def draw_circuit(circuit, path):
     ax.set_title(f"{circuit.netlist.name}  (blue: resistive, red: pressure-defining, green: flow-defining)",
                  fontsize=9)
     ax.axis("off")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path)

@@ -87,7 +87,6 @@ class Protocol:
         c = self.apply_initial(circuit)
         for ev in self.events:
             for path in ev.set:
-                e, _, _, name = (None, None, None, None)
                 eid, _, name = path.partition(".")
                 if eid in c.elements and name in c.elements[eid].cls.options:
                     raise NetlistError(f"event at {ev.at:g} s sets the structural option '{path}'; options may only "

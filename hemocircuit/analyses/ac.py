@@ -26,6 +26,7 @@ import numpy as np
 from ..errors import HemocircuitError, NetlistError
 from ..units import UnitError, parse_quantity
 from .linearize import linearize
+from ..io import pyplot, save_figure
 
 
 def parse_freqs(spec, per_decade=20):
@@ -163,10 +164,7 @@ def ac_response(circuit, input="Pa", outputs=("Q(Rla)", "Q(Rsv)"), freqs="0.001:
 # ------------------------------------------------------------------------------ plots -----
 def plot_bode(path, res: ACResult, title=""):
     """Bode plot: relative gain (log-log) and phase (deg, leading positive) against frequency."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(8, 6.5), sharex=True)
     for n in res.outputs:
@@ -183,9 +181,7 @@ def plot_bode(path, res: ACResult, title=""):
     ax2.legend(fontsize=8)
     if title:
         ax1.set_title(title)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 # ------------------------------------------------------------------------------ CLI -------

@@ -14,6 +14,7 @@ import numpy as np
 
 from ..derived import derived_units, evaluate_derived
 from ..errors import HemocircuitError
+from ..io import pyplot, save_figure
 
 
 def compare_sweep(circuits, param, values):
@@ -57,10 +58,7 @@ def write_tidy(path, results, xname, xunit):
 
 
 def plot_overlays(prefix, results, quantities, xlabel):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     files = []
     for k in quantities:
@@ -74,11 +72,9 @@ def plot_overlays(prefix, results, quantities, xlabel):
         ax.set_ylabel(f"{k} [{unit}]" if unit else k)
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
-        fig.tight_layout()
         safe = "".join(ch if ch.isalnum() or ch in "._-" else "_" for ch in k)
         f = f"{prefix}_{safe}.png"
-        fig.savefig(f, dpi=100)
-        plt.close(fig)
+        save_figure(fig, f, dpi=100)
         files.append(f)
     return files
 

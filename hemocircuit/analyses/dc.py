@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import HemocircuitError, NetlistError, SolverError
+from ..errors import NetlistError, SolverError
 from ..units import UnitError, parse_quantity
 
 
@@ -58,7 +58,7 @@ def dc_sweep(circuit, param: str, values, progress=False):
         c.set_param(param, float(v))
         try:
             op = operating_point(c, x0=None if x_prev is None else x_prev)
-        except (SolverError,) as exc:
+        except SolverError:
             try:  # continuation failed: retry from a fresh DC guess
                 op = operating_point(c)
             except SolverError as exc2:

@@ -17,8 +17,8 @@ import numpy as np
 
 from ..batch import build_batches, expand_grid, parse_grid_arg, resolve_values
 from ..batch_integrator import integrate
-from ..errors import HemocircuitError
 from ..execution import run_chunks, split
+from ..io import pyplot, save_figure
 
 
 def _law_states(c):
@@ -32,7 +32,6 @@ def _law_states(c):
 def _run_chunk(job):
     bc, opt = job
     from .op import operating_points
-    B = bc.B
     X0, opv, errors = operating_points(bc)
     good = np.array([e is None for e in errors])
     free = [j for j in range(bc.nx) if j not in _law_states(bc)]
@@ -115,10 +114,7 @@ def envelope(circuit, sweep, grid=None, outputs=("art.r", "Q(Rla)"), t_end=1000.
 
 
 def plot_envelope(path, rows, output, sweep_param):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     series = {}
     for r in rows:
@@ -137,16 +133,11 @@ def plot_envelope(path, rows, output, sweep_param):
     ax.set_ylabel(output)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=6)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def plot_phase_plane(path, rows, x_col, y_col):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     fig, ax = plt.subplots(figsize=(5.5, 4.5))
     for r in rows:
@@ -158,9 +149,7 @@ def plot_phase_plane(path, rows, x_col, y_col):
     ax.set_ylabel(y_col)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=6)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def register_cli(sub, common):

@@ -22,6 +22,7 @@ from ..batch import build_batches, expand_grid, parse_grid_arg, resolve_values
 from ..batch_integrator import integrate
 from ..errors import HemocircuitError
 from ..execution import run_chunks, split
+from ..io import pyplot, save_figure
 
 SAMPLES = 64  # per period
 
@@ -61,7 +62,6 @@ def _run_chunk(job):
     period = 1.0 / f
     t = np.zeros(B)
     x = X0.copy()
-    prev = np.full((B, len(outputs)), np.nan, dtype=complex)
     settled = np.zeros(B, bool)
     failed = np.array([e is not None for e in errors])
     for k, e in enumerate(errors):
@@ -69,7 +69,6 @@ def _run_chunk(job):
             res[k] = {"error": e}
     total_periods = np.zeros(B, int)
     block = opt["block_periods"]
-    last = {}
     while True:
         idx = np.nonzero(~settled & ~failed)[0]
         if idx.size == 0:
@@ -89,7 +88,6 @@ def _run_chunk(job):
             # fundamental of each of the last two periods of this block
             a1 = _dft(Y[:, -SAMPLES:], SAMPLES, 1)
             a0 = _dft(Y[:, -2 * SAMPLES:-SAMPLES], SAMPLES, 1)
-            x1 = _dft(X_in[-SAMPLES:], SAMPLES, 1)
             total_periods[m] += block
             # change of the fundamental between the last two periods, relative to its size (or
             # to 1 % of the steady output, so a vanishing response does not block settling)
@@ -187,10 +185,7 @@ def write_rows(path, rows):
 
 
 def plot_bode(path, rows, outputs):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     fig, (a1, a2) = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
     keyf = lambda r: tuple((k, str(v)) for k, v in r.items() if k not in (
@@ -214,9 +209,7 @@ def plot_bode(path, rows, outputs):
     for a in (a1, a2):
         a.grid(alpha=0.3, which="both")
     a1.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def register_cli(sub, common):

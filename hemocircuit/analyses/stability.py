@@ -33,6 +33,7 @@ import numpy as np
 
 from ..errors import HemocircuitError, SolverError
 from .linearize import limit_flags, linearize
+from ..io import pyplot, save_figure
 
 RE_TOL = 1e-9
 IM_TOL = 1e-7
@@ -339,10 +340,7 @@ def _bisect(pred, a, b, pred_a, xtol):
 def plot_stability(path, res: StabilityResult, title=""):
     """Real parts of the eigenvalues against the parameter (symlog) and the eigenvalues in the
     complex plane coloured by the parameter."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(13, 5.2))
     v = res.values
@@ -378,9 +376,7 @@ def plot_stability(path, res: StabilityResult, title=""):
     ax2.grid(alpha=0.3)
     if title:
         fig.suptitle(title)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 # ------------------------------------------------------------------------ CLI -------------

@@ -72,7 +72,6 @@ def simulate(circuit, t_end, dt=None, t0=0.0, x0=None, protocol=None, method="BD
     scales = c.state_scales
     atol_v = (atol if atol is not None else rtol * 1e-3) * scales
     ts, xs, segs = [], [], []
-    t = t0
     nfev = njev = nsteps = 0
     t_grid = None if dt is None else np.arange(t0, t_end + 0.5 * dt, dt)
 

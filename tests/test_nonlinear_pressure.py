@@ -1,0 +1,49 @@
+"""Elements nonlinear in the pressures: the assembly runs Newton on the nodal equations."""
+import numpy as np
+import pytest
+from scipy.optimize import brentq
+
+import hemocircuit as hc
+from hemocircuit.component import Component, Param, two_terminal_conductance
+from hemocircuit.registry import component_types
+
+
+class QuadraticResistor(Component):
+    """Turbulent-type resistance: dP = K q |q|, i.e. q = sign(dP) sqrt(|dP| / K)."""
+
+    type_name = "test_quadratic_resistor"
+    terminals = ("a", "b")
+    parameters = {"K": Param("mmHg*s**2/mL**2", lower=0.0, lower_open=True)}
+    linear_in_pressure = False
+
+    def stamp(self, p, x, u, t, src=None):
+        dP = np.zeros(x.shape[:2]) + 1.0 if u is None else u[..., 0] - u[..., 1]
+        a = np.maximum(np.abs(dP), 1e-9)
+        q = np.sign(dP) * np.sqrt(a / p["K"])
+        g = 0.5 / np.sqrt(a * p["K"])  # dq/d(dP)
+        return two_terminal_conductance(g, q - g * dP)
+
+
+@pytest.fixture
+def registered():
+    types = component_types()
+    types[QuadraticResistor.type_name] = QuadraticResistor
+    yield
+    types.pop(QuadraticResistor.type_name)
+
+
+def test_series_quadratic_and_linear_resistor(registered, tmp_path):
+    net = tmp_path / "nl.yaml"
+    net.write_text("""
+elements:
+  - {id: Ps, type: pressure_source, nodes: [in, ground], value: 50 mmHg}
+  - {id: Rq, type: test_quadratic_resistor, nodes: [in, a], K: 2 mmHg*s**2/mL**2}
+  - {id: R, type: resistor, nodes: [a, ground], R: 3 mmHg*s/mL}
+""")
+    c = hc.load(str(net))
+    op = c.operating_point()
+    # by hand: 2 q^2 + 3 q = 50
+    q = brentq(lambda q: 2 * q * q + 3 * q - 50, 0, 10)
+    assert op["Q(R)"] == pytest.approx(q, rel=1e-10)
+    assert op["Q(Rq)"] == pytest.approx(q, rel=1e-10)
+    assert op["P(a)"] == pytest.approx(3 * q, rel=1e-10)
