@@ -10,9 +10,14 @@ cannot fall below 0 -- at the limit its derivative is held at zero.
 """
 from __future__ import annotations
 
+import math
+
+import numba
 import numpy as np
 
 from hemocircuit.component import Component, Observable, Option, Param, State, Storage, pressure_branch
+
+_jit = numba.njit(cache=True, nogil=True, error_model="numpy")
 
 
 class _Store(Component):
@@ -33,8 +38,23 @@ class _Store(Component):
         return (Observable("V", "mL", "stored volume", state_only=True),
                 Observable("C", "mL/mmHg", "compliance dV/dP", state_only=True))
 
-    def dc_open(self):
-        return True
+    def dc_stamp(self, p, A_loc, b_loc, keep):
+        """Open: the branch flows are 0 (except on the stores in ``keep``)."""
+        opened = ~np.asarray(keep, dtype=bool)
+        K = len(self.local_nodes)
+        for m in range(len(self.branches())):
+            r = K + m
+            A_loc[:, opened, r, :] = 0.0
+            A_loc[:, opened, r, r] = 1.0  # branch flow = 0
+            b_loc[:, opened, r] = 0.0
+        return A_loc, b_loc
+
+    def limited_states(self, p, x, rtol=1e-6):
+        """A clamped store collapsed to V <= 0 (the steady variant continues it below 0)."""
+        out = super().limited_states(p, x, rtol)
+        if self.opts["clamp_at_zero"]:
+            out[..., 0] |= x[..., 0] <= 0.0
+        return out
 
     def pressure(self, p, V):
         raise NotImplementedError
@@ -59,6 +79,12 @@ class _Store(Component):
         collapsed = self.opts["clamp_at_zero"] or self.opts.get("extended", False)
         return {"V": np.maximum(V, 0.0) if collapsed else V, "C": self.compliance(p, V)}
 
+    # --- compiled path (hemocircuit.kernels; functions at the end of this module) ----------
+    def kernel_options(self):
+        """[clamp_at_zero (0|1), extended (0|1)] (``extended`` is always 0 for the linear law)."""
+        return np.array([int(bool(self.opts["clamp_at_zero"])), int(bool(self.opts.get("extended", False)))],
+                        dtype=np.int64)
+
 
 class LinearCompliance(_Store):
     """Linear compliance C [mL/mmHg] with unstressed volume V0 [mL]."""
@@ -69,6 +95,10 @@ class LinearCompliance(_Store):
 
     def pressure(self, p, V):
         return (V - p["V0"]) / p["C"]
+
+    def kernel(self):
+        from hemocircuit.kernels import Kernel
+        return Kernel(stamp=linear_stamp, derivs=store_derivs, observe=linear_observe, observables=("V", "C"))
 
     def volume(self, p, dP):
         return p["V0"] + p["C"] * dP
@@ -92,6 +122,10 @@ class LogCompliance(_Store):
     steady_opts = {"clamp_at_zero": False, "extended": True}
     EPS = 1e-3  # mmHg
 
+    def kernel(self):
+        from hemocircuit.kernels import Kernel
+        return Kernel(stamp=log_stamp, derivs=store_derivs, observe=log_observe, observables=("V", "C"))
+
     def pressure(self, p, V):
         k, P0, Vn = p["k"], p["P0"], p["Vn"]
         if not self.opts["extended"]:
@@ -110,3 +144,82 @@ class LogCompliance(_Store):
         k = p["k"]
         V_eps = p["Vn"] + np.log(self.EPS) / k
         return np.where(V >= V_eps, np.exp(-k * (np.maximum(V, V_eps) - p["Vn"])) / k, 1.0 / (k * self.EPS))
+
+
+# --- compiled path (hemocircuit.kernels contract) -------------------------------------------
+# Local unknowns [P_node, P_ref, q] (q: flow node -> ref through the store), state [V] (mL).
+# p: compliance [C, V0]; log_compliance [k, P0, Vn].  iopt: [clamp_at_zero, extended].
+# Observables (state-only, in order): V, C.  Every expression follows the numpy code above.
+_EPS = LogCompliance.EPS  # compile-time constants of the kernels [mmHg], and numpy's log of it
+_LOG_EPS = float(np.log(_EPS))
+
+
+@_jit
+def _branch(value, A, b):
+    A[0, 2] = 1.0
+    A[1, 2] = -1.0
+    A[2, 0] = 1.0
+    A[2, 1] = -1.0
+    b[2] = value
+
+
+@_jit
+def store_derivs(p, x, u, t, iopt, dx):
+    q = u[2]
+    if iopt[0] != 0 and x[0] <= 0.0 and q < 0.0:
+        q = 0.0
+    dx[0] = q
+
+
+@_jit
+def _observed_volume(V, iopt):
+    if (iopt[0] != 0 or iopt[1] != 0) and V < 0.0:  # np.maximum(V, 0): NaN stays NaN
+        return 0.0
+    return V
+
+
+@_jit
+def linear_stamp(p, x, u, t, iopt, A, b):
+    _branch((x[0] - p[1]) / p[0], A, b)
+
+
+@_jit
+def linear_observe(p, x, iopt, out):
+    V = x[0]
+    out[0] = _observed_volume(V, iopt)
+    out[1] = p[0] + 0.0 * V
+
+
+@_jit
+def _exp_clipped(a):
+    if a > 700.0:  # np.minimum(a, 700): NaN stays NaN
+        a = 700.0
+    return math.exp(a)
+
+
+@_jit
+def log_pressure(k, P0, Vn, V, extended):
+    """LogCompliance.pressure for one element."""
+    if not extended:
+        return P0 + _exp_clipped(k * (V - Vn))
+    V_eps = Vn + _LOG_EPS / k
+    if V >= V_eps:  # then np.maximum(V, V_eps) is V
+        return P0 + _exp_clipped(k * (V - Vn))
+    return P0 + _EPS * (1 + k * (V - V_eps))
+
+
+@_jit
+def log_stamp(p, x, u, t, iopt, A, b):
+    _branch(log_pressure(p[0], p[1], p[2], x[0], iopt[1] != 0), A, b)
+
+
+@_jit
+def log_observe(p, x, iopt, out):
+    k, Vn = p[0], p[2]
+    V = x[0]
+    out[0] = _observed_volume(V, iopt)
+    V_eps = Vn + _LOG_EPS / k
+    if V >= V_eps:
+        out[1] = math.exp(-k * (V - Vn)) / k
+    else:
+        out[1] = 1.0 / (k * _EPS)

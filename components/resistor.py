@@ -1,7 +1,31 @@
 """Linear hydraulic resistor: q = (P_a - P_b) / R  (thesis eq. Poiseuille, R = dP/Q)."""
 from __future__ import annotations
 
+import numba
+
 from hemocircuit.component import Component, Param, two_terminal_conductance
+
+_jit = numba.njit(cache=True, nogil=True, error_model="numpy")
+
+
+# --- compiled path (hemocircuit.kernels contract; p = [R], no states, no options) --------------
+@_jit
+def kernel_stamp(p, x, u, t, iopt, A, b):
+    g = 1.0 / p[0]
+    A[0, 0] = g
+    A[0, 1] = -g
+    A[1, 0] = -g
+    A[1, 1] = g
+
+
+@_jit
+def kernel_derivs(p, x, u, t, iopt, dx):
+    pass
+
+
+@_jit
+def kernel_observe(p, x, iopt, out):
+    pass
 
 
 class Resistor(Component):
@@ -14,3 +38,7 @@ class Resistor(Component):
 
     def stamp(self, p, x, u, t, src=None):
         return two_terminal_conductance(1.0 / p["R"])
+
+    def kernel(self):
+        from hemocircuit.kernels import Kernel
+        return Kernel(stamp=kernel_stamp, derivs=kernel_derivs, observe=kernel_observe, observables=())

@@ -63,6 +63,9 @@ spans 1e-14 .. 1e-29 M depending on the pool and the reading.
 """
 from __future__ import annotations
 
+import math
+
+import numba
 import numpy as np
 
 from hemocircuit.component import Component, Observable, Option, Param, State, pressure_branch
@@ -126,6 +129,10 @@ class _Pool(Component):
     def observe(self, p, x, u, t, src=None):
         return {"C": x[..., 0]}
 
+    def kernel_options(self):
+        """[units_reading 'thesis' (0|1)]; ``scale`` only sets tolerances, the kernel ignores it."""
+        return np.array([int(self._thesis())], dtype=np.int64)
+
     def check(self, p):
         if self._thesis() or "h" not in p or "l" not in p:
             return []
@@ -163,6 +170,10 @@ class TracerPool(_Pool):
 
     def stamp(self, p, x, u, t, src=None):
         return pressure_branch(np.zeros(x.shape[:2]))  # ideal meter: P_a - P_b = 0
+
+    def kernel(self):
+        from hemocircuit.kernels import Kernel
+        return Kernel(stamp=tracer_stamp, derivs=tracer_derivs, observe=pool_observe, observables=("C",))
 
     def feed(self, p, q):
         """C_feed [M] (eq. cinv) for the metered flow q [mL/s]."""
@@ -216,6 +227,10 @@ class TissuePool(_Pool):
         shape = x.shape[:2]
         return np.zeros(shape + (0, 0)), np.zeros(shape + (0,))
 
+    def kernel(self):
+        from hemocircuit.kernels import Kernel
+        return Kernel(stamp=tissue_stamp, derivs=tissue_derivs, observe=pool_observe, observables=("C",))
+
     def _balance(self, p):
         D, G = self._loss(p, self._volume(p))
         return G * p["C_x"], D + G
@@ -229,3 +244,79 @@ class TissuePool(_Pool):
         with np.errstate(divide="ignore", invalid="ignore"):
             c = np.where(b > 0, a / np.where(b > 0, b, 1.0), 0.0)
         return np.broadcast_to(np.nan_to_num(c), u.shape[:2])[..., None]
+
+
+# --- compiled path (hemocircuit.kernels contract) -------------------------------------------
+# State [C] (M); iopt = [thesis] (units_reading: 0 consistent, 1 thesis); observables: C.
+# p (the ``parameters`` order): V, k_d, h, l, C_x (both) then C_0, C_inf, k_feed, L_feed, n_feed
+# (tracer_pool).  tracer_pool local unknowns [P_a, P_b, q] (q the metered flow a -> b);
+# tissue_pool has none.  Every expression follows the numpy code above.
+_jit = numba.njit(cache=True, nogil=True, error_model="numpy")
+_V, _K_D, _H, _L, _C_X, _C_0, _C_INF, _K_FEED, _L_FEED, _N_FEED = range(10)
+
+
+@_jit
+def _pool_volume(p):
+    v = p[_V] * M3_PER_ML
+    if v < _V_FLOOR:  # np.maximum(v, floor): NaN stays NaN
+        v = _V_FLOOR
+    return v
+
+
+@_jit
+def _pool_loss(p, vol, thesis):
+    """(D, G) as _Pool._loss."""
+    if thesis:
+        return p[_K_D], p[_H]
+    return p[_K_D] * vol, p[_H] * p[_L]
+
+
+@_jit
+def tracer_feed(p, q, thesis):
+    """TracerPool.feed for one element."""
+    qs = q * M3_PER_ML
+    K = p[_K_FEED] * p[_L_FEED] * (1.0 if thesis else p[_N_FEED])
+    x = K / qs if qs > 0 else math.inf
+    return (p[_C_INF] - p[_C_0]) * (-math.expm1(-x)) + p[_C_0]
+
+
+@_jit
+def tracer_stamp(p, x, u, t, iopt, A, b):
+    A[0, 2] = 1.0  # ideal meter: P_a - P_b = 0 (b stays zero)
+    A[1, 2] = -1.0
+    A[2, 0] = 1.0
+    A[2, 1] = -1.0
+
+
+@_jit
+def tracer_derivs(p, x, u, t, iopt, dx):
+    thesis = iopt[0] != 0
+    q = u[2]
+    qp = q
+    if qp < 0.0:  # np.maximum(q, 0): NaN stays NaN
+        qp = 0.0
+    qp = qp * M3_PER_ML
+    vol = _pool_volume(p)
+    D, G = _pool_loss(p, vol, thesis)
+    a = qp * tracer_feed(p, q, thesis) + G * p[_C_X]
+    bb = qp + D + G
+    dx[0] = (a - bb * x[0]) / vol
+
+
+@_jit
+def tissue_stamp(p, x, u, t, iopt, A, b):
+    pass
+
+
+@_jit
+def tissue_derivs(p, x, u, t, iopt, dx):
+    vol = _pool_volume(p)
+    D, G = _pool_loss(p, vol, iopt[0] != 0)
+    a = G * p[_C_X]
+    bb = D + G
+    dx[0] = (a - bb * x[0]) / vol
+
+
+@_jit
+def pool_observe(p, x, iopt, out):
+    out[0] = x[0]

@@ -116,6 +116,13 @@ class Arteriole(Component):
         names = [n for n in _OBS if n != "dCa" or self.opts["ca_order"] == 2]
         return tuple(Observable(n, _OBS[n][0], _OBS[n][2], state_only=n in _STATE_ONLY) for n in names)
 
+    def outputs_of_interest(self):
+        return ("r", "Ca")
+
+    def volume_observables(self):
+        """The bed's blood volume is V(ID), whether or not it flows (volume_flow)."""
+        return ("V",)
+
     def hard_limits(self):
         """Second-order Ca stops at the floor and its rate is reset (chapter 6 footnotes)."""
         return (("Ca", CA_FLOOR, "dCa"),) if self.opts["ca_order"] == 2 else ()
@@ -196,6 +203,21 @@ class Arteriole(Component):
         else:
             out["q_out"] = (u[..., 0] - u[..., 1]) / (resistance(o["r"], p) * _OBS["R"][1])
         return out
+
+    # --- compiled path (hemocircuit.kernels; equations in compiled.py) -------------------
+    def kernel(self):
+        from hemocircuit.kernels import Kernel
+
+        from . import compiled
+        return Kernel(stamp=compiled.stamp, derivs=compiled.derivs, observe=compiled.observe,
+                      observables=tuple(o.name for o in self.observables() if o.state_only))
+
+    def kernel_options(self):
+        """[ca_order (1|2), kinetics dynamic (0|1), passive (0|1), volume_flow (0|1),
+        pim_reference 'ref' (0|1)] (the iopt layout of compiled.py)."""
+        o = self.opts
+        return np.array([int(o["ca_order"]), int(o["kinetics"] == "dynamic"), int(bool(o["passive"])),
+                         int(bool(o["volume_flow"])), int(o["pim_reference"] == "ref")], dtype=np.int64)
 
     def default_states(self, p):
         shape = np.broadcast_shapes(*(np.shape(v) for v in p.values()))
