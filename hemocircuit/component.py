@@ -108,6 +108,29 @@ class Storage:
     state: str | None = None
 
 
+@dataclass(frozen=True)
+class Drive:
+    """How an input signal drives an element (a source): the names of the parameters involved.
+
+    ``value``: the parameter an input drives (a source's value; the input of AC, linearisation
+    and the frequency response, and what source stepping ramps).  ``amplitude``, ``frequency``,
+    ``phase``, ``start``: the parameters of the element's built-in sine term
+    ``amplitude sin(2 pi frequency (t - start) + phase)`` for t >= start, added to the value
+    (what the frequency response and forced periodic orbits set), or None when it has none.
+    """
+
+    value: str
+    amplitude: str | None = None
+    frequency: str | None = None
+    phase: str | None = None
+    start: str | None = None
+
+    @property
+    def has_sine(self) -> bool:
+        """True when all four parameters of a built-in sine term are declared."""
+        return None not in (self.amplitude, self.frequency, self.phase, self.start)
+
+
 class Component:
     """Base class of every element type.  Subclasses set the class attributes and hooks."""
 
@@ -132,6 +155,10 @@ class Component:
 
     #: option overrides used while solving for a steady state (must not change the states)
     steady_opts: dict = {}
+    #: parameters that accept a waveform mapping (``{pwl: ...}``, ``{sine: ...}``) in netlists
+    waveform_params: tuple[str, ...] = ()
+    #: the parameters an input signal drives (:class:`Drive`); None: the element is not a source
+    drive: Drive | None = None
 
     def __init__(self, opts: dict | None = None):
         self.opts = {k: o.default for k, o in self.options.items()}
@@ -198,13 +225,78 @@ class Component:
         """
         return np.zeros(u.shape[:2] + (len(self.states()),))
 
-    def dc_open(self) -> bool:
-        """True if, for the DC guess, the element's branches carry no flow (volume stores)."""
-        return False
+    # --- DC guess of the operating point ----------------------------------------------
+    def dc_stamp(self, p, A_loc, b_loc, keep):
+        """The element's stamp in the DC-guess network of the operating point, from its normal
+        stamp ``(A_loc, b_loc)`` (writable arrays, shapes as :meth:`stamp`; modify and return
+        them).  ``keep`` (bool, (E,)) marks elements that must keep their normal stamp: one
+        volume store per conservation law, which anchors the pressure of a node group joined
+        to the rest of the circuit only through opened stores.  Default: the normal stamp.
+        Volume stores open their branches (no flow); inductors short themselves."""
+        return A_loc, b_loc
+
+    def has_dc_stamp(self) -> bool:
+        """True if :meth:`dc_stamp` changes the stamp (by default: the type overrides it)."""
+        return type(self).dc_stamp is not Component.dc_stamp
 
     def dc_short(self) -> bool:
-        """True if, for the DC guess, the element is a short circuit (inductors)."""
+        """True if the element is a short circuit at steady state (inductors): the topology
+        pass counts it in loops of pressure-defining elements (no operating point)."""
         return False
+
+    # --- time structure ------------------------------------------------------------------
+    def breakpoints(self, p, t0, t1) -> list[float]:
+        """Times in (t0, t1) where the element's stamp is discontinuous in time (a sine term
+        switching on), over every element of the group and every parameter set of ``p``; the
+        integrators restart there.  Waveform breakpoints are found by the circuit itself."""
+        return []
+
+    def hard_limits(self) -> tuple[tuple[str, float, str | None], ...]:
+        """``((state, lower bound, state reset to 0 at the bound or None), ...)``: the integration
+        stops when ``state`` reaches the bound, puts it on the bound and resets the rate state
+        (the arteriole's second-order Ca: ``(("Ca", 1e-12, "dCa"),)``)."""
+        return ()
+
+    def limited_states(self, p, x, rtol=1e-6) -> np.ndarray:
+        """Bool (B, E, S): states sitting at a hard limit of the element's dynamics (flagged by
+        the stability analysis).  Default: the states within ``rtol`` of a :meth:`hard_limits`
+        bound."""
+        names = [s.name for s in self.states()]
+        out = np.zeros(x.shape, dtype=bool)
+        for name, bound, _ in self.hard_limits():
+            j = names.index(name)
+            out[..., j] = x[..., j] <= bound + rtol * max(abs(bound), 1e-300)
+        return out
+
+    # --- defaults and reporting -----------------------------------------------------------
+    def defaults(self) -> dict:
+        """Parameter values that replace the declared defaults for these options (a preset):
+        ``{name: number in the declared unit}``."""
+        return {}
+
+    def drive_output(self, eid: str, nodes: list) -> str | None:
+        """The output column that holds the driven quantity of element ``eid`` on ``nodes``
+        (a pressure source to ground: ``P(node)``; a flow source: ``Q(eid)``), or None."""
+        return None
+
+    def outputs_of_interest(self) -> tuple[str, ...]:
+        """Names of states/observables an analysis reports by default when the netlist declares
+        no ``outputs:`` (columns ``ID.name``, or ``V(ID)`` for a volume), e.g. ``("r",)``."""
+        return ()
+
+    def volume_observables(self) -> tuple[str, ...]:
+        """Observables reported as ``V(ID)`` rather than ``ID.name`` (stored volumes)."""
+        return tuple(s.volume for s in self.storages())
+
+    # --- compiled path (hemocircuit.kernels) --------------------------------------------
+    def kernel(self):
+        """The type's compiled equations (:class:`hemocircuit.kernels.Kernel`), or None when the
+        type runs only on the numpy path (circuits containing it then run on that path)."""
+        return None
+
+    def kernel_options(self) -> np.ndarray:
+        """This instance's structural options as an int64 array, read by the kernel's functions."""
+        return np.zeros(0, dtype=np.int64)
 
 
 

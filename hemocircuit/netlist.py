@@ -16,7 +16,7 @@ import yaml
 from .errors import NetlistError
 
 TOP_KEYS = {"name", "description", "parameters", "elements", "extends", "add", "remove", "change",
-            "constraints", "outputs", "derived"}
+            "constraints", "outputs", "input", "derived"}
 ELEMENT_KEYS = {"id", "type", "nodes"}
 GROUND = "ground"
 _REF = re.compile(r"\$\{([A-Za-z_][A-Za-z0-9_]*)\}")
@@ -40,8 +40,12 @@ class Netlist:
     constraints: list
     file: str | None = None
     base_dir: str | None = None
-    outputs: list = field(default_factory=list)
+    #: outputs of interest {use: [column or derived name]} ('default' and hemocircuit.outputs.USES)
+    outputs: dict = field(default_factory=dict)
     derived: dict = field(default_factory=dict)  # name -> {expr, unit}: quantities computed from columns
+    input: str | None = None  # the default input: a source id or ID.PARAM
+    outputs_file: str | None = None  # the files that declared outputs / input (for errors)
+    input_file: str | None = None
 
     def element(self, eid):
         for e in self.elements:
@@ -50,9 +54,9 @@ class Netlist:
         raise KeyError(eid)
 
 
-class UniqueKeyLoader(yaml.SafeLoader):
-    """A safe YAML loader that rejects a key repeated in one mapping (PyYAML keeps the last
-    one silently, so ``{R: 1 mmHg*s/mL, R: 2 mmHg*s/mL}`` would hide a typo)."""
+class _UniqueKeys:
+    """Rejects a key repeated in one mapping (PyYAML keeps the last one silently, so
+    ``{R: 1 mmHg*s/mL, R: 2 mmHg*s/mL}`` would hide a typo)."""
 
     def construct_mapping(self, node, deep=False):
         seen = set()
@@ -68,6 +72,16 @@ class UniqueKeyLoader(yaml.SafeLoader):
                     key_node.start_mark)
             seen.add(key)
         return super().construct_mapping(node, deep=deep)
+
+
+class UniqueKeyLoader(_UniqueKeys, yaml.SafeLoader):
+    """A safe YAML loader that rejects a key repeated in one mapping."""
+
+
+# libyaml's parser (about 5x faster on netlists of thousands of elements), same constructor
+# and resolver; an invalid file is re-read with the pure-Python loader for its exact message
+_FastUniqueKeyLoader = (type("_FastUniqueKeyLoader", (_UniqueKeys, yaml.CSafeLoader), {})
+                        if getattr(yaml, "__with_libyaml__", False) else None)
 
 
 def _absolutize(value, base_dir):
@@ -110,7 +124,11 @@ def _read_yaml(path):
     try:
         with open(path) as fh:
             text = _REF_TEXT.sub(lambda m: "$(" + m.group(1) + ")", fh.read())
-        data = _restore_refs(yaml.load(text, Loader=UniqueKeyLoader))
+        try:
+            data = yaml.load(text, Loader=_FastUniqueKeyLoader or UniqueKeyLoader)
+        except yaml.YAMLError:
+            data = yaml.load(text, Loader=UniqueKeyLoader)  # raises again, with the snippet
+        data = _restore_refs(data)
     except yaml.YAMLError as exc:
         raise NetlistError(f"not valid YAML: {exc}", file=path) from None
     except (UnicodeDecodeError, OSError) as exc:
@@ -205,7 +223,9 @@ def _load_raw(path, chain):
         elements += _element_list(data.get("add"), path, "add")
         name = data.get("name", base["name"])
         description = data.get("description", "")
-        outputs = data.get("outputs", base["outputs"])
+        outputs, outputs_file = (_outputs(data["outputs"], path), path) if "outputs" in data else \
+            (base["outputs"], base["outputs_file"])
+        inp, input_file = (_input(data["input"], path), path) if "input" in data else (base["input"], base["input_file"])
     else:
         for key in ("add", "remove", "change"):
             if key in data:
@@ -216,16 +236,47 @@ def _load_raw(path, chain):
         merged_params = dict(params)
         name = data.get("name", os.path.splitext(os.path.basename(path))[0])
         description = data.get("description", "")
-        outputs = data.get("outputs", [])
-    if not isinstance(outputs, list) or not all(isinstance(o, str) for o in outputs):
-        raise NetlistError("'outputs' must be a list of column names", file=path)
+        outputs, outputs_file = (_outputs(data["outputs"], path), path) if "outputs" in data else ({}, None)
+        inp, input_file = (_input(data["input"], path), path) if "input" in data else (None, None)
     derived = data.get("derived") or {}
     if not isinstance(derived, dict) or not all(isinstance(v, dict) and "expr" in v for v in derived.values()):
         raise NetlistError("'derived' must be a mapping name -> {expr: '<expression of columns>', unit: ...}",
                            file=path)
     derived = {**(base["derived"] if "extends" in data else {}), **derived}
     return {"elements": elements, "parameters": merged_params, "constraints": constraints, "name": name,
-            "description": description, "outputs": outputs, "base_dir": base_dir, "derived": derived}
+            "description": description, "outputs": outputs, "base_dir": base_dir, "derived": derived,
+            "outputs_file": outputs_file, "input": inp, "input_file": input_file}
+
+
+def _outputs(value, path):
+    """``outputs:`` -> {use: [names]}: a list (the 'default' use) or a mapping use -> list."""
+    from .outputs import USES
+
+    if value is None:
+        return {}
+    if isinstance(value, list):
+        value = {"default": value}
+    if not isinstance(value, dict):
+        raise NetlistError("'outputs' must be a list of column names, or a mapping {use: [column names]} "
+                           f"with uses {sorted(USES)}", file=path)
+    out = {}
+    for use, names in value.items():
+        if use not in USES:
+            import difflib
+            near = difflib.get_close_matches(str(use), list(USES), n=1)
+            raise NetlistError(f"outputs: unknown use {use!r}" + (f" (did you mean {near[0]!r}?)" if near else "")
+                               + f"; uses: {sorted(USES)}", file=path)
+        if not isinstance(names, list) or not all(isinstance(n, str) and n for n in names):
+            raise NetlistError(f"outputs{'' if use == 'default' else '.' + str(use)} must be a list of column names",
+                               file=path)
+        out[use] = list(names)
+    return out
+
+
+def _input(value, path):
+    if not isinstance(value, str) or not value:
+        raise NetlistError("'input' must be a source element id (or ID.PARAM)", file=path)
+    return value
 
 
 def _substitute(value, params, where):
@@ -270,4 +321,5 @@ def load_netlist(path: str) -> Netlist:
         e.values = _substitute(e.values, params, {"file": e.file, "element": e.id})
     return Netlist(name=str(raw["name"]), description=str(raw["description"] or ""), elements=raw["elements"],
                    parameters=params, constraints=raw["constraints"], file=os.path.abspath(path),
-                   base_dir=raw["base_dir"], outputs=list(raw["outputs"] or []), derived=dict(raw["derived"]))
+                   base_dir=raw["base_dir"], outputs=dict(raw["outputs"] or {}), derived=dict(raw["derived"]),
+                   input=raw["input"], outputs_file=raw["outputs_file"], input_file=raw["input_file"])

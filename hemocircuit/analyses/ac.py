@@ -6,8 +6,10 @@ conservation laws projected out) and evaluate
     H(j w) = C (j w I - A)^-1 B + D,        w = 2 pi f,
 
 for every frequency with one batched complex solve (thousands of frequencies in milliseconds).
-The input is the source's ``value`` parameter (``--input Pa`` means ``Pa.value``; any
-``ID.PARAM`` is accepted), so H is in output unit per input unit, e.g. mL/s per mmHg.
+The input is a source's drive parameter (``--input Pa`` means ``Pa.value`` for a pressure
+source; any ``ID.PARAM`` is accepted), so H is in output unit per input unit, e.g. mL/s per
+mmHg.  Without ``input`` / ``outputs`` the netlist's ``input:`` and ``outputs:`` (use ``ac``)
+apply (see :mod:`hemocircuit.outputs`).
 
 Reported per output:
   gain       |H|                                   [output unit / input unit]
@@ -130,17 +132,24 @@ class ACResult:
         return cols, units
 
 
-def ac_response(circuit, input="Pa", outputs=("Q(Rla)", "Q(Rsv)"), freqs="0.001:10 Hz", per_decade=20,
+def ac_response(circuit, input=None, outputs=None, freqs="0.001:10 Hz", per_decade=20,
                 t=0.0, op=None, x=None) -> ACResult:
     """Small-signal transfer functions from ``input`` to each of ``outputs``.
 
     circuit: a Circuit (or a batch circuit: arrays gain a leading batch axis).
-    input:   source id ('Pa' -> 'Pa.value') or 'ID.PARAM'.
+    input:   source id (its drive parameter, e.g. 'Pa' -> 'Pa.value') or 'ID.PARAM'; default:
+             the netlist's ``input:`` (:func:`hemocircuit.outputs.default_input`).
+    outputs: output columns or derived names; default: the netlist's ``outputs:`` for 'ac'.
     freqs:   array [Hz] or a spec string (:func:`parse_freqs`).
     op / x:  the operating point to linearise about (computed when omitted).
     """
+    from ..outputs import default_input, default_outputs
     from .op import operating_point
 
+    if input is None:
+        input = default_input(circuit)
+    if outputs is None:
+        outputs = default_outputs(circuit, "ac")
     f = parse_freqs(freqs, per_decade)
     if np.any(f < 0):
         raise HemocircuitError("frequencies must be >= 0")
@@ -153,7 +162,7 @@ def ac_response(circuit, input="Pa", outputs=("Q(Rla)", "Q(Rsv)"), freqs="0.001:
     lin = linearize(circuit, x, input=input, outputs=outputs, t=t)
     H = transfer(lin.A_red, lin.B_red, lin.C_red, lin.D, 2j * np.pi * f)
     units = dict(circuit.column_units())
-    derived = getattr(circuit.netlist, "derived", {}) or {}
+    derived = circuit.netlist.derived or {}
     for n in outputs:
         if n not in units and n in derived:
             units[n] = str(derived[n].get("unit", ""))
@@ -189,11 +198,9 @@ def cmd_ac(args):
     from .. import io
     from ..cli import _load
 
-    c, proto = _load(args)
-    if proto:
-        c = proto.apply_initial(c)
-    outputs = args.output or ["Q(Rla)"]
-    res = ac_response(c, input=args.input, outputs=outputs, freqs=args.freq, per_decade=args.per_decade)
+    c, _ = _load(args)
+    res = ac_response(c, input=args.input, outputs=args.output or None, freqs=args.freq, per_decade=args.per_decade)
+    outputs = res.outputs
     print(f"AC: {res.input} = {res.p0:.6g} {res.units['input']} -> {', '.join(outputs)}; "
           f"{len(res.freq)} frequencies {res.freq[0]:.4g}..{res.freq[-1]:.4g} Hz")
     sys.stdout.flush()
@@ -225,8 +232,10 @@ def cmd_ac(args):
 
 def register_cli(sub, common):
     sp = common(sub.add_parser("ac", help="small-signal transfer functions (Bode) at the operating point"))
-    sp.add_argument("--input", default="Pa", help="source id (its 'value') or ID.PARAM (default Pa)")
-    sp.add_argument("--output", action="append", help="output column, e.g. 'Q(Rla)' (repeatable)")
+    sp.add_argument("--input", help="source id (its drive parameter) or ID.PARAM "
+                                    "(default: the netlist's 'input:', or its only source)")
+    sp.add_argument("--output", action="append",
+                    help="output column or derived name (repeatable; default: the netlist's 'outputs:')")
     sp.add_argument("--freq", default="0.001:10Hz",
                     help="F1:F2 UNIT (log-spaced), F1:F2:STEP UNIT (linear) or a list (default 0.001:10Hz)")
     sp.add_argument("--per-decade", type=int, default=20, help="points per decade for F1:F2 (default 20)")

@@ -1,7 +1,7 @@
 """Linearisation at an operating point (shared by the AC and stability analyses).
 
 For dx/dt = f(x, p) and outputs y = g(x, p), with p one parameter (the input: a source's
-``value``), this computes by *central* finite differences
+drive parameter, or any ``ID.PARAM``), this computes by *central* finite differences
 
     A = df/dx (nx, nx)   B = df/dp (nx,)   C = dg/dx (ny, nx)   D = dg/dp (ny,)
 
@@ -64,12 +64,12 @@ class Linearization:
 
 
 def input_path(circuit, name):
-    """'Pa' -> 'Pa.value' (a source); 'ID.PARAM' is taken as it is (and checked)."""
+    """A source id -> 'ID.<its drive parameter>' (Component.drive; a pressure source 'Pa' ->
+    'Pa.value'); 'ID.PARAM' is taken as it is (and checked); None stays None (no input)."""
     if name is None:
         return None
-    path = name if "." in name else f"{name}.value"
-    circuit.param_path(path)  # raises a NetlistError naming the choices when wrong
-    return path
+    from ..outputs import input_path as _path
+    return _path(circuit, name)
 
 
 def _steps(circuit, X, eps=EPS):
@@ -100,7 +100,7 @@ def _output_values(circuit, t, X, names):
     """Outputs ``names`` for states X (rows a multiple of the circuit's batch) -> (rows, ny)."""
     cols = circuit.outputs(t, X)
     missing = [n for n in names if n not in cols]
-    derived = getattr(circuit.netlist, "derived", {}) or {}
+    derived = circuit.netlist.derived or {}
     if missing:
         want = {n: derived[n] for n in missing if n in derived}
         unknown = [n for n in missing if n not in derived]
@@ -182,7 +182,8 @@ def reduce_laws(T, A, B=None, C=None):
 def linearize(circuit, x=None, input=None, outputs=(), t=0.0, eps=EPS, op=None) -> Linearization:
     """Linearise ``circuit`` about the states ``x`` (default: its operating point).
 
-    input:   a source id ('Pa' means 'Pa.value') or any 'ID.PARAM' -- the input p of B and D.
+    input:   a source id (its drive parameter: 'Pa' means 'Pa.value') or any 'ID.PARAM' -- the
+             input p of B and D; None: no input (A and C only).
     outputs: output columns ('Q(Rla)', 'P(alpha)', 'V(Ca)', 'art.r', derived names).
     Works on ``circuit.steady_variant()`` (see the module docstring).
     """
@@ -236,19 +237,14 @@ def linearize(circuit, x=None, input=None, outputs=(), t=0.0, eps=EPS, op=None) 
 
 
 def limit_flags(circuit, x, rtol=1e-6):
-    """Names of the states of x (nx,) sitting at a hard limit of the *dynamic* circuit:
-    a clamped compliance collapsed to V <= 0 (the steady variant continues it below 0), or a
-    state at a declared floor (second-order Ca)."""
+    """Names of the states of x (nx,) sitting at a hard limit of the *dynamic* circuit
+    (Component.limited_states: e.g. a clamped compliance collapsed to V <= 0, which the steady
+    variant continues below 0, or a state at a declared floor such as second-order Ca)."""
     x = np.asarray(x, dtype=float)
-    out = []
+    hit = np.zeros(circuit.nx, dtype=bool)
     for g in circuit.groups:
-        if g.comp.opts.get("clamp_at_zero") and "V" in [s.name for s in g.states]:
-            j = [s.name for s in g.states].index("V")
-            for i in range(g.E):
-                k = g.sidx[i, j]
-                if x[k] <= 0.0:
-                    out.append(circuit.state_names[k])
-    for k, bound, _ in circuit.hard_limits():
-        if x[k] <= bound + rtol * max(abs(bound), 1e-300):
-            out.append(circuit.state_names[k])
-    return out
+        if g.S == 0:
+            continue
+        mask = g.comp.limited_states(g.p, x[g.sidx][None], rtol)  # (1, E, S)
+        hit[g.sidx[np.asarray(mask[0], dtype=bool)]] = True
+    return [circuit.state_names[k] for k in np.nonzero(hit)[0]]

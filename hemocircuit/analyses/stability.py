@@ -230,15 +230,20 @@ class StabilityResult:
 
 
 # ------------------------------------------------------------------------ sweep -----------
-def stability_sweep(circuit, param="Pa.value", values="10:200:2 mmHg", t=0.0, locate=True, xtol=None,
+def stability_sweep(circuit, param=None, values=None, t=0.0, locate=True, xtol=None,
                     progress=False) -> StabilityResult:
     """Eigen-analysis of the equilibria of ``circuit`` over ``param`` = ``values`` (array in the
     parameter's declared unit, or a range string '10:200:2 mmHg'), continuing the operating point
-    from point to point.  With ``locate``, Hopf points, real crossings and complex-pair onsets
+    from point to point.  ``param`` defaults to the netlist's input (a source's drive parameter,
+    :func:`hemocircuit.outputs.default_input`); ``values`` are required.  With ``locate``, Hopf points, real crossings and complex-pair onsets
     between sweep points are located in the parameter to ``xtol`` (default 1e-6 of the sweep's
     step for Hopf/real crossings, 1e-3 of it for complex onsets)."""
+    from ..outputs import default_input, input_path
     from .dc import parse_range
 
+    param = input_path(circuit, default_input(circuit) if param is None else param)
+    if values is None:
+        raise HemocircuitError(f"stability_sweep: give the values of {param} to sweep (e.g. '10:200:2 UNIT')")
     unit = circuit.param_unit(param)
     vals = parse_range(values, unit) if isinstance(values, str) else np.atleast_1d(np.asarray(values, dtype=float))
     if circuit.B != 1:
@@ -384,9 +389,7 @@ def cmd_stability(args):
     from .. import io
     from ..cli import _load, _range_spacing
 
-    c, proto = _load(args)
-    if proto:
-        c = proto.apply_initial(c)
+    c, _ = _load(args)
     if not args.sweep or "=" not in args.sweep:
         raise HemocircuitError("stability needs --sweep ID.PARAM=START:STOP:STEP UNIT (e.g. Pa.value=10:200:2mmHg)")
     param, rng = (s.strip() for s in args.sweep.split("=", 1))

@@ -1,0 +1,306 @@
+"""The component contract (hemocircuit/component.py, docs/components.md), checked generically on
+every registered component type -- the built-in library and any plug-in installed through the
+entry-point group -- with no knowledge of particular types:
+
+* declarations: terminals, parameters, options, states, observables, storages, edges,
+  branches, the drive, hard limits, defaults and outputs of interest name each other
+  consistently, and every unit parses with pint;
+* the numerical hooks return the documented shapes and types (stamp, derivatives, observe,
+  default/initial states, dc_stamp, breakpoints, limited_states);
+* ``kernel()``, when not None, gives the same stamp, derivatives and state-only observables
+  as the numpy hooks.
+
+Parameter values: each type's defaults (its preset for the current options) for every option
+combination, the values of its elements in the bundled netlists (with the states and local
+pressures of the circuit's DC guess), and, for a required parameter that no netlist gives, a
+value inside its declared bounds.
+"""
+from __future__ import annotations
+
+import glob
+import itertools
+import math
+import numbers
+
+import numpy as np
+import pytest
+
+from hemocircuit.component import Component, Drive
+from hemocircuit.registry import component_types
+from hemocircuit.units import Q_, parse_quantity
+
+from paths import NETLISTS, ROOT
+
+TYPES = component_types()
+ROLES = {"conductive", "pressure", "flow"}
+B, E = 2, 3  # batch and elements of the shape checks
+
+
+def option_combinations(cls):
+    axes = []
+    for name, opt in cls.options.items():
+        if opt.choices is not None:
+            axes.append([(name, c) for c in opt.choices])
+        elif opt.kind is bool:
+            axes.append([(name, False), (name, True)])
+        else:
+            axes.append([(name, opt.default)])
+    return [dict(c) for c in itertools.product(*axes)]
+
+
+def _okey(opts):
+    return tuple(sorted((k, repr(v)) for k, v in opts.items()))
+
+
+# ------------------------------------------------------------------ samples ----------------
+@pytest.fixture(scope="module")
+def netlist_samples():
+    """{type name: [(options, p (1, E'), x (1, E', S), u (1, E', L))]} from the bundled
+    netlists: bound parameters (expressions evaluated), DC-guess states and local unknowns."""
+    import hemocircuit as hc
+    from hemocircuit.analyses.op import dc_guess
+
+    out, seen = {}, set()
+    files = sorted(glob.glob(str(ROOT / "netlists" / "*.yaml"))) + [str(NETLISTS / "base_rc.yaml")]
+    for f in files:
+        c = hc.load(f)
+        new = [(g.comp.type_name, _okey(g.comp.opts)) for g in c.groups]
+        if all(k in seen for k in new):
+            continue
+        X = dc_guess(c)
+        u, plist, _ = c.evaluate(0.0, X, want="u")
+        for g, p in zip(c.groups, plist):
+            key = (g.comp.type_name, _okey(g.comp.opts))
+            if key in seen:
+                continue
+            seen.add(key)
+            pp = {k: np.array(np.broadcast_to(v, (1, g.E)), dtype=float) for k, v in p.items()}
+            out.setdefault(g.comp.type_name, []).append((dict(g.comp.opts), pp, X[:, g.sidx], u[:, g.uidx]))
+    return out
+
+
+def _inside(par):
+    """A value inside the parameter's declared bounds (for a required one no netlist gives)."""
+    lo, hi = par.lower, par.upper
+    if lo is not None and hi is not None:
+        return 0.5 * (lo + hi)
+    if lo is not None:
+        return lo + 1.0
+    if hi is not None:
+        return hi - 1.0
+    return 1.0
+
+
+def default_params(cls, opts, netlist_samples):
+    """{name: float} from the type's defaults / preset for ``opts``; a required parameter takes
+    the value of the type's first element in the bundled netlists, else one inside its bounds."""
+    comp = cls(opts)
+    pre = comp.defaults()
+    given = netlist_samples.get(cls.type_name, [])
+    vals = {}
+    for name, par in cls.parameters.items():
+        d = pre.get(name, par.default)
+        if d is None:
+            vs = [float(s[1][name][0, 0]) for s in given if np.isfinite(s[1][name][0, 0])]
+            vals[name] = vs[0] if vs else _inside(par)
+        elif isinstance(d, numbers.Number) and not isinstance(d, bool):
+            vals[name] = float(d)  # presets are numbers in the declared unit
+        else:
+            vals[name] = parse_quantity(d, par.unit, name)
+    return vals
+
+
+def _local_unknowns(comp, shape):
+    """Plausible local unknowns: node pressures falling from 80 mmHg, branch flows of 1 mL/s."""
+    K, M = len(comp.local_nodes), len(comp.branches())
+    u = np.empty(shape + (K + M,))
+    u[..., :K] = 80.0 * 0.6 ** np.arange(K)
+    u[..., K:] = 1.0
+    return u
+
+
+def samples_of(cls, netlist_samples):
+    """[(component, p (1, E'), x, u)]: defaults for every option combination, then the
+    netlists' elements."""
+    out = []
+    for opts in option_combinations(cls):
+        comp = cls(opts)
+        vals = default_params(cls, opts, netlist_samples)
+        p = {k: np.full((1, 1), v) for k, v in vals.items()}
+        if comp.check(p):
+            continue
+        x = np.array(np.broadcast_to(comp.default_states(p), (1, 1, len(comp.states()))))
+        out.append((comp, p, x, _local_unknowns(comp, (1, 1))))
+    for opts, p, x, u in netlist_samples.get(cls.type_name, []):
+        out.append((cls(opts), p, x, u))
+    return out
+
+
+NAMES = sorted(TYPES)
+
+
+# --------------------------------------------------------------- declarations --------------
+def _unit_ok(unit):
+    Q_(1, unit)  # raises on a unit pint cannot parse
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_declarations_are_consistent(name):
+    cls = TYPES[name]
+    assert issubclass(cls, Component) and cls.type_name == name
+    assert len(set(cls.terminals)) == len(cls.terminals)
+    assert cls.role in ROLES
+    for pname, par in cls.parameters.items():
+        _unit_ok(par.unit)
+        if isinstance(par.default, str):
+            parse_quantity(par.default, par.unit, pname)
+    assert set(cls.waveform_params) <= set(cls.parameters)
+    d = cls.drive
+    assert d is None or isinstance(d, Drive)
+    if d is not None:
+        named = [n for n in (d.value, d.amplitude, d.frequency, d.phase, d.start) if n is not None]
+        assert set(named) <= set(cls.parameters), named
+    for opts in option_combinations(cls):
+        comp = cls(opts)
+        nodes = comp.local_nodes
+        assert len(set(nodes)) == len(nodes)
+        states = [s.name for s in comp.states()]
+        assert len(set(states)) == len(states)
+        for s in comp.states():
+            _unit_ok(s.unit)
+            assert s.scale > 0
+        obs = {o.name: o for o in comp.observables()}
+        assert len(obs) == len(comp.observables())
+        for o in obs.values():
+            _unit_ok(o.unit)
+        for a, b in comp.branches():
+            assert a in nodes and b in nodes
+        for a, b, role in comp.edges():
+            assert a in nodes and b in nodes and role in ROLES
+        for st in comp.storages():
+            assert st.plus in nodes and st.minus in nodes
+            assert st.volume in obs and obs[st.volume].state_only
+            assert st.state is None or st.state in states
+        for sname, bound, reset in comp.hard_limits():
+            assert sname in states and isinstance(bound, float) and (reset is None or reset in states)
+        assert set(comp.volume_observables()) <= set(obs)
+        assert set(comp.outputs_of_interest()) <= set(obs) | set(states)
+        assert set(comp.defaults()) <= set(cls.parameters)
+        assert set(comp.steady_opts) <= set(cls.options)
+        assert isinstance(comp.has_dc_stamp(), bool) and isinstance(comp.dc_short(), bool)
+        col = comp.drive_output("X", ["n1", "ground"] + ["n2"] * max(0, len(cls.terminals) - 2))
+        assert col is None or isinstance(col, str)
+        iopt = comp.kernel_options()
+        assert isinstance(iopt, np.ndarray) and iopt.dtype == np.int64 and iopt.ndim == 1
+
+
+# --------------------------------------------------------------- hook shapes ---------------
+def _batch(p, x, u):
+    """The sample repeated to (B, E) parameter sets x elements."""
+    def rep(a):
+        return np.repeat(np.repeat(a[:, :1], E, axis=1), B, axis=0)
+    return {k: rep(v) for k, v in p.items()}, rep(x), rep(u)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_hooks_return_the_documented_shapes(name, netlist_samples):
+    cls = TYPES[name]
+    for comp, p1, x1, u1 in samples_of(cls, netlist_samples):
+        p, x, u = _batch(p1, x1, u1)
+        S, L = len(comp.states()), len(comp.local_nodes) + len(comp.branches())
+        assert x.shape == (B, E, S) and u.shape == (B, E, L)
+        A, b = comp.stamp(p, x, None if comp.linear_in_pressure else u, 0.0, None)
+        assert np.ndim(A) == 4 and np.ndim(b) == 3
+        A = np.broadcast_to(A, (B, E, L, L))
+        b = np.broadcast_to(b, (B, E, L))
+        assert np.shape(comp.derivatives(p, x, u, 0.0, None)) == (B, E, S)
+        full = comp.observe(p, x, u, 0.0, None)
+        for o in comp.observables():
+            assert o.name in full, o.name
+            np.broadcast_to(full[o.name], (B, E))
+        part = comp.observe(p, x, None, 0.0, None)
+        for o in comp.observables():
+            if o.state_only:
+                np.broadcast_to(part[o.name], (B, E))
+        np.broadcast_to(comp.default_states(p), (B, E, S))
+        flows = np.einsum("beij,bej->bei", A, u) - b
+        assert np.shape(comp.initial_states(p, u, flows, x)) == (B, E, S)
+        # DC guess: writable copies in, same shapes out; ``keep`` elements keep their stamp
+        keep = np.zeros(E, dtype=bool)
+        keep[0] = True
+        Ad, bd = comp.dc_stamp(p, np.array(A), np.array(b), keep)
+        assert np.shape(Ad) == (B, E, L, L) and np.shape(bd) == (B, E, L)
+        if not comp.has_dc_stamp():
+            assert np.array_equal(Ad, A) and np.array_equal(bd, b)
+        lim = comp.limited_states(p, x)
+        assert lim.shape == x.shape and lim.dtype == bool
+        for t0, t1 in ((0.0, 10.0), (-1.0, 1e9)):
+            bps = comp.breakpoints(p, t0, t1)
+            assert isinstance(bps, (list, tuple))
+            assert all(isinstance(v, numbers.Real) and t0 < v < t1 for v in bps)
+        assert isinstance(comp.varies_in_time(p), (bool, np.bool_))
+
+
+@pytest.mark.parametrize("name", [n for n in NAMES if TYPES[n].drive is not None and TYPES[n].drive.has_sine])
+def test_sine_drive_breakpoints_follow_the_declared_parameters(name, netlist_samples):
+    """A source's sine term switching on at its declared start is a breakpoint, and only
+    while its amplitude is not zero."""
+    cls = TYPES[name]
+    d = cls.drive
+    comp, p1, x1, u1 = samples_of(cls, netlist_samples)[0]
+    p, _, _ = _batch(p1, x1, u1)
+    p[d.start] = np.full((B, E), 2.5)
+    p[d.amplitude] = np.zeros((B, E))
+    assert list(comp.breakpoints(p, 0.0, 10.0)) == []
+    p[d.amplitude][1, 2] = 1.0
+    assert list(comp.breakpoints(p, 0.0, 10.0)) == [2.5]
+    assert list(comp.breakpoints(p, 3.0, 10.0)) == []
+
+
+# --------------------------------------------------------------- kernels -------------------
+def _close(got, ref, what):
+    ref = np.asarray(ref, dtype=float)
+    scale = np.max(np.abs(ref[np.isfinite(ref)]), initial=0.0)
+    np.testing.assert_allclose(got, ref, rtol=1e-10, atol=1e-12 * scale + 1e-300, equal_nan=True, err_msg=what)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_kernel_matches_the_numpy_hooks(name, netlist_samples):
+    cls = TYPES[name]
+    if cls().kernel() is None:
+        pytest.skip(f"'{name}' has no kernel (numpy path only)")
+    for comp, p, x, u in samples_of(cls, netlist_samples):
+        k = comp.kernel()
+        assert k.observables == tuple(o.name for o in comp.observables() if o.state_only)
+        iopt = comp.kernel_options()
+        S, L = len(comp.states()), len(comp.local_nodes) + len(comp.branches())
+        n = x.shape[1]
+        pmat = np.ascontiguousarray(np.stack([np.broadcast_to(p[nm], (1, n))[0] for nm in comp.parameters], axis=1))
+        for t in (0.0, 1.5):
+            A_np, b_np = comp.stamp(p, x, None if comp.linear_in_pressure else u, t, None)
+            A_np = np.broadcast_to(A_np, (1, n, L, L))[0]
+            b_np = np.broadcast_to(b_np, (1, n, L))[0]
+            dx_np = np.broadcast_to(comp.derivatives(p, x, u, t, None), (1, n, S))[0]
+            ob_np = comp.observe(p, x, None, t, None)
+            for e in range(n):
+                xe, ue = np.ascontiguousarray(x[0, e], dtype=float), np.ascontiguousarray(u[0, e], dtype=float)
+                A, b = np.zeros((L, L)), np.zeros(L)
+                k.stamp(pmat[e], xe, ue, t, iopt, A, b)
+                dx = np.full(S, np.nan)
+                k.derivs(pmat[e], xe, ue, t, iopt, dx)
+                out = np.full(len(k.observables), np.nan)
+                k.observe(pmat[e], xe, iopt, out)
+                where = f"{name} {comp.opts} element {e} t={t}"
+                _close(A, A_np[e], f"stamp A, {where}")
+                _close(b, b_np[e], f"stamp b, {where}")
+                _close(dx, dx_np[e], f"derivatives, {where}")
+                for j, o in enumerate(k.observables):
+                    _close(out[j], np.broadcast_to(ob_np[o], (1, n))[0, e], f"observable {o}, {where}")
+
+
+def test_every_type_is_sampled(netlist_samples):
+    """Each registered type gets at least one parameter set (defaults or a netlist)."""
+    for name, cls in TYPES.items():
+        assert samples_of(cls, netlist_samples), name
+        assert math.isfinite(sum(default_params(cls, cls.options and option_combinations(cls)[0] or {},
+                                                netlist_samples).values())), name
