@@ -1,4 +1,6 @@
-"""Command line: ``hemocircuit check|op|dc|tran|graph NETLIST [options]``.
+"""Command line: ``hemocircuit check|op|dc|tran|graph|... NETLIST [options]``.
+
+Every command gets its circuit from :func:`load_circuit` (netlist, ``--set``, ``--protocol``).
 
 Errors the user can cause (netlist, units, topology, solver) print one clear message and
 exit with status 2; they never show a traceback.
@@ -12,14 +14,19 @@ from . import io
 from .errors import HemocircuitError
 
 
-def _sets(items):
+def _assignments(items, flag="--set", form="ID.PARAM=VALUE", example="Pa.value=90mmHg"):
+    """['ID.NAME=VALUE', ...] -> {ID.NAME: VALUE} ('90mmHg' spaced to '90 mmHg')."""
     out = {}
     for it in items or []:
         if "=" not in it:
-            raise HemocircuitError(f"--set {it!r}: expected ID.PARAM=VALUE (e.g. Pa.value=90mmHg)")
+            raise HemocircuitError(f"{flag} {it!r}: expected {form} (e.g. {example})")
         k, v = it.split("=", 1)
         out[k.strip()] = _unit_spacing(v.strip())
     return out
+
+
+def _sets(items):
+    return _assignments(items, "--set", "ID.PARAM=VALUE", "Pa.value=90mmHg")
 
 
 def _unit_spacing(v):
@@ -29,36 +36,66 @@ def _unit_spacing(v):
     return f"{m.group(1)} {m.group(2)}" if m else v
 
 
-def _load(args):
+def load_circuit(netlist, sets=None, protocol=None):
+    """The one way every command gets its circuit: netlist, then ``--set``, then ``--protocol``.
+
+    ``sets``: {ID.NAME: value} (``--set``): structural options (``art.ca_order``, values as YAML
+    literals) re-assemble the circuit first, keeping every numeric value; then numeric
+    parameters are set (strings with units).  ``protocol``: path of a protocol YAML (or None),
+    checked against the circuit; its ``initial`` settings are applied last (they win over
+    ``--set``, as they would in ``simulate``).  Returns (circuit, protocol or None).  The
+    protocol's timed events are left to the commands that run them (tran, compare --tran),
+    which pass it on stripped of ``initial`` (see :func:`events_only`).
+    """
     from .circuit import load
     from .protocol import Protocol
 
-    c = load(args.netlist)
-    sets = _sets(getattr(args, "set", None))
-    opts = {k: v for k, v in sets.items() if k.partition(".")[0] in c.elements
-            and k.partition(".")[2] in c.elements[k.partition(".")[0]].cls.options}
+    c = load(str(netlist))
+    sets = dict(sets or {})
+    opts = {k: v for k, v in sets.items() if _is_option(c, k)}
     if opts:
         c = c.with_options({k: _option_literal(v) for k, v in opts.items()})
     c.set_params({k: v for k, v in sets.items() if k not in opts})
-    proto = Protocol.load(args.protocol, c) if getattr(args, "protocol", None) else None
+    proto = None
+    if protocol:
+        proto = Protocol.load(str(protocol), c)
+        c = proto.apply_initial(c)
+    return c, proto
+
+
+def events_only(proto):
+    """The protocol without its ``initial`` settings (already applied by :func:`load_circuit`)."""
+    import dataclasses
+    return None if proto is None else dataclasses.replace(proto, initial={})
+
+
+def _is_option(c, path):
+    eid, _, name = path.partition(".")
+    return eid in c.elements and name in c.elements[eid].cls.options
+
+
+def _load(args, uses_events=False):
+    """load_circuit() from the parsed arguments (netlist, --set, --protocol) of any command."""
+    c, proto = load_circuit(args.netlist, _sets(getattr(args, "set", None)), getattr(args, "protocol", None))
+    if proto is not None and proto.events and not uses_events:
+        print(f"note: {args.command} applies the protocol's 'initial' settings; its {len(proto.events)} timed "
+              "event(s) are used by tran only", file=sys.stderr)
     return c, proto
 
 
 def _option_literal(v):
     import yaml
-    return yaml.safe_load(v)
+    return yaml.safe_load(v) if isinstance(v, str) else v
 
 
 def cmd_check(args):
-    c, proto = _load(args)
+    c, proto = _load(args, uses_events=True)
     print(c.describe())
     print("ok: the netlist is valid" + (" and so is the protocol" if proto else ""))
 
 
 def cmd_op(args):
-    c, proto = _load(args)
-    if proto:
-        c = proto.apply_initial(c)
+    c, _ = _load(args)
     op = c.operating_point()
     flat = op.as_flat_dict()
     width = max(len(k) for k in flat)
@@ -97,10 +134,11 @@ def _range_spacing(r):
 
 
 def cmd_tran(args):
-    c, proto = _load(args)
+    c, proto = _load(args, uses_events=True)
     t_end = float(_unit_to(args.t_end, "s")) if args.t_end else None
     dt = float(_unit_to(args.dt, "s")) if args.dt else None
-    res = c.simulate(t_end, dt=dt, protocol=proto, method=args.method)
+    ic = _assignments(args.ic, "--ic", "ID.STATE=VALUE", "Cv.V=20mL")
+    res = c.simulate(t_end, dt=dt, protocol=events_only(proto), method=args.method, ic=ic)
     print(f"{len(res.t)} points, t = {res.t[0]:g} .. {res.t[-1]:g} s; solver {res.stats}")
     last = {k: v[-1] for k, v in res.columns.items()}
     for k in (args.show or list(last)[:12]):
@@ -131,13 +169,20 @@ def build_parser():
     p = argparse.ArgumentParser(prog="hemocircuit", description="Lumped-parameter hemodynamic circuits.")
     sub = p.add_subparsers(dest="command", required=True)
 
-    def common(sp):
-        sp.add_argument("netlist", help="netlist YAML file")
-        sp.add_argument("--set", action="append", metavar="ID.PARAM=VALUE", help="override a parameter (units allowed)")
-        sp.add_argument("--protocol", help="protocol YAML (timed events)")
-        sp.add_argument("--out", help="output file (CSV for series/sweeps, JSON for op, PNG for graph)")
-        sp.add_argument("--plot", help="PNG plot file")
-        sp.add_argument("--show", action="append", help="column to print/plot (repeatable)")
+    def common(sp, outputs=True, netlist=True):
+        """The loader's arguments (netlist, --set, --protocol: see load_circuit), shared by every
+        command; with ``outputs`` also --out, --plot, --show."""
+        if netlist:
+            sp.add_argument("netlist", help="netlist YAML file")
+        sp.add_argument("--set", action="append", metavar="ID.PARAM=VALUE",
+                        help="set a parameter (units allowed, e.g. Pa.value=90mmHg) or a structural option "
+                             "(e.g. art.ca_order=2); repeatable")
+        sp.add_argument("--protocol", help="protocol YAML: its 'initial' settings apply to every command, "
+                                           "its timed events to tran")
+        if outputs:
+            sp.add_argument("--out", help="output file (CSV for series/sweeps, JSON for op, PNG for graph)")
+            sp.add_argument("--plot", help="PNG plot file")
+            sp.add_argument("--show", action="append", help="column to print/plot (repeatable)")
         return sp
 
     common(sub.add_parser("check", help="validate a netlist (and protocol)")).set_defaults(func=cmd_check)
@@ -149,6 +194,9 @@ def build_parser():
     sp.add_argument("--t-end", help="end time (e.g. 100 or '100 s')")
     sp.add_argument("--dt", help="output interval (e.g. 0.1 s)")
     sp.add_argument("--method", default="BDF", help="solve_ivp method (BDF, Radau, LSODA)")
+    sp.add_argument("--ic", action="append", metavar="ID.STATE=VALUE",
+                    help="start with this state overridden (units allowed, e.g. Cv.V=20mL, art.Ca=1e-7M); "
+                         "the others at the operating point; repeatable")
     sp.set_defaults(func=cmd_tran)
     common(sub.add_parser("graph", help="draw the circuit graph to PNG")).set_defaults(func=cmd_graph)
     for register in _extra_commands():

@@ -225,12 +225,23 @@ def test_local_processes_give_identical_numbers(artc, serial_batch):
     _assert_same_rows(serial_batch, _small_batch(artc, scheduler="processes", workers=2))
 
 
-def test_dask_in_process_cluster_gives_identical_numbers(artc, serial_batch):
+def test_dask_local_cluster_gives_identical_numbers(artc):
+    """The Dask path end to end on a local cluster of two worker processes (the chunks are
+    pickled to them, as on a real cluster): numbers identical to the serial run.  Two members,
+    one chunk per worker, to stay quick (worker start-up dominates).  CI installs the
+    'distributed' extra, so this runs there."""
     distributed = pytest.importorskip("dask.distributed")
-    with distributed.LocalCluster(n_workers=1, processes=False, dashboard_address=None) as cluster, \
-            distributed.Client(cluster) as client:
-        rows = _small_batch(artc, scheduler=client, workers=2)
-    _assert_same_rows(serial_batch, rows)
+
+    def batch(**kw):
+        return frequency_response(artc, [0.5], [Q1, Q2], step=0.0, amplitude=0.05, rtol=1e-6,
+                                  grid=[("art.tau_Ca", [1.0, 2.0])], workers=2, **kw)
+
+    serial = batch(scheduler="serial")
+    with distributed.LocalCluster(n_workers=2, processes=True, threads_per_worker=1, dashboard_address=None) \
+            as cluster, distributed.Client(cluster) as client:
+        assert len(client.scheduler_info()["workers"]) == 2
+        rows = batch(scheduler=client)
+    _assert_same_rows(serial, rows)
 
 
 def test_member_trajectory_does_not_depend_on_its_batch_companions(vaso):

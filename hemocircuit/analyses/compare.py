@@ -81,11 +81,10 @@ def plot_overlays(prefix, results, quantities, xlabel):
 
 def register_cli(sub, common):
     sp = sub.add_parser("compare", help="steady states (or a protocol) of several netlists side by side")
-    sp.add_argument("netlists", nargs="+", help="netlist YAML files")
-    sp.add_argument("--set", action="append", metavar="ID.PARAM=VALUE", help="override (applied to every netlist)")
+    sp.add_argument("netlists", nargs="+", help="netlist YAML files (--set and --protocol apply to every one)")
+    common(sp, outputs=False, netlist=False)
     sp.add_argument("--sweep", help="ID.PARAM=START:STOP:STEP UNIT")
     sp.add_argument("--tran", action="store_true", help="run --protocol on each netlist instead of a sweep")
-    sp.add_argument("--protocol", help="protocol YAML for --tran")
     sp.add_argument("--t-end", help="end time for --tran")
     sp.add_argument("--dt", help="output interval for --tran")
     sp.add_argument("--out", help="tidy CSV file")
@@ -95,20 +94,18 @@ def register_cli(sub, common):
 
 
 def cmd_compare(args):
-    from ..circuit import load
-    from ..cli import _range_spacing, _sets, _unit_to
+    from ..cli import _range_spacing, _sets, _unit_to, events_only, load_circuit
 
-    circuits = []
+    circuits, proto = [], None
     for path in args.netlists:
-        c = load(path)
-        c.set_params(_sets(args.set))
+        c, proto = load_circuit(path, _sets(args.set), args.protocol)
         circuits.append(c)
     if args.tran:
         if not args.protocol:
             raise HemocircuitError("compare --tran needs --protocol")
         t_end = float(_unit_to(args.t_end, "s")) if args.t_end else None
         dt = float(_unit_to(args.dt, "s")) if args.dt else None
-        results = compare_transient(circuits, args.protocol, t_end, dt)
+        results = compare_transient(circuits, events_only(proto), t_end, dt)
         xname, xunit = "time", "s"
     else:
         if not args.sweep or "=" not in args.sweep:

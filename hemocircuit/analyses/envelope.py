@@ -89,10 +89,15 @@ def _period(t, y):
     return float(np.mean(np.diff(tc)))
 
 
-def envelope(circuit, sweep, grid=None, outputs=("art.r", "Q(Rla)"), t_end=1000.0, dt=0.1, window=0.3,
+def envelope(circuit, sweep, grid=None, outputs=None, t_end=1000.0, dt=0.1, window=0.3,
              kick=1e-3, osc_tol=1e-3, rtol=1e-5, keep_series=None, scheduler=None, workers=None, progress=False):
-    """sweep: (ID.PARAM, values) ; grid: [(ID.PARAM, values)].  Returns tidy rows (dicts)."""
-    outputs = list(outputs)
+    """sweep: (ID.PARAM, values) ; grid: [(ID.PARAM, values)].  Returns tidy rows (dicts).
+
+    outputs: columns to report, the first giving the period; default the netlist's
+    ``outputs:`` for 'envelope' (:func:`hemocircuit.outputs.default_outputs`)."""
+    from ..outputs import default_outputs
+
+    outputs = list(default_outputs(circuit, "envelope") if outputs is None else outputs)
     grids = resolve_values(circuit, ([sweep] if sweep else []) + list(grid or []))
     assignments = expand_grid(grids)
     opt = dict(outputs=outputs, t_end=float(t_end), dt=float(dt), window=float(window), kick=kick,
@@ -153,12 +158,11 @@ def plot_phase_plane(path, rows, x_col, y_col):
 
 
 def register_cli(sub, common):
-    sp = sub.add_parser("envelope", help="oscillation envelope over a sweep x grid (batched)")
-    sp.add_argument("netlist")
-    sp.add_argument("--set", action="append", metavar="ID.PARAM=VALUE")
+    sp = common(sub.add_parser("envelope", help="oscillation envelope over a sweep x grid (batched)"), outputs=False)
     sp.add_argument("--sweep", required=True, help="ID.PARAM=START:STOP:STEP UNIT or V1,V2,...")
     sp.add_argument("--grid", action="append", help="ID.PARAM=V1,V2 (repeatable)")
-    sp.add_argument("--output", action="append", help="outputs to report (default art.r, Q(Rla))")
+    sp.add_argument("--output", action="append",
+                    help="outputs to report, the first gives the period (default: the netlist's 'outputs:')")
     sp.add_argument("--t-end", type=float, default=1000.0, help="s (default 1000)")
     sp.add_argument("--dt", type=float, default=0.1, help="output interval, s")
     sp.add_argument("--rtol", type=float, default=1e-5)
@@ -166,21 +170,27 @@ def register_cli(sub, common):
     sp.add_argument("--workers", type=int)
     sp.add_argument("--out", help="tidy CSV")
     sp.add_argument("--plot", help="envelope PNG (first output)")
-    sp.add_argument("--phase-plot", help="phase-plane PNG (art.Ca vs art.r)")
+    sp.add_argument("--phase-plot", help="phase-plane PNG (the netlist's 'outputs: {phase_plane: [x, y]}')")
     sp.set_defaults(func=cmd_envelope)
 
 
 def cmd_envelope(args):
-    from ..circuit import load
-    from ..cli import _sets
+    from ..cli import _load
+    from ..errors import HemocircuitError
+    from ..outputs import default_outputs
     from .freq import write_rows
 
-    c = load(args.netlist)
-    c.set_params(_sets(args.set))
-    outputs = args.output or ["art.r", "Q(Rla)"]
+    c, _ = _load(args)
+    outputs = args.output or default_outputs(c, "envelope")
     sweep = parse_grid_arg(args.sweep)
     grid = [parse_grid_arg(g) for g in (args.grid or [])]
-    keep = ["art.Ca", "art.r"] if args.phase_plot else None
+    keep = None
+    if args.phase_plot:
+        keep = default_outputs(c, "phase_plane")
+        if len(keep) < 2:
+            raise HemocircuitError(f"--phase-plot needs two columns (x, y): declare 'outputs: {{phase_plane: [X, Y]}}' "
+                                   f"in the netlist (found {keep})")
+        keep = keep[:2]
     rows = envelope(c, sweep, grid, outputs, t_end=args.t_end, dt=args.dt, rtol=args.rtol, keep_series=keep,
                     scheduler=args.scheduler, workers=args.workers, progress=True)
     o = outputs[0]
@@ -198,5 +208,5 @@ def cmd_envelope(args):
         plot_envelope(args.plot, rows, o, sweep[0])
         print(f"wrote {args.plot}")
     if args.phase_plot:
-        plot_phase_plane(args.phase_plot, rows, "art.r", "art.Ca")
+        plot_phase_plane(args.phase_plot, rows, keep[0], keep[1])
         print(f"wrote {args.phase_plot}")

@@ -1,7 +1,8 @@
 """Nonlinear frequency response (thesis section artComp): step + sine forcing, batched.
 
 For every member (frequency x grid point): start at the operating point with the input
-source at its baseline P0, then apply P0 (1 + step) + amplitude P0 sin(2 pi f t) (thesis:
+source at its baseline P0, then apply P0 (1 + step) + amplitude P0 sin(2 pi f t) through the
+source's drive parameters (Component.drive: its value and built-in sine term) (thesis:
 10 % and 10 %; MODEL_NOTES "Analyses").  Integration proceeds in blocks of whole periods
 until the fundamental of every output over the last period differs from that of the period
 before by less than ``settle_tol`` (relative) - the transient has settled, detected not
@@ -44,20 +45,20 @@ def _run_chunk(job):
     """Worker: one vectorised batch.  job = (batch circuit, list of member descriptors, options)."""
     bc, members, opt = job
     B = bc.B
-    outputs, inp = opt["outputs"], opt["input"]
+    outputs, inp, drive = opt["outputs"], opt["input"], opt["drive"]
     inp_node_col = opt["input_col"]
     res = [None] * B
     # baseline operating point (input at P0), then the step + sine
     from .op import operating_points
     X0, opv, errors = operating_points(bc)
     y0 = np.stack([opv.get(o, np.full(B, np.nan)) for o in outputs], axis=1) if opv else np.full((B, len(outputs)), np.nan)
-    P0 = bc.get_param(f"{inp}.value")
+    P0 = bc.get_param(f"{inp}.{drive.value}")
     f = np.array([m["frequency"] for m in members])
-    bc.set_param(f"{inp}.value", P0 * (1 + opt["step"]), prepare=False)
-    bc.set_param(f"{inp}.amplitude", P0 * opt["amplitude"], prepare=False)
-    bc.set_param(f"{inp}.frequency", f, prepare=False)
-    bc.set_param(f"{inp}.phase", np.zeros(B), prepare=False)
-    bc.set_param(f"{inp}.start", np.zeros(B), prepare=False)
+    bc.set_param(f"{inp}.{drive.value}", P0 * (1 + opt["step"]), prepare=False)
+    bc.set_param(f"{inp}.{drive.amplitude}", P0 * opt["rel_amplitude"], prepare=False)
+    bc.set_param(f"{inp}.{drive.frequency}", f, prepare=False)
+    bc.set_param(f"{inp}.{drive.phase}", np.zeros(B), prepare=False)
+    bc.set_param(f"{inp}.{drive.start}", np.zeros(B), prepare=False)
     bc._prepare()
     period = 1.0 / f
     t = np.zeros(B)
@@ -114,23 +115,33 @@ def _run_chunk(job):
     return res
 
 
-def frequency_response(circuit, freqs, outputs=("Q(Rla)", "Q(Rsv)"), input="Pa", step=0.1, amplitude=0.1,
+def frequency_response(circuit, freqs, outputs=None, input=None, step=0.1, amplitude=0.1,
                        grid=None, settle_tol=1e-3, n_periods=2, block_periods=4, max_periods=400, rtol=1e-8,
                        scheduler=None, workers=None, progress=False):
     """Batched nonlinear frequency response.  ``grid``: [(ID.PARAM, [values])].  Returns a list
-    of rows (dicts), one per (grid point, frequency, output): tidy data."""
-    outputs = list(outputs)
+    of rows (dicts), one per (grid point, frequency, output): tidy data.
+
+    ``input``: a source element with a built-in sine term (Component.drive); default the
+    netlist's ``input:``.  ``outputs``: default the netlist's ``outputs:`` for 'freq'."""
+    from ..outputs import default_input, default_outputs, drive_of, input_element
+
+    outputs = list(default_outputs(circuit, "freq") if outputs is None else outputs)
     grid = resolve_values(circuit, grid or [])
     assignments, descr = [], []
     for g in expand_grid(grid):
         for f in np.atleast_1d(freqs):
             assignments.append(dict(g))
             descr.append({"grid": g, "frequency": float(f)})
-    src = circuit.elements.get(input)
-    if src is None or "value" not in src.cls.parameters or "amplitude" not in src.cls.parameters:
-        raise HemocircuitError(f"--input {input!r} must be a pressure or flow source element")
-    inp_col = f"P({src.nodes[0]})" if src.cls.type_name == "pressure_source" else f"Q({input})"
-    opt = dict(outputs=outputs, input=input, input_col=inp_col, step=step, amplitude=amplitude,
+    input = input_element(circuit, default_input(circuit) if input is None else input)
+    comp, drive = drive_of(circuit, input)
+    if not drive.has_sine:
+        raise HemocircuitError(f"input {input!r}: a '{comp.type_name}' has no built-in sine term "
+                               "(the frequency response needs a source that declares one)")
+    inp_col = comp.drive_output(input, circuit.elements[input].nodes)
+    if inp_col is None:
+        raise HemocircuitError(f"input {input!r}: no output column holds its driven quantity "
+                               "(a pressure source needs its reference on ground)")
+    opt = dict(outputs=outputs, input=input, drive=drive, input_col=inp_col, step=step, rel_amplitude=amplitude,
                settle_tol=settle_tol, n_periods=n_periods, block_periods=max(block_periods, n_periods + 1),
                max_periods=max_periods, rtol=rtol)
     jobs, where = [], []
@@ -213,11 +224,11 @@ def plot_bode(path, rows, outputs):
 
 
 def register_cli(sub, common):
-    sp = sub.add_parser("freq", help="nonlinear frequency response (step + sine), batched")
-    sp.add_argument("netlist")
-    sp.add_argument("--set", action="append", metavar="ID.PARAM=VALUE")
-    sp.add_argument("--input", default="Pa", help="source element (default Pa)")
-    sp.add_argument("--output", action="append", help="output column (repeatable; default Q(Rla), Q(Rsv))")
+    sp = common(sub.add_parser("freq", help="nonlinear frequency response (step + sine), batched"), outputs=False)
+    sp.add_argument("--input", help="source element with a sine term (default: the netlist's 'input:', "
+                                    "or its only source)")
+    sp.add_argument("--output", action="append",
+                    help="output column (repeatable; default: the netlist's 'outputs:')")
     sp.add_argument("--freq", default="0.001:1Hz", help="START:STOP[Hz] (log spaced) or a list 0.01,0.1Hz")
     sp.add_argument("--per-decade", type=float, default=10.0)
     sp.add_argument("--step", type=float, default=10.0, help="step in percent of the baseline (default 10)")
@@ -242,12 +253,12 @@ def parse_freqs(text, per_decade):
 
 
 def cmd_freq(args):
-    from ..circuit import load
-    from ..cli import _sets
+    from ..cli import _load
 
-    c = load(args.netlist)
-    c.set_params(_sets(args.set))
-    outputs = args.output or ["Q(Rla)", "Q(Rsv)"]
+    c, _ = _load(args)
+    from ..outputs import default_outputs
+
+    outputs = args.output or default_outputs(c, "freq")
     freqs = parse_freqs(args.freq, args.per_decade)
     grid = [parse_grid_arg(g) for g in (args.grid or [])]
     rows = frequency_response(c, freqs, outputs, args.input, args.step / 100, args.amplitude / 100, grid,

@@ -125,11 +125,15 @@ def shoot(circuit, x_guess, T_guess, forced=False, rtol=1e-9, tol=1e-8, max_iter
     return orb
 
 
-def guess_from_run(circuit, output="art.r", t_settle=400.0, dt=0.05, kick=1e-3, rtol=1e-6):
+def guess_from_run(circuit, output=None, t_settle=400.0, dt=0.05, kick=1e-3, rtol=1e-6):
     """(x on an upward mean crossing of ``output``, period estimate) from a settling run
-    (a single run: the scipy LSODA transient is the faster integrator for one member)."""
+    (a single run: the scipy LSODA transient is the faster integrator for one member).
+    ``output`` defaults to the first of the netlist's ``outputs:`` for 'periodic'."""
+    from ..outputs import default_outputs
     from .op import operating_point
     from .envelope import _law_states, _period
+    if output is None:
+        output = default_outputs(circuit, "periodic")[0]
     op = operating_point(circuit)
     x0 = np.array(op.x, dtype=float)
     free = [j for j in range(circuit.nx) if j not in _law_states(circuit)]
@@ -149,12 +153,13 @@ def guess_from_run(circuit, output="art.r", t_settle=400.0, dt=0.05, kick=1e-3, 
 
 
 def register_cli(sub, common):
-    sp = sub.add_parser("periodic", help="limit cycle (or forced periodic steady state) by shooting")
-    sp.add_argument("netlist")
-    sp.add_argument("--set", action="append", metavar="ID.PARAM=VALUE")
-    sp.add_argument("--output", default="art.r", help="output used to find the period (default art.r)")
+    sp = common(sub.add_parser("periodic", help="limit cycle (or forced periodic steady state) by shooting"),
+                outputs=False)
+    sp.add_argument("--output", help="output used to find the period (default: the first of the netlist's "
+                                     "'outputs:' for periodic)")
     sp.add_argument("--t-settle", type=float, default=400.0, help="settling run for the initial guess, s")
-    sp.add_argument("--forced", help="source element with a sine term: periodic steady state at its frequency")
+    sp.add_argument("--forced", help="source element with a built-in sine term: periodic steady state at "
+                                     "its frequency")
     sp.add_argument("--out", help="CSV of one period of the orbit")
     sp.add_argument("--plot", help="PNG of the orbit")
     sp.set_defaults(func=cmd_periodic)
@@ -162,27 +167,33 @@ def register_cli(sub, common):
 
 def cmd_periodic(args):
     from .. import io
-    from ..circuit import load
-    from ..cli import _sets
+    from ..cli import _load
 
-    c = load(args.netlist)
-    c.set_params(_sets(args.set))
+    from ..outputs import default_outputs, drive_of, input_element
+
+    c, _ = _load(args)
+    interest = default_outputs(c, "periodic", required=args.output is None)
+    output = args.output or interest[0]
     if args.forced:
-        f = float(c.get_param(f"{args.forced}.frequency")[0])
-        if f <= 0 or float(c.get_param(f"{args.forced}.amplitude")[0]) == 0:
-            raise HemocircuitError(f"--forced {args.forced}: give it a sine term (--set {args.forced}.amplitude=..., "
-                                   f"{args.forced}.frequency=...)")
+        src = input_element(c, args.forced)
+        comp, drive = drive_of(c, src)
+        if not drive.has_sine:
+            raise HemocircuitError(f"--forced {src}: a '{comp.type_name}' has no built-in sine term")
+        amp, freq = f"{src}.{drive.amplitude}", f"{src}.{drive.frequency}"
+        f = float(c.get_param(freq)[0])
+        if f <= 0 or float(c.get_param(amp)[0]) == 0:
+            raise HemocircuitError(f"--forced {src}: give it a sine term (--set {amp}=..., {freq}=...)")
         from .op import operating_point
         c0 = c.copy()
-        c0.set_param(f"{args.forced}.amplitude", 0.0)
+        c0.set_param(amp, 0.0)
         orb = shoot(c, operating_point(c0).x, 1.0 / f, forced=True)
     else:
-        x, T = guess_from_run(c, args.output, args.t_settle)
+        x, T = guess_from_run(c, output, args.t_settle)
         orb = shoot(c, x, T)
-    y = orb.columns[args.output]
+    y = orb.columns[output]
     print(f"{'converged' if orb.converged else 'NOT converged'} after {orb.iterations} Newton iterations "
           f"(residual {orb.residual:.2e}); period {orb.period:.6g} s")
-    print(f"{args.output}: min {y.min():.6g}, max {y.max():.6g}, mean {y.mean():.6g}")
+    print(f"{output}: min {y.min():.6g}, max {y.max():.6g}, mean {y.mean():.6g}")
     mu = orb.nontrivial_multipliers
     print("Floquet multipliers (non-trivial): " + ", ".join(f"{m:.4g}" for m in mu))
     print("orbitally stable" if orb.stable else "orbitally UNSTABLE")
@@ -191,5 +202,5 @@ def cmd_periodic(args):
         print(f"wrote {args.out}")
     if args.plot:
         io.plot_series(args.plot, orb.t, "time [s]", orb.columns, orb.units, title="periodic orbit",
-                       select=[args.output] + [k for k in ("art.Ca", "Q(Rla)") if k in orb.columns])
+                       select=[output] + [k for k in interest if k in orb.columns and k != output])
         print(f"wrote {args.plot}")
