@@ -26,6 +26,7 @@ from .component import Component
 from .errors import HemocircuitError, NetlistError, SolverError, TopologyError
 from .graph import check_topology, local_node_map
 from .linalg import solve_batched
+from . import sparse as sparse_la
 from .netlist import GROUND, Netlist, load_netlist
 from .units import UnitError, parse_quantity
 
@@ -34,6 +35,17 @@ def _scatter(ST, local):
     """Global contributions (rows, N) of local stamps (rows, ...) through a sparse scatter."""
     flat = local.reshape(local.shape[0], -1)
     return np.asarray((ST @ flat.T).T)
+
+
+def _bincount_scatter(uidx, b_loc, Bx, N1):
+    """Global right-hand-side contributions (Bx, N1) of local ones b_loc (1 or Bx, E, L), adding
+    duplicates (the sparse path: cheaper per call than a scipy product for single rows)."""
+    idx = uidx.reshape(-1)
+    w = b_loc if b_loc.shape[0] == Bx else np.broadcast_to(b_loc, (Bx,) + uidx.shape)
+    if Bx == 1:
+        return np.bincount(idx, weights=w.reshape(-1), minlength=N1)[None]
+    off = (idx[None, :] + N1 * np.arange(Bx)[:, None]).reshape(-1)
+    return np.bincount(off, weights=w.reshape(-1), minlength=Bx * N1).reshape(Bx, N1)
 
 
 class Group:
@@ -55,6 +67,17 @@ class Group:
         self.exprs = [(i, name, ex) for i, e in enumerate(elements) for name, ex in e.expressions.items()]
         self.constant = comp.constant_matrix and not self.exprs and comp.linear_in_pressure
         self.time_dependent = comp.time_dependent or bool(self.waves)
+
+    @property
+    def ST_A(self):
+        """Scatter of local matrix stamps into the flattened dense (n+1)^2 system (dense path
+        only; built on first use: its row pointer alone has (n+1)^2 entries)."""
+        st = self.__dict__.get("_ST_A")
+        if st is None:
+            nA = self.flat.size
+            st = sp.csr_matrix((np.ones(nA), (self.flat, np.arange(nA))), shape=(self.N1 * self.N1, nA))
+            self._ST_A = st
+        return st
 
     def source_values(self, t, B):
         """Waveform contributions (B, E) at time t (scalar or (B,1) array); None if none."""
@@ -116,10 +139,11 @@ class Circuit:
             g.cols = np.repeat(ui[:, None, :], g.L, axis=1)
             N1 = self.n + 1
             g.flat = (g.rows * N1 + g.cols).reshape(-1)
+            g.N1 = N1
             # scatter of local stamps into the global system, as sparse 0/1 matrices (duplicates
-            # add up); sparse products beat dense BLAS for these thin shapes by far
-            nA, nb = g.E * g.L * g.L, g.E * g.L
-            g.ST_A = sp.csr_matrix((np.ones(nA), (g.flat, np.arange(nA))), shape=(N1 * N1, nA))
+            # add up); sparse products beat dense BLAS for these thin shapes by far.  g.ST_A
+            # (matrix, dense path) is built on first use, g.SP_A (sparse path) by _sparse_pattern
+            nb = g.E * g.L
             g.ST_b = sp.csr_matrix((np.ones(nb), (ui.reshape(-1), np.arange(nb))), shape=(N1, nb))
         # --- states -------------------------------------------------------------------
         names, units, scales, owners = [], [], [], []
@@ -156,7 +180,10 @@ class Circuit:
         """
         N1 = self.n + 1
         self.__dict__.pop("_subset_cache", None)  # subset views hold the old parameters
-        self.A_const = np.zeros((self.B, N1 * N1))
+        self._jac_plans = {}  # Jacobian sparsity patterns (sparse path) for these parameters
+        sparse = self.sparse
+        # dense path: the flattened (n+1)^2 matrix; sparse path: its values on the CSC pattern
+        self.A_const = np.zeros((self.B, self._sparse_pattern().nnz if sparse else N1 * N1))
         self.b_const = np.zeros((self.B, N1))
         self.all_constant = True
         self.dynamic_groups = []
@@ -166,7 +193,7 @@ class Circuit:
             if g.constant:
                 A_loc, b_loc = g.comp.stamp(g.p, np.zeros((1, g.E, g.S)), None, 0.0, None)
                 A_loc = np.broadcast_to(A_loc, (A_loc.shape[0], g.E, g.L, g.L))
-                self.A_const = self.A_const + _scatter(g.ST_A, A_loc)
+                self.A_const = self.A_const + _scatter(self._scatter_A(g), A_loc)
                 if g.static:
                     b_loc = np.broadcast_to(b_loc, (b_loc.shape[0], g.E, g.L))
                     self.b_const = self.b_const + _scatter(g.ST_b, b_loc)
@@ -176,7 +203,10 @@ class Circuit:
                 self.dynamic_groups.append(g)
         n = self.n
         self._Ainv = None
-        if self.all_constant:
+        self._lu = sparse_la.Factors()
+        if self.all_constant and sparse:
+            self._lu = sparse_la.Factors(self._factor_const())
+        elif self.all_constant:
             A = self.A_const.reshape(-1, N1, N1)[:, :n, :n]
             try:
                 self._Ainv = np.linalg.inv(A)
@@ -184,6 +214,125 @@ class Circuit:
                 raise TopologyError("the nodal equations are singular (a pressure is undefined)",
                                     file=self.file) from None
         self._rep_cache = {}
+
+    # ------------------------------------------------------------- sparse path ---------
+    #: the sparse path (splu factorisations, coloured sparse Jacobians) is taken when the
+    #: nodal system has more unknowns than this; change it with set_sparse_threshold
+    sparse_threshold = sparse_la.SPARSE_MIN_UNKNOWNS
+
+    @property
+    def sparse(self) -> bool:
+        """True when this circuit runs on the sparse path (n > sparse_threshold)."""
+        return self.n > self.sparse_threshold
+
+    def set_sparse_threshold(self, n_unknowns):
+        """Take the sparse path above ``n_unknowns`` nodal unknowns (None: the default,
+        ``hemocircuit.sparse.SPARSE_MIN_UNKNOWNS``; 0 forces it, a huge number forbids it)."""
+        if n_unknowns is None:
+            self.__dict__.pop("sparse_threshold", None)
+        else:
+            self.sparse_threshold = int(n_unknowns)
+        self._prepare()
+        return self
+
+    def _sparse_pattern(self):
+        """The nodal matrix's CSC pattern: every element's whole local stamp block (ground
+        rows and columns dropped), with each group's scatter onto its values (g.SP_A)."""
+        pat = self.__dict__.get("_pattern")
+        if pat is None:
+            n = self.n
+            rows = np.concatenate([g.rows.reshape(-1) for g in self.groups])
+            cols = np.concatenate([g.cols.reshape(-1) for g in self.groups])
+            inside = (rows < n) & (cols < n)
+            pat = sparse_la.Pattern(n, rows[inside], cols[inside])
+            for g in self.groups:
+                r, c = g.rows.reshape(-1), g.cols.reshape(-1)
+                k = np.nonzero((r < n) & (c < n))[0]
+                g.SP_A = sp.csr_matrix((np.ones(k.size), (pat.position(r[k], c[k]), k)),
+                                       shape=(pat.nnz, r.size))
+            self._pattern = pat
+        return pat
+
+    def _outputs_sparse(self, t, x):
+        """outputs() for large circuits: the same columns, in the same order, filled group by
+        group (no per-element Python) into one (columns, T) array, time chunk by time chunk so
+        that one evaluation's arrays stay under about OUTPUT_ELEMENTS numbers.  Checked against
+        the general path on the first time point (names, order, values): None if they differ
+        (then outputs() takes its general path)."""
+        keys = [f"P({n})" for n in self.nodes if ":" not in n]
+        p_nodes = np.array([j for j, n in enumerate(self.nodes) if ":" not in n], dtype=int)
+        lay = []
+        for g in self.groups:
+            store_vols = set(g.comp.volume_observables())  # volumes are V(id)
+            obs_names = [o.name for o in g.observables]
+            st_j = [j for j, s in enumerate(g.states) if s.name not in obs_names]
+            lay.append((len(keys), 1 + len(st_j) + len(g.observables), st_j))
+            for e in g.ids:
+                keys.append(f"Q({e})")
+                keys += [f"{e}.{g.states[j].name}" for j in st_j]
+                keys += [f"V({e})" if o.name in store_vols else f"{e}.{o.name}" for o in g.observables]
+        if len(set(keys)) != len(keys):
+            return None
+        T = x.shape[0]
+        width = self.n + 1 + sum(g.E * g.L * (g.L + 2) for g in self.groups)
+        chunk = max(1, sparse_la.OUTPUT_ELEMENTS // width)
+        M = np.empty((len(keys), T))  # column-major result: each column a contiguous row
+        for i0 in range(0, T, chunk):
+            i1 = min(T, i0 + chunk)
+            Tc = i1 - i0
+            xc = x[i0:i1]
+            tt = np.broadcast_to(np.asarray(t, dtype=float), (T,))[i0:i1].reshape(Tc, 1) if np.ndim(t) else float(t)
+            u, plist, stamps = self.evaluate(tt, xc, want="u")
+            buf = np.empty((Tc, len(keys)))  # time-major chunk (contiguous writes), transposed once
+            buf[:, :len(p_nodes)] = u[:, p_nodes]
+            for g, p, st, (base, w, st_j) in zip(self.groups, plist, stamps, lay):
+                if st is None:  # static group: stamp it for the flows
+                    st = g.comp.stamp(p, xc[:, g.sidx], None, tt, None) + (None,)
+                A_loc, b_loc, src = st
+                ul = u[:, g.uidx]
+                Bg = buf[:, base:base + w * g.E].reshape(Tc, g.E, w)  # (time, element, slot)
+                if g.K:  # flow leaving the first terminal into the element
+                    A0 = np.broadcast_to(A_loc, (Tc,) + A_loc.shape[1:])[:, :, 0, :]
+                    Bg[:, :, 0] = (np.einsum("bej,bej->be", A0, ul)
+                                   - np.broadcast_to(b_loc, (Tc,) + b_loc.shape[1:])[:, :, 0])
+                else:
+                    Bg[:, :, 0] = 0.0
+                xl = xc[:, g.sidx]
+                for k, j in enumerate(st_j):
+                    Bg[:, :, 1 + k] = xl[:, :, j]
+                obs = g.comp.observe(p, xl, ul, tt, src)
+                for k, o in enumerate(g.observables):
+                    v = obs[o.name]
+                    Bg[:, :, 1 + len(st_j) + k] = (v if np.ndim(v) == 2 else np.broadcast_to(v, (Tc,))[:, None])
+            M[:, i0:i1] = buf.T
+        ref = self.outputs(np.ravel(t)[:1] if np.ndim(t) else t, x[:1])
+        if list(ref) != keys:
+            return None
+        ref = np.array([np.ravel(ref[k])[0] for k in keys], dtype=float)
+        big = np.max(np.abs(ref[np.isfinite(ref)]), initial=0.0)
+        if not np.all(np.isclose(M[:, 0], ref, rtol=1e-6, atol=1e-12 * big, equal_nan=True)):
+            return None
+        return {k: M[r] for r, k in enumerate(keys)}
+
+    def _scatter_A(self, g):
+        return g.SP_A if self.sparse else g.ST_A
+
+    def _factor_const(self):
+        """Factorisations of the constant nodal matrix (per member), solved through the explicit
+        sparse inverse where it is sparser than a few times the LU factors."""
+        lus = self._factor(self.A_const, "the nodal equations are singular (a pressure is undefined)")
+        pat = self._sparse_pattern()
+        nz = np.any(self.A_const != 0, axis=0)
+        S = sp.csr_matrix((np.ones(int(nz.sum())), (pat.indices[nz], pat.cols[nz])), shape=(self.n, self.n))
+        return sparse_la.with_inverses(lus, S, 3 * max(lu.nnz for lu in lus))
+
+    def _factor(self, data, message):
+        """splu factorisations of the matrix rows ``data`` (rows, nnz) on the pattern."""
+        try:
+            lus = sparse_la.factor_rows(self._sparse_pattern(), data)
+        except RuntimeError:  # SuperLU: "Factor is exactly singular"
+            raise TopologyError(message, file=self.file) from None
+        return lus
 
     def _rep(self, arr, Bx):
         """Parameter-batch array (B, ...) laid out for a stacked batch of Bx rows."""
@@ -271,7 +420,20 @@ class Circuit:
     def with_options(self, changes: dict) -> "Circuit":
         """A re-assembled circuit with structural options changed ({ID.OPTION: value}).
 
-        Numeric parameters set on this circuit are carried over where they still exist.
+        A structural option changes the equations (states, nodes), not the numbers: every
+        numeric value this circuit holds is kept, on the elements whose options change as on
+        the others - the netlist's values, and every value changed since assembly (``--set``,
+        :meth:`set_param`, a protocol's ``initial``, a batch's per-member values), waveforms
+        set with ``set_param`` included.  Parameters that follow an expression are
+        re-evaluated in the new circuit, not copied.
+
+        Options that change an element's *defaults* (the arteriole's ``preset``, a named
+        parameter set) are the one case where values are replaced: on that element the values
+        that came from the old defaults take the new preset's values, while the values set
+        explicitly stay - those written in the netlist, and those changed since assembly.  A
+        value counts as changed since assembly when it differs from the assembled one, so a
+        value set to exactly the old preset's number follows the new preset like an untouched
+        one.
         """
         nl = copy.deepcopy(self.netlist)
         for path, v in changes.items():
@@ -279,20 +441,32 @@ class Circuit:
             try:
                 nl.element(eid).values[name] = v
             except KeyError:
-                raise NetlistError(f"no element '{eid}'", file=self.file, element=eid) from None
+                raise NetlistError(f"no element '{eid}' (elements: {sorted(self.elements)})", file=self.file,
+                                   element=eid) from None
         new = assemble(nl)
-        changed = {path.partition(".")[0] for path in changes}
+        if self.B > 1:
+            new = new.batch(self.B)
+        # The new assembly reproduces the netlist's values and the (possibly new) defaults;
+        # on top of them, carry every value (and waveform) changed on this circuit since its
+        # assembly.
         for g in self.groups:
+            waves = {(i, name): wf for i, name, wf in g.waves}
             for i, eid in enumerate(g.ids):
-                if eid in changed:
-                    continue  # its options (maybe its preset) changed: keep the netlist's values
+                e, ne = self.elements[eid], new.elements[eid]
+                ng, ni = new._locate[eid]
                 for name, arr in g.p.items():
-                    if name in self.elements[eid].expressions:
+                    if name in e.expressions or name in ne.expressions or name not in ng.p:
                         continue
-                    ng, ni = new._locate[eid]
-                    if name in ng.p and self.B == 1:
-                        ng.p[name] = ng.p[name].copy()
-                        ng.p[name][:, ni] = arr[:, i]
+                    wf = waves.get((i, name))
+                    if np.all(arr[:, i] == e.values[name]) and wf is e.waveforms.get(name):
+                        continue  # as assembled: the new assembly has the right value
+                    ng.p[name] = np.array(np.broadcast_to(ng.p[name], (max(ng.p[name].shape[0], arr.shape[0]),
+                                                                       ng.E)))
+                    ng.p[name][:, ni] = arr[:, i]
+                    ng.waves = [w for w in ng.waves if not (w[0] == ni and w[1] == name)]
+                    if wf is not None:
+                        ng.waves.append((ni, name, wf))
+                    ng.time_dependent = ng.comp.time_dependent or bool(ng.waves)
         new._prepare()
         return new
 
@@ -352,6 +526,8 @@ class Circuit:
         c.A_const = self.A_const[members] if self.A_const.shape[0] > 1 else self.A_const
         c.b_const = self.b_const[members] if self.b_const.shape[0] > 1 else self.b_const
         c._Ainv = None if self._Ainv is None else (self._Ainv[members] if self._Ainv.shape[0] > 1 else self._Ainv)
+        c._lu = self._lu.subset(members)
+        c._jac_plans = {}
         c._rep_cache = {}
         c.law_totals = [None if v is None else np.atleast_1d(v)[members] if np.size(v) > 1 else v
                         for v in self.law_totals]
@@ -517,7 +693,11 @@ class Circuit:
         N1 = self.n + 1
         b = np.array(np.broadcast_to(self._rep(self.b_const, Bx), (Bx, N1)))
         need_A = dc or not self.all_constant
-        A = np.array(np.broadcast_to(self._rep(self.A_const, Bx), (Bx, N1 * N1))) if need_A else None
+        sparse = self.sparse
+        if sparse:  # values on the pattern, one row, or one per batch row (never copied per row)
+            A = self._rep(self.A_const, Bx) if need_A else None
+        else:
+            A = np.array(np.broadcast_to(self._rep(self.A_const, Bx), (Bx, N1 * N1))) if need_A else None
         stamps = [None] * len(self.groups)
         for k, (g, p) in enumerate(zip(self.groups, plist)):
             if g.static and not dc:
@@ -531,18 +711,21 @@ class Circuit:
                 A_loc = np.broadcast_to(A_loc, (A_loc.shape[0], g.E, g.L, g.L))
             if b_loc.shape[1:] != (g.E, g.L):
                 b_loc = np.broadcast_to(b_loc, (b_loc.shape[0], g.E, g.L))
-            if dc and (g.comp.dc_open() or g.comp.dc_short()):
-                A_loc, b_loc = self._dc_stamp(g, A_loc, b_loc)
-                A = A + _scatter(g.ST_A, A_loc)
+            if dc and g.comp.has_dc_stamp():
+                A_loc, b_loc = self._dc_stamp(g, p, A_loc, b_loc)
+                A = A + _scatter(self._scatter_A(g), A_loc)
                 if g.constant:
                     A = A - self._const_part(g, Bx)
             elif need_A and not g.constant:
-                A = A + _scatter(g.ST_A, A_loc)
+                A = A + _scatter(self._scatter_A(g), A_loc)
             if not g.static:  # static groups are already in b_const
-                b = b + _scatter(g.ST_b, b_loc)
+                if sparse:
+                    b += _bincount_scatter(g.uidx, b_loc, Bx, N1)
+                else:
+                    b = b + _scatter(g.ST_b, b_loc)
             stamps[k] = (A_loc, b_loc, src)
         n = self.n
-        if A is not None:
+        if A is not None and not sparse:
             A = A.reshape(Bx, N1, N1)[:, :n, :n]
         return A, b[:, :n], stamps
 
@@ -567,32 +750,26 @@ class Circuit:
     def _const_part(self, g, Bx):
         A_loc, _ = g.comp.stamp(g.p, np.zeros((1, g.E, g.S)), None, 0.0, None)
         A_loc = np.broadcast_to(A_loc, (A_loc.shape[0], g.E, g.L, g.L))
-        return self._rep(_scatter(g.ST_A, A_loc), Bx)
+        return self._rep(_scatter(self._scatter_A(g), A_loc), Bx)
 
-    def _dc_stamp(self, g, A_loc, b_loc):
-        A_loc = np.array(A_loc)
-        b_loc = np.array(b_loc)
-        if g.comp.dc_open():
-            # one store per conservation law stays closed: it anchors the pressure of a node
-            # group that is otherwise joined to the circuit only through open stores
-            keep = [i for s in self.law_specs for (gg, i) in [s["anchor"]] if gg is g]
-            opened = np.setdiff1d(np.arange(g.E), keep)
-            for m in range(g.M):
-                r = g.K + m
-                A_loc[:, opened, r, :] = 0.0
-                A_loc[:, opened, r, r] = 1.0  # branch flow = 0
-                b_loc[:, opened, r] = 0.0
-        else:  # short: a large conductance between the first two terminals
-            G = 1e6
-            A_loc[..., 0, 0] += G
-            A_loc[..., 0, 1] -= G
-            A_loc[..., 1, 0] -= G
-            A_loc[..., 1, 1] += G
-            b_loc[..., :2] = 0.0
-        return A_loc, b_loc
+    def _dc_stamp(self, g, p, A_loc, b_loc):
+        """The group's stamp in the DC-guess network (Component.dc_stamp, on writable copies).
+        One store per conservation law keeps its stamp: it anchors the pressure of a node
+        group that is otherwise joined to the circuit only through open stores."""
+        keep = np.zeros(g.E, dtype=bool)
+        for s in self.law_specs:
+            gg, i = s["anchor"]
+            if gg is g:
+                keep[i] = True
+        return g.comp.dc_stamp(p, np.array(A_loc), np.array(b_loc), keep)
 
     def _solve(self, A, b):
-        if A is None:
+        """Node pressures and branch flows (Bx, n + 1; the ground slot last) from the assembled
+        system: A None (the cached inverse / factorisation applies), a dense stack (Bx, n, n),
+        or on the sparse path the values (1 or Bx, nnz) on the pattern."""
+        if self.sparse:
+            u = self._solve_sparse(A, b)
+        elif A is None:
             Ainv = self._Ainv
             if Ainv.shape[0] != b.shape[0]:
                 Ainv = np.repeat(Ainv, b.shape[0] // Ainv.shape[0], axis=0)
@@ -606,6 +783,20 @@ class Circuit:
                 raise TopologyError("the nodal equations are singular at this state (a pressure is undefined)",
                                     file=self.file)
         return np.concatenate([u, np.zeros((u.shape[0], 1))], axis=1)  # + ground slot
+
+    def _solve_sparse(self, A, b):
+        """The batch rows of b are the columns of one solve per factorisation."""
+        if A is None:
+            if self._lu.lus is None:  # unpickled: factorise again
+                self._lu = sparse_la.Factors(self._factor_const())
+            lus = self._lu.lus
+        else:
+            lus = self._factor(A, "the nodal equations are singular at this state (a pressure is undefined)")
+        u = sparse_la.solve_rows(lus, b)
+        if not np.all(np.isfinite(u)):
+            raise TopologyError("the nodal equations are singular at this state (a pressure is undefined)",
+                                file=self.file)
+        return u
 
     def evaluate(self, t, x, dc=False, want="rhs"):
         """Core evaluation for a stacked batch x (Bx, nx).
@@ -640,7 +831,12 @@ class Circuit:
         """Finite-difference Jacobian d(dx/dt)/dx, all columns from one batched evaluation.
 
         x: (nx,) -> (nx, nx); or (B, nx) -> (B, nx, nx).
+        On the sparse path (see :attr:`sparse`): a ``scipy.sparse.csc_matrix`` (nx, nx), or a
+        list of B of them, by coloured finite differences (see :meth:`sparse_jacobian`).
         """
+        if self.sparse:
+            Js = self.sparse_jacobian(t, x)[0]
+            return Js[0] if np.ndim(x) == 1 else Js
         single = np.ndim(x) == 1
         X = np.atleast_2d(np.asarray(x, dtype=float))
         B, nx = X.shape
@@ -654,13 +850,134 @@ class Circuit:
         J = np.swapaxes(J, 1, 2)
         return J[0] if single else J
 
+    def jacobian_plan(self, key, fun, X, t=0.0, row_reads=None, how="auto"):
+        """The Jacobian sparsity pattern and column colouring of ``fun`` (rows (m, nx) ->
+        (m, nx), the right-hand side or the operating point's residual), once per parameter
+        set and structural option set under ``key``.
+
+        Structural (how='auto' or 'structural'): from the elements' incidence and the generic
+        structure of the nodal matrix's inverse (:func:`hemocircuit.sparse.structural_pattern`),
+        valid at every state.  ``row_reads`` {state row: (element ids whose states it reads,
+        nodal unknowns it reads)} replaces rows that are not the element's own equation (the
+        operating point's conservation-law rows).  Numerical (how='numerical', or when the
+        nodal matrix is structurally singular): finite differences at X in column blocks.
+        """
+        key = (key, how, tuple(tuple(sorted((k, repr(v)) for k, v in g.comp.opts.items())) for g in self.groups))
+        plans = self.__dict__.setdefault("_jac_plans", {})
+        if key not in plans:
+            X = np.atleast_2d(np.asarray(X, dtype=float))
+            rc = self._structural_pattern(t, X, row_reads) if how != "numerical" else None
+            if rc is None:
+                width = self.n + 1 + sum(g.E * g.L * (g.L + 1) for g in self.groups)
+                plans[key] = sparse_la.detect_pattern(fun, X, self.state_scales, width)
+            else:
+                diag = np.arange(self.nx)
+                plans[key] = sparse_la.JacobianPlan(self.nx, np.concatenate([rc[0], diag]),
+                                                    np.concatenate([rc[1], diag]), "structural")
+        return plans[key]
+
+    def _incidence(self):
+        """Element-level incidence matrices (structure only, cached): own (nx, elements) state ->
+        its element, unk (elements, n) element -> its nodal unknowns, infl (elements, nx) element
+        -> the states it depends on (its own, and those of elements whose observables its
+        parameter expressions read)."""
+        inc = self.__dict__.get("_incidence_cache")
+        if inc is None:
+            n, nx = self.n, self.nx
+            eidx, k = {}, 0
+            for g in self.groups:
+                for i, eid in enumerate(g.ids):
+                    eidx[eid] = k
+                    k += 1
+            ne = k
+            o_r, o_c, u_r, u_c, f_r, f_c = [], [], [], [], [], []
+            for g in self.groups:
+                e0 = eidx[g.ids[0]]
+                el = e0 + np.arange(g.E)
+                o_r.append(g.sidx.reshape(-1))
+                o_c.append(np.repeat(el, g.S))
+                ui = g.uidx.reshape(-1)
+                inside = ui < n
+                u_r.append(np.repeat(el, g.L)[inside])
+                u_c.append(ui[inside])
+                for i, _, ex in g.exprs:
+                    for ref in ex.refs.values():
+                        if ref.kind == "observable":
+                            rg, ri = self._locate[ref.element]
+                            f_r.append(np.full(rg.S, e0 + i))
+                            f_c.append(rg.sidx[ri])
+            own = sp.csr_matrix((np.ones(nx), (np.concatenate(o_r), np.concatenate(o_c))), shape=(nx, ne))
+            unk = sp.csr_matrix((np.ones(sum(a.size for a in u_r)), (np.concatenate(u_r), np.concatenate(u_c))),
+                                shape=(ne, n))
+            infl = own.T.tocsr()
+            if f_r:
+                fr, fc = np.concatenate(f_r), np.concatenate(f_c)
+                infl = infl + sp.csr_matrix((np.ones(fr.size), (fr, fc)), shape=(ne, nx))
+            inc = (own, unk, infl.tocsr(), eidx)
+            self._incidence_cache = inc
+        return inc
+
+    def _structural_pattern(self, t, X, row_reads=None):
+        """(rows, cols) of the structural Jacobian pattern (see jacobian_plan) or None."""
+        n, nx = self.n, self.nx
+        pat = self._sparse_pattern()
+        # nonzero structure of the nodal matrix: the constant part's values, and each other
+        # group's local nonzeros (at these states, any element) at every element of the group
+        A_const = self.A_const if self.sparse else None
+        if A_const is not None:
+            nzc = np.any(A_const != 0, axis=0)
+            rows, cols = [pat.indices[nzc]], [pat.cols[nzc]]
+        else:  # dense layout (n+1)^2
+            flat = np.nonzero(np.any(self.A_const != 0, axis=0))[0]
+            rows, cols = [flat // (n + 1)], [flat % (n + 1)]
+        _, _, stamps = self.evaluate(t, X, want="u")
+        for g, st in zip(self.groups, stamps):
+            if st is None or g.constant:
+                continue
+            m = np.any(np.asarray(st[0]) != 0, axis=tuple(range(np.ndim(st[0]) - 2)))  # (L, L)
+            rows.append(g.rows[:, m].reshape(-1))
+            cols.append(g.cols[:, m].reshape(-1))
+        r, c = np.concatenate(rows), np.concatenate(cols)
+        inside = (r < n) & (c < n)
+        S = sp.csr_matrix((np.ones(int(inside.sum())), (r[inside], c[inside])), shape=(n, n))
+        own, unk, infl, eidx = self._incidence()
+        read = own @ unk  # (nx, n)
+        infl_rows = unk.T @ infl  # (n, nx)
+        direct = own @ infl  # (nx, nx)
+        if row_reads:
+            keep = np.ones(nx)
+            keep[list(row_reads)] = 0.0
+            K = sp.diags(keep)
+            rr, rc_, dr, dc_ = [], [], [], []
+            for row, (eids, unknowns) in row_reads.items():
+                for eid in eids:
+                    st = infl[eidx[eid]].indices
+                    dr += [row] * st.size
+                    dc_ += list(st)
+                rr += [row] * len(unknowns)
+                rc_ += list(unknowns)
+            read = K @ read + sp.csr_matrix((np.ones(len(rr)), (rr, rc_)), shape=(nx, n))
+            direct = K @ direct + sp.csr_matrix((np.ones(len(dr)), (dr, dc_)), shape=(nx, nx))
+        return sparse_la.structural_pattern(S, read, infl_rows, direct)
+
+    def sparse_jacobian(self, t, x):
+        """Coloured finite-difference Jacobians d(dx/dt)/dx at x (nx,) or (B, nx): returns
+        ([csc_matrix (nx, nx)] per member, dx/dt (B, nx)).  Same steps as :meth:`jacobian`."""
+        X = np.atleast_2d(np.asarray(x, dtype=float))
+
+        def fun(rows):
+            return self.evaluate(t, rows)
+
+        plan = self.jacobian_plan("rhs", fun, X, t)
+        return sparse_la.coloured_jacobian(fun, X, self.state_scales, plan)
+
     # ------------------------------------------------------------------ outputs --------
     def columns(self) -> list[Column]:
         """Every output column, in a stable order."""
         cols = [Column(f"P({n})", "mmHg") for n in self.nodes if ":" not in n]
         cols += [Column(f"Q({e})", "mL/s") for g in self.groups for e in g.ids]
         for g in self.groups:
-            store_vols = {s.volume for s in g.comp.storages()} | {"V"}
+            store_vols = set(g.comp.volume_observables())
             obs_names = [o.name for o in g.observables]
             for e in g.ids:
                 for s in g.states:
@@ -677,6 +994,10 @@ class Circuit:
         """
         x = np.atleast_2d(np.asarray(x, dtype=float))
         T = x.shape[0]
+        if self.sparse and self.B == 1 and T > 1:  # large circuits: vectorised, in bounded chunks
+            out = self._outputs_sparse(t, x)
+            if out is not None:
+                return out
         tt = np.broadcast_to(np.asarray(t, dtype=float), (T,)).reshape(T, 1) if np.ndim(t) else float(t)
         if self.B != 1 and T % self.B:
             raise HemocircuitError("outputs() of a batch circuit needs one member's parameters: use member(k)")
@@ -693,7 +1014,7 @@ class Circuit:
             flows = np.einsum("beij,bej->bei", np.broadcast_to(A_loc, (T,) + A_loc.shape[1:]), ul) - b_loc
             xl = x[:, g.sidx]
             obs = g.comp.observe(p, xl, ul, tt, src)
-            store_vols = {s.volume for s in g.comp.storages()} | {"V"}  # volumes are V(id)
+            store_vols = set(g.comp.volume_observables())  # volumes are V(id)
             obs_names = [o.name for o in g.observables]
             for i, e in enumerate(g.ids):
                 out[f"Q({e})"] = flows[:, i, 0] if g.K else np.zeros(T)
@@ -715,7 +1036,7 @@ class Circuit:
         """[(state index, lower bound, index of a state reset to 0 at the bound or None)]."""
         out = []
         for g in self.groups:
-            for name, bound, reset in getattr(g.comp, "hard_limits", lambda: ())():
+            for name, bound, reset in g.comp.hard_limits():
                 names = [s.name for s in g.states]
                 for i in range(g.E):
                     out.append((g.sidx[i, names.index(name)], bound,
@@ -723,15 +1044,13 @@ class Circuit:
         return out
 
     def breakpoints(self, t0, t1):
-        """Scheduled discontinuities of sources in (t0, t1)."""
+        """Scheduled discontinuities in (t0, t1): waveform breakpoints and the elements' own
+        (Component.breakpoints, e.g. a source's sine term switching on)."""
         pts = set()
         for g in self.groups:
             for _, _, wf in g.waves:
                 pts.update(b for b in wf.breakpoints() if t0 < b < t1)
-            if "start" in g.p and "amplitude" in g.p:
-                for s, a in zip(np.ravel(g.p["start"]), np.ravel(np.broadcast_to(g.p["amplitude"], g.p["start"].shape))):
-                    if a != 0 and t0 < s < t1:
-                        pts.add(float(s))
+            pts.update(float(b) for b in g.comp.breakpoints(g.p, t0, t1) if t0 < b < t1)
         return sorted(pts)
 
     def describe(self) -> str:
@@ -745,7 +1064,11 @@ class Circuit:
 
 
 def assemble(netlist: Netlist) -> Circuit:
-    return Circuit(netlist, parse_netlist(netlist))
+    from .outputs import check as check_outputs
+
+    c = Circuit(netlist, parse_netlist(netlist))
+    check_outputs(c)  # the netlist's outputs: and input: name columns and sources of this circuit
+    return c
 
 
 def load(path: str, set_params: dict | None = None) -> Circuit:
@@ -754,3 +1077,9 @@ def load(path: str, set_params: dict | None = None) -> Circuit:
     if set_params:
         c.set_params(set_params)
     return c
+
+
+# the common analyses as methods (c.simulate(), c.operating_point(), ...)
+from .analyses import attach as _attach  # noqa: E402
+
+_attach(Circuit)

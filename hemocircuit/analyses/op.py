@@ -15,7 +15,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.linalg import lsqr, splu
 
+from .. import sparse as sparse_la
 from ..errors import HemocircuitError, SolverError
 
 
@@ -53,6 +56,25 @@ def residual(circuit, t, X, law_totals):
 
 
 def _jac(circuit, t, X, law_totals):
+    """(J, F(X)): J dense (B, nx, nx), or on the sparse path a list of B csc matrices from
+    coloured finite differences (pattern derived once per circuit and parameter set)."""
+    if getattr(circuit, "sparse", False):
+        B = X.shape[0]
+
+        def fun(rows):
+            return residual(circuit, t, rows, _rep(law_totals, rows.shape[0] // B))
+
+        # conservation-law rows: the stored volumes of the law's stores, or (calibration) the
+        # pressure of its node
+        reads = {}
+        for spec in circuit.law_specs:
+            if spec.get("_target") is not None:
+                reads[spec["row"]] = ((), (circuit.nodes.index(spec["node"]),))
+            else:
+                reads[spec["row"]] = (tuple(g.ids[i] for g, i, _, _ in spec["terms"]), ())
+        key = ("residual", tuple(spec.get("_target") is not None for spec in circuit.law_specs))
+        plan = circuit.jacobian_plan(key, fun, X, t, row_reads=reads)
+        return sparse_la.coloured_jacobian(fun, X, circuit.state_scales, plan)
     B, nx = X.shape
     h = 1e-7 * np.maximum(np.abs(X), circuit.state_scales)
     h = (X + h) - X
@@ -87,14 +109,17 @@ def newton(circuit, X, law_totals, t=0.0, tol=1e-10, max_iter=50, ptc=False):
             return X, False, norm
         if not ptc and np.all(norm < 1e-13):  # already at the residual floor: nothing to improve
             return X, True, norm
-        if ptc:
-            M = np.eye(nx)[None] / dt[:, None, None] - J
+        if isinstance(J, list):  # sparse path
+            dX = _sparse_step(J, F, dt if ptc else None)
         else:
-            M = J
-        try:
-            dX = np.linalg.solve(M, -F[..., None])[..., 0]
-        except np.linalg.LinAlgError:
-            dX = np.linalg.lstsq(M[0], -F[0], rcond=None)[0][None] if B == 1 else np.zeros_like(X)
+            if ptc:
+                M = np.eye(nx)[None] / dt[:, None, None] - J
+            else:
+                M = J
+            try:
+                dX = np.linalg.solve(M, -F[..., None])[..., 0]
+            except np.linalg.LinAlgError:
+                dX = np.linalg.lstsq(M[0], -F[0], rcond=None)[0][None] if B == 1 else np.zeros_like(X)
         step_small = np.max(np.abs(dX) / (np.abs(X) + scales), axis=1) < tol
         # line search on the scaled residual
         lam = np.ones(B)
@@ -121,6 +146,23 @@ def newton(circuit, X, law_totals, t=0.0, tol=1e-10, max_iter=50, ptc=False):
     Fn = residual(circuit, t, X, law_totals)
     nn = np.max(np.abs(Fn) / scales, axis=1)
     return X, bool(np.all(nn < 1e-8)), nn
+
+
+def _sparse_step(Js, F, dt=None):
+    """Newton (dt None) or pseudo-transient (I/dt - J) steps, one sparse LU per member; a
+    singular member falls back to least squares (LSQR) if it is alone, else takes no step."""
+    B, nx = F.shape
+    dX = np.zeros_like(F)
+    eye = sp.identity(nx, format="csc") if dt is not None else None
+    for b in range(B):
+        M = Js[b] if dt is None else (eye / dt[b] - Js[b])
+        M = sp.csc_matrix(M)
+        try:
+            dX[b] = splu(M).solve(-F[b])
+        except RuntimeError:  # exactly singular
+            if B == 1:
+                dX[b] = lsqr(M, -F[b], atol=1e-14, btol=1e-14)[0]
+    return dX
 
 
 def dc_guess(circuit, t=0.0, max_iter=200, tol=1e-12):
@@ -151,9 +193,8 @@ def dc_guess(circuit, t=0.0, max_iter=200, tol=1e-12):
             ul = u[:, g.uidx]
             flows = np.einsum("beij,bej->bei", np.broadcast_to(A_loc, (B,) + A_loc.shape[1:]), ul) - b_loc
             new = g.comp.initial_states(p, ul, flows, X[:, g.sidx])
-            for i in range(g.E):
-                if (id(g), i) not in anchors:
-                    Xn[:, g.sidx[i]] = new[:, i]
+            free = np.array([(id(g), i) not in anchors for i in range(g.E)], dtype=bool)
+            Xn[:, g.sidx[free]] = new[:, free]
         step = Xn - X
         X = X + relax * step
         if np.max(np.abs(step) / (np.abs(X) + circuit.state_scales)) < tol:
@@ -206,8 +247,9 @@ def _solve_with_fallbacks(circuit, X0, totals, t):
 
 
 def _source_stepping(circuit, totals, t):
-    """Ramp every pressure/flow source 'value' from 30 % to 100 %, continuing the solution."""
-    paths = [f"{e}.value" for g in circuit.groups if g.comp.time_dependent for e in g.ids]
+    """Ramp every source's drive parameter (Component.drive: a pressure or flow source's value)
+    from 30 % to 100 %, continuing the solution."""
+    paths = [f"{e}.{g.comp.drive.value}" for g in circuit.groups if g.comp.drive is not None for e in g.ids]
     base = {p: circuit.get_param(p) for p in paths}
     X = None
     ok = False
