@@ -33,6 +33,17 @@ class TransientResult:
         return ["time"] + list(self.columns)
 
 
+def _jac_for(c, method):
+    """The Jacobian callable for solve_ivp.  Large circuits (c.sparse) give a scipy.sparse
+    matrix from coloured finite differences, which BDF and Radau factorise with splu; LSODA
+    takes dense matrices only."""
+    if method not in ("BDF", "Radau", "LSODA"):
+        return None
+    if method == "LSODA" and getattr(c, "sparse", False):
+        return lambda t, x: c.jacobian(t, x).toarray()
+    return c.jacobian
+
+
 def _limit_events(circuit, limits):
     evs = []
     for idx, bound, _ in limits:
@@ -45,12 +56,18 @@ def _limit_events(circuit, limits):
 
 
 def simulate(circuit, t_end, dt=None, t0=0.0, x0=None, protocol=None, method="BDF", rtol=1e-6, atol=None,
-             max_step=np.inf, first_step=None):
+             max_step=np.inf, first_step=None, engine="auto", ic=None):
     """Integrate from t0 to t_end [s].
 
     x0: initial states (default: the operating point after the protocol's initial settings).
-    dt: output interval [s] (default: the solver's own steps).
+    dt: output interval [s] (default: the solver's own steps; the compiled engine, which has
+        no step list, then reports 1001 evenly spaced times).
     protocol: a Protocol (or path to a protocol YAML) with initial settings and timed events.
+    ic: {ID.STATE: value} states to override in that start (x0 or the operating point), e.g.
+        {'Cv.V': '20 mL'}; units allowed, plain numbers are in the state's unit (hemocircuit.ic).
+    engine: 'compiled' (numba Rosenbrock-W ROS34PW2, hemocircuit.kernels), 'scipy'
+        (solve_ivp with ``method``), or 'auto': compiled when every component type has a
+        kernel and ``method`` is left at its default, scipy otherwise.
     """
     from .op import operating_point
 
@@ -66,11 +83,24 @@ def simulate(circuit, t_end, dt=None, t0=0.0, x0=None, protocol=None, method="BD
     if c.B != 1:
         raise SolverError("simulate() runs one parameter set; use hemocircuit.batch for many")
     x = operating_point(c, t=t0).x if x0 is None else np.asarray(x0, dtype=float).copy()
+    if ic:
+        from ..ic import apply_ic
+        x = apply_ic(c, x, ic)
     events = sorted([(ev.at, ev) for ev in (protocol.events if protocol else []) if t0 < ev.at < t_end],
                     key=lambda e: e[0])
     limits = c.hard_limits()
     scales = c.state_scales
     atol_v = (atol if atol is not None else rtol * 1e-3) * scales
+    if engine not in ("auto", "compiled", "scipy"):
+        raise SolverError(f"engine {engine!r}: choose 'auto', 'compiled' or 'scipy'")
+    if engine != "scipy" and (engine == "compiled" or method == "BDF"):
+        from ..kernels.system import CompiledSystem
+        system = CompiledSystem.of(c)
+        if system is None and engine == "compiled":
+            raise SolverError("this circuit cannot run compiled (a component type without a kernel, or "
+                              "too many nodal unknowns); use engine='scipy'")
+        if system is not None:
+            return _simulate_compiled(system, c, x, t0, t_end, dt, events, rtol, atol, max_step, first_step)
     ts, xs, segs = [], [], []
     nfev = njev = nsteps = 0
     t_grid = None if dt is None else np.arange(t0, t_end + 0.5 * dt, dt)
@@ -86,7 +116,7 @@ def simulate(circuit, t_end, dt=None, t0=0.0, x0=None, protocol=None, method="BD
                 tpts = np.concatenate([tpts, [t_b]])
         try:
             sol = solve_ivp(c.rhs, (t_a, t_b), x_a, method=method, t_eval=tpts, rtol=rtol, atol=atol_v,
-                            jac=(c.jacobian if method in ("BDF", "Radau", "LSODA") else None),
+                            jac=_jac_for(c, method),
                             events=_limit_events(c, limits) or None, max_step=max_step,
                             first_step=first_step)
         except Exception as exc:  # a failing right-hand side or linear solve
@@ -152,12 +182,50 @@ def _collect(c_last, ts, xs, segs):
             t_all[-1], x_all[-1] = t_all[-1][:-1], x_all[-1][:-1]
             for k in cols:
                 cols[k][-1] = cols[k][-1][:-1]
-        out = c.outputs(t, x)
-        for k, v in out.items():
+        for k, v in c.outputs(t, x).items():
             cols.setdefault(k, []).append(np.asarray(v))
         t_all.append(t)
         x_all.append(x)
     t = np.concatenate(t_all) if t_all else np.zeros(0)
     x = np.concatenate(x_all) if x_all else np.zeros((0, c_last.nx))
-    columns = {k: np.concatenate(v) for k, v in cols.items()}
+    columns = {k: np.concatenate(cols.pop(k)) for k in list(cols)}  # each part freed once copied
     return TransientResult(t, x, columns, c_last.column_units(), c_last.state_names)
+
+
+def _simulate_compiled(system, c, x, t0, t_end, dt, events, rtol, atol, max_step, first_step):
+    """simulate() on the compiled engine: one kernel call per protocol segment (hard limits and
+    source breakpoints are handled inside the kernel)."""
+    if dt is None:
+        t_grid = np.linspace(t0, t_end, 1001)
+    else:
+        t_grid = np.arange(t0, t_end + 0.5 * dt, dt)
+        t_grid = t_grid[t_grid <= t_end + 1e-9 * max(1.0, abs(t_end))]
+        if t_grid[-1] < t_end:
+            t_grid = np.append(t_grid, t_end)
+    bounds = [t0] + [e[0] for e in events] + [t_end]
+    ts, xs, segs = [], [], []
+    stats = {"steps": 0, "rejected": 0, "nfev": 0, "limit_events": 0}
+    h0 = 1e-3 if first_step is None else first_step
+    for k in range(len(bounds) - 1):
+        t_a, t_b = bounds[k], bounds[k + 1]
+        if k > 0:
+            c = c.copy()
+            events[k - 1][1].apply(c)
+        tpts = t_grid[(t_grid > t_a) & (t_grid < t_b)]
+        tpts = np.concatenate([[t_a], tpts, [t_b]])
+        X, st = system.integrate(tpts, x, system.params(c)[0], rtol=rtol, atol=atol,
+                                 breaks=c.breakpoints(t_a, t_b), h0=h0, hmax=max_step)
+        for key in stats:
+            stats[key] += st[key]
+        good = np.all(np.isfinite(X), axis=1)
+        ts.append(tpts[good])
+        xs.append(X[good])
+        segs.append(c)
+        if st["status"] < 0:
+            bad = X[good][-1] if good.any() else x
+            raise SolverError(f"compiled integrator failed: {st['message']}", time=st["t"],
+                              state=c.state_dict(bad), partial=_collect(c, ts, xs, segs))
+        x = X[-1].copy()
+    res = _collect(c, ts, xs, segs)
+    res.stats = {**stats, "method": "ROS34PW2 (compiled)"}
+    return res
