@@ -8,8 +8,18 @@
 
 Circuit units: pressure mmHg, flow mL/s, volume mL, time s (see hemocircuit.units).
 """
-from .circuit import Circuit, assemble, load  # noqa: F401
 from .errors import HemocircuitError, NetlistError, SolverError, TopologyError  # noqa: F401
-from . import analyses as _analyses  # noqa: F401  (attaches analysis methods to Circuit)
 
 __version__ = "0.1.0"
+
+_LAZY = {"Circuit", "assemble", "load"}
+
+
+def __getattr__(name):
+    """The circuit API is imported on first use, so that ``hemocircuit --help`` and other light
+    commands do not pay for numpy, scipy, pint and numba (PEP 562)."""
+    if name in _LAZY:
+        from . import circuit  # (it attaches the analysis methods to Circuit)
+
+        return getattr(circuit, name)
+    raise AttributeError(f"module 'hemocircuit' has no attribute {name!r}")

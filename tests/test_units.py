@@ -164,3 +164,15 @@ def test_set_param_converts_units(write):
     with pytest.raises(NetlistError, match="dimension"):
         c.set_param("R1.R", "2.5 mmHg")
     assert c.get_param("R1.R")[0] == 2.5
+
+
+def test_boundary_constants_are_pints():
+    """The mmHg/cmH2O factors are written out (no pint at import); they must be pint's."""
+    import pint
+
+    from hemocircuit.units import PA_PER_CMH2O, PA_PER_MMHG
+
+    ureg = pint.UnitRegistry()
+    assert PA_PER_MMHG == float(ureg.Quantity(1, "mmHg").to("Pa").magnitude)
+    # 98.0665 exactly by definition; pint's float arithmetic lands one ulp below it
+    assert abs(PA_PER_CMH2O / float(ureg.Quantity(1, "cmH2O").to("Pa").magnitude) - 1) < 1e-15

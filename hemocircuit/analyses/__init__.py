@@ -1,17 +1,23 @@
-"""Analyses.  Each module is one analysis; they are attached to Circuit as methods here."""
-from ..circuit import Circuit
-from .ac import ac_response
-from .dc import dc_sweep
-from .envelope import envelope
-from .freq import frequency_response
-from .op import operating_point
-from .stability import stability_sweep
-from .transient import simulate
+"""Analyses.  Each module is one analysis (a function of a circuit and settings, plus an
+optional ``register_cli``).  This package imports nothing heavy itself, so the CLI can list
+the commands cheaply; :func:`attach` (called by ``hemocircuit.circuit``) makes the common
+analyses available as Circuit methods (``c.simulate()``, ``c.operating_point()``, ...), each
+importing its module on first call."""
+from importlib import import_module
 
-Circuit.operating_point = operating_point
-Circuit.dc_sweep = dc_sweep
-Circuit.simulate = simulate
-Circuit.ac_response = ac_response
-Circuit.stability_sweep = stability_sweep
-Circuit.frequency_response = frequency_response
-Circuit.envelope = envelope
+METHODS = {"operating_point": "op", "dc_sweep": "dc", "simulate": "transient", "ac_response": "ac",
+           "stability_sweep": "stability", "frequency_response": "freq", "envelope": "envelope"}
+
+
+def _method(name, module):
+    def method(self, *args, **kwargs):
+        return getattr(import_module(f"{__name__}.{module}"), name)(self, *args, **kwargs)
+
+    method.__name__ = name
+    method.__doc__ = f"``hemocircuit.analyses.{module}.{name}(circuit, ...)`` as a method."
+    return method
+
+
+def attach(circuit_class):
+    for name, module in METHODS.items():
+        setattr(circuit_class, name, _method(name, module))
