@@ -92,6 +92,6 @@ def build_batches(circuit, assignments):
                     except UnitError as exc:
                         raise NetlistError(str(exc)) from None
             b.set_param(p, np.array(vals), prepare=False)
-        b._prepare()
+        b.prepare()
         out.append((b, members))
     return out

@@ -340,6 +340,27 @@ class Circuit:
             return arr
         return np.repeat(arr, Bx // arr.shape[0], axis=0)
 
+    # --- public services for analyses (they use these, never the private helpers) -----
+    def prepare(self):
+        """Rebuild the parameter-dependent caches after ``set_param(..., prepare=False)``."""
+        self._prepare()
+
+    def group_params(self, rows=None):
+        """Per-group parameter dicts laid out for ``rows`` state rows (a multiple of the batch
+        size B; default B)."""
+        return self._params(1) if rows is None or rows == self.B else self._params_for(rows)
+
+    def element_group(self, eid):
+        """(group, index in the group) of element ``eid``."""
+        return self._locate[eid]
+
+    def dc_unknowns(self, t, X):
+        """Nodal unknowns of the DC network (stores open, inductors shorted: each component's
+        ``dc_stamp``) for states X (B, nx).  Returns (u (B, n+1), bound parameters, stamps)."""
+        plist = self._bound_params(X, self._params(1), t)
+        A, b, stamps = self._assemble(t, X, plist, dc=True)
+        return self._solve(A, b), plist, stamps
+
     def param_path(self, path: str):
         """Split 'ID.PARAM' and check it names a parameter.  Returns (element data, group, index, name)."""
         if not isinstance(path, str) or "." not in path:

@@ -205,16 +205,30 @@ def build_parser():
 
 
 def _extra_commands():
-    """Commands contributed by analysis modules (each module exposes register_cli)."""
+    """Commands contributed by analysis modules: every module of ``hemocircuit.analyses`` that
+    defines ``register_cli(subparsers, common)`` (found by scanning the package, like the
+    components), then third-party ones registered under the entry-point group
+    ``hemocircuit.analyses`` (the entry point names such a module or function)."""
     import importlib
+    import pkgutil
+    from importlib import metadata
+
+    from . import analyses
+
     out = []
-    for mod in ("compare", "ac", "freq", "stability", "envelope", "periodic"):
-        try:
-            m = importlib.import_module(f".analyses.{mod}", __package__)
-        except ModuleNotFoundError:
-            continue
-        if hasattr(m, "register_cli"):
+    for info in sorted(pkgutil.iter_modules(analyses.__path__), key=lambda i: i.name):
+        spec = info.module_finder.find_spec(info.name)
+        origin = getattr(spec, "origin", None)
+        if origin and origin.endswith(".py"):
+            with open(origin, encoding="utf-8") as fh:  # import only the modules that add a command:
+                if "def register_cli" not in fh.read():  # the others pull in scipy for nothing
+                    continue
+        m = importlib.import_module(f"{analyses.__name__}.{info.name}")
+        if callable(getattr(m, "register_cli", None)):
             out.append(m.register_cli)
+    for ep in metadata.entry_points(group="hemocircuit.analyses"):
+        obj = ep.load()
+        out.append(obj if callable(obj) and not hasattr(obj, "register_cli") else obj.register_cli)
     return out
 
 
@@ -228,6 +242,10 @@ def main(argv=None):
         return 2
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError:  # output piped into a command that stopped reading (| head)
+        import os
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
     return 0
 
 

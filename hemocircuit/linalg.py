@@ -58,9 +58,19 @@ except ImportError:  # pragma: no cover
     HAVE_NUMBA = False
 
 
+#: below this many rows numpy's LAPACK is used: the first numba call of a process costs ~0.4 s
+#: (numba's runtime start), more than a short analysis such as ``op`` spends in solves
+NUMBA_MIN_ROWS = 64
+
+
 def solve_batched(A, b):
     """u with A[i] @ u[i] = b[i]; A (m, n, n), b (m, n).  Singular rows give NaN (numba) or
     raise LinAlgError (numpy)."""
-    if HAVE_NUMBA:
+    if HAVE_NUMBA and len(A) >= NUMBA_MIN_ROWS:
         return _solve_nb(np.ascontiguousarray(A, dtype=float), np.ascontiguousarray(b, dtype=float))
-    return np.linalg.solve(A, b[..., None])[..., 0]
+    try:
+        return np.linalg.solve(A, b[..., None])[..., 0]
+    except np.linalg.LinAlgError:
+        if not HAVE_NUMBA:
+            raise
+        return _solve_nb(np.ascontiguousarray(A, dtype=float), np.ascontiguousarray(b, dtype=float))

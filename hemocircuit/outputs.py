@@ -77,7 +77,7 @@ def default_outputs(circuit, use="default", required=True) -> list[str]:
         return list(declared["default"])
     out = []
     for eid, e in circuit.elements.items():
-        g, _ = circuit._locate[eid]
+        g, _ = circuit.element_group(eid)
         vols = set(g.comp.volume_observables())
         out += [f"V({eid})" if n in vols else f"{eid}.{n}" for n in g.comp.outputs_of_interest()]
     if not out and required:
@@ -89,7 +89,7 @@ def default_outputs(circuit, use="default", required=True) -> list[str]:
 def drive_of(circuit, eid):
     """The component instance of element ``eid`` and its :class:`~hemocircuit.component.Drive`
     (None if the element is not a source)."""
-    g, _ = circuit._locate[eid]
+    g, _ = circuit.element_group(eid)
     return g.comp, g.comp.drive
 
 

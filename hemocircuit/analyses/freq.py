@@ -59,7 +59,7 @@ def _run_chunk(job):
     bc.set_param(f"{inp}.{drive.frequency}", f, prepare=False)
     bc.set_param(f"{inp}.{drive.phase}", np.zeros(B), prepare=False)
     bc.set_param(f"{inp}.{drive.start}", np.zeros(B), prepare=False)
-    bc._prepare()
+    bc.prepare()
     period = 1.0 / f
     t = np.zeros(B)
     x = X0.copy()

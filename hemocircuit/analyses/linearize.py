@@ -137,7 +137,7 @@ def law_gradients(circuit, x, t=0.0, eps=EPS):
     c = np.zeros((Bm, len(specs), nx))
     if not specs:
         return c[0] if single else c
-    plist = circuit._params(1) if Bm == circuit.B else circuit._params_for(Bm)
+    plist = circuit.group_params(Bm)
     for k, spec in enumerate(specs):
         for g, i, vol, sign in spec["terms"]:
             st = next((s for s in g.comp.storages() if s.volume == vol), None)

@@ -171,7 +171,7 @@ def dc_guess(circuit, t=0.0, max_iter=200, tol=1e-12):
     X = np.zeros((B, circuit.nx))
     if circuit.nx == 0:
         return X
-    plist = circuit._params(1)
+    plist = circuit.group_params()
     for g, p in zip(circuit.groups, plist):
         if g.S:
             X[:, g.sidx] = np.broadcast_to(g.comp.default_states(p), (B, g.E, g.S))
@@ -203,10 +203,7 @@ def dc_guess(circuit, t=0.0, max_iter=200, tol=1e-12):
 
 
 def _dc_u(circuit, t, X):
-    plist = circuit._bound_params(X, circuit._params(1), t)
-    A, b, stamps = circuit._assemble(t, X, plist, dc=True)
-    u = circuit._solve(A, b)
-    return u, plist, stamps
+    return circuit.dc_unknowns(t, X)
 
 
 def _calibrate(circuit, t):
@@ -258,7 +255,7 @@ def _source_stepping(circuit, totals, t):
         c = circuit.copy()
         for p in paths:
             c.set_param(p, base[p] * lam if c.B > 1 else float(base[p][0] * lam), prepare=False)
-        c._prepare()
+        c.prepare()
         X0 = dc_guess(c, t) if X is None else X
         X, ok, res = newton(c, X0, totals, t, ptc=True)
         if not ok:

@@ -25,13 +25,14 @@ class PeriodicOrbit:
         self.x0, self.period, self.t, self.x = x0, period, t, x
         self.multipliers, self.converged, self.iterations = multipliers, converged, iterations
         self.residual, self.forced, self.columns, self.units = residual, forced, columns, units
+        self.n_laws = 0  # conserved quantities (each gives a trivial multiplier 1)
 
     @property
     def nontrivial_multipliers(self):
         """Multipliers without the trivial ones (flow direction, conservation laws), by |mu|."""
         mu = np.array(sorted(self.multipliers, key=lambda z: -abs(z)))
         n_triv = 0 if self.forced else 1
-        n_triv += self._n_laws
+        n_triv += self.n_laws
         # drop the n_triv multipliers closest to 1
         idx = np.argsort(np.abs(mu - 1.0))[:n_triv]
         return np.delete(mu, idx)
@@ -121,7 +122,7 @@ def shoot(circuit, x_guess, T_guess, forced=False, rtol=1e-9, tol=1e-8, max_iter
     cols = c.outputs(t, xs)
     orb = PeriodicOrbit(x0, T, t, xs, np.linalg.eigvals(M) if M is not None else np.zeros(0), converged, it,
                         res_norm, forced, cols, c.column_units())
-    orb._n_laws = len(L)
+    orb.n_laws = len(L)
     return orb
 
 
