@@ -1,9 +1,10 @@
 """Write, cache and import the compiled engine for a set of component types.
 
-One module is generated per *set of component types* (not per netlist, element count or
-parameter value): a header that dispatches by type code to each type's Kernel functions,
-followed by ``engine_template.py``.  Numba compiles it on first use and caches the machine
-code beside the module, so netlists made of the same types never recompile.  The module's
+One module is generated per list of kernels -- in practice all registered component types
+(``kernels.layout.registered_kernels``), never per netlist, element count or parameter value:
+a header that dispatches by type code to each type's Kernel functions, followed by
+``engine_template.py``.  Numba compiles it on first use and caches the machine code beside
+the module, so later netlists never recompile.  The module's
 name hashes the template, the kernels' source files and the numba version, so an edit to any
 of them makes a new module instead of reusing stale machine code.
 
@@ -21,7 +22,9 @@ from pathlib import Path
 _TEMPLATE = Path(__file__).with_name("engine_template.py")
 _HERE = Path(__file__).parent
 # sources whose constants are frozen into the compiled code (units: the mmHg/Pa factors)
-_SUPPORT = (_HERE / "waveforms.py", _HERE / "expressions.py", _HERE.parent / "units.py")
+_SUPPORT = (_HERE / "waveforms.py", _HERE / "expressions.py", _HERE.parent / "units.py",
+            _HERE.parent / "batch_integrator.py",  # the Rosenbrock tableau
+            Path(__file__))  # and this file: it writes the header
 _loaded: dict[str, object] = {}
 
 

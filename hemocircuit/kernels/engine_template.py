@@ -266,23 +266,9 @@ def nodes_batch(T, X, P, lay):
 
 # --- ROS34PW2 (Rang & Angermann 2005, BIT 45:761): 4 stages, order 3, embedded order 2,
 # L-stable, stiffly accurate Rosenbrock-W: consistent with an approximate (reused) Jacobian.
-GAMMA = 4.3586652150845900e-01
-RA = np.array([[0.0, 0.0, 0.0, 0.0],
-               [8.7173304301691801e-01, 0.0, 0.0, 0.0],
-               [8.4457060015369423e-01, -1.1299064236397981e-01, 0.0, 0.0],
-               [0.0, 0.0, 1.0, 0.0]])
-RG = np.array([[0.0, 0.0, 0.0, 0.0],
-               [-8.7173304301691801e-01, 0.0, 0.0, 0.0],
-               [-9.0338057013044082e-01, 5.4180672388095326e-02, 0.0, 0.0],
-               [2.4212380706095346e-01, -1.2232505839045147e+00, 5.4526025533510214e-01, 0.0]])
-RB = np.array([2.4212380706095346e-01, -1.2232505839045147e+00, 1.5452602553351023e+00,
-               4.3586652150845900e-01])
-RE = RB - np.array([3.7810903145819369e-01, -9.6042292212423178e-02, 5.0000000000000000e-01,
-                    2.1793326075422950e-01])
-RC = np.array([0.0, 8.7173304301691801e-01, 7.3157995778972170e-01, 1.0])
-RD = np.array([GAMMA, GAMMA - 8.7173304301691801e-01,
-               GAMMA - 9.0338057013044082e-01 + 5.4180672388095326e-02,
-               GAMMA + 2.4212380706095346e-01 - 1.2232505839045147e+00 + 5.4526025533510214e-01])
+# the tableau is the numpy batch integrator's (one copy; numba freezes these arrays as constants)
+from hemocircuit.batch_integrator import GAMMA, A as RA, G as RG, B_SOL as RB, B_EMB as _RB_EMB, C_T as RC, D_T as RD  # noqa: E402
+RE = RB - _RB_EMB  # error estimate: solution minus embedded solution
 JAC_REUSE = 6  # accepted steps per Jacobian (a W-method stays consistent with an old one)
 FD_REL = 1e-7  # finite-difference step, relative to max(|x|, the state's scale)
 

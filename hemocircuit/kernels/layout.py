@@ -7,6 +7,7 @@ and the compiled code.
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -26,6 +27,25 @@ class Layout:
     n_params: int
 
 
+@functools.lru_cache(maxsize=1)
+def registered_kernels() -> tuple:
+    """The kernels of every registered component type (one option set each; the functions do
+    not depend on options), in type-name order.  The engine is generated for all of them, so
+    every netlist, whatever its types, uses one compiled engine: compiled once per install."""
+    from ..registry import component_types
+
+    out, seen = [], set()
+    for _, cls in sorted(component_types().items()):
+        try:
+            k = cls().kernel()
+        except Exception:  # noqa: BLE001 - a plug-in that cannot build without options: numpy path
+            k = None
+        if k is not None and (k.stamp, k.derivs, k.observe) not in seen:
+            seen.add((k.stamp, k.derivs, k.observe))
+            out.append(k)
+    return tuple(out)
+
+
 def kernels_of(circuit):
     """[(group, Kernel)] for every group, or None if some type has no compiled kernel."""
     out = []
@@ -43,11 +63,11 @@ def build_layout(circuit) -> Layout | None:
     pairs = kernels_of(circuit)
     if pairs is None or circuit.n > MAX_DENSE_UNKNOWNS:
         return None
-    kernels, codes = [], {}
-    for _, k in pairs:
-        key = (k.stamp, k.derivs, k.observe)
-        if key not in codes:
-            codes[key] = len(kernels)
+    kernels = list(registered_kernels())
+    codes = {(k.stamp, k.derivs, k.observe): i for i, k in enumerate(kernels)}
+    for _, k in pairs:  # a type registered after the first call (tests, notebooks)
+        if (k.stamp, k.derivs, k.observe) not in codes:
+            codes[(k.stamp, k.derivs, k.observe)] = len(kernels)
             kernels.append(k)
     et, L, S, cm, st = [], [], [], [], []
     ep, ex, eu, eo, eb = [0], [0], [0], [0], [0]
