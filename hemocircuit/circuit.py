@@ -587,7 +587,7 @@ class Circuit:
                     f"node(s) {sorted(law.nodes)} connect only through volume stores, so the stored volume "
                     f"{law.describe()} is conserved and the operating point is undefined until it is fixed: add "
                     f"'constraints: [{{node: {node}, volume: <total> mL}}]' or a calibration "
-                    f"'{{node: {node}, pressure: 10 mmHg, when: {{Pa.value: 80 mmHg}}}}'",
+                    f"'{{node: {node}, pressure: <P> mmHg, when: {{<ID.PARAM>: <value with unit>}}}}'",
                     file=self.file, element=law.terms[0][0], node=node)
             c = match[0]
             specs.remove(c)
