@@ -43,7 +43,7 @@ def make_work(lay):
     return (np.zeros(ep[-1]), np.zeros(max(eb[-1], 1)), np.zeros((n + 1, n + 1)), np.zeros(n + 1),
             np.zeros(n + 1), np.zeros((Lm, Lm)), np.zeros(Lm), np.zeros(Lm), np.zeros(n + 1),
             np.zeros(Pm), np.zeros(Sm), np.zeros(Im, dtype=np.int64), np.zeros(Sm), np.zeros(Om),
-            np.zeros((n + 1, n + 1)), np.zeros(n + 1))
+            np.zeros((n + 1, n + 1)), np.zeros(n + 1), np.zeros(n + 1, dtype=np.int64))
 
 
 # inline="always" (numba IR inlining) on the small helpers called inside the per-evaluation
@@ -81,42 +81,6 @@ def effective_params(t, x, P, lay, work):
         for k in range(xs.shape[0]):
             Pe[xs[k]] = eval_expr(xcode, xc[k], xconst, xk[k], Pe, O)
     return Pe
-
-
-@njit(cache=True, nogil=True)
-def lu_solve(A, b, n, out):
-    """Solve A[:n,:n] out = b[:n] by Gaussian elimination with partial pivoting (A, b are
-    overwritten).  Returns False when the matrix is singular."""
-    for c in range(n):
-        p = c
-        best = abs(A[c, c])
-        for r in range(c + 1, n):
-            v = abs(A[r, c])
-            if v > best:
-                best, p = v, r
-        if best == 0.0:
-            return False
-        if p != c:
-            for j in range(c, n):
-                tmp = A[c, j]
-                A[c, j] = A[p, j]
-                A[p, j] = tmp
-            tmp = b[c]
-            b[c] = b[p]
-            b[p] = tmp
-        inv = 1.0 / A[c, c]
-        for r in range(c + 1, n):
-            f = A[r, c] * inv
-            if f != 0.0:
-                for j in range(c + 1, n):
-                    A[r, j] -= f * A[c, j]
-                b[r] -= f * b[c]
-    for i in range(n - 1, -1, -1):
-        s = b[i]
-        for j in range(i + 1, n):
-            s -= A[i, j] * out[j]
-        out[i] = s / A[i, i]
-    return True
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -163,7 +127,7 @@ def solve_nodes(t, x, Pe, lay, work):
     parameters.  Returns False if the system is singular or Newton fails."""
     (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st) = lay
     A, b, u, Al, bl, un, A0, b0 = work[2], work[3], work[4], work[5], work[6], work[8], work[14], work[15]
-    ul, pl, xl, il = work[7], work[9], work[10], work[11]
+    ul, pl, xl, il, piv = work[7], work[9], work[10], work[11], work[16]
     if nonlin == 0:
         for i in range(n + 1):
             u[i] = 0.0
@@ -182,8 +146,11 @@ def solve_nodes(t, x, Pe, lay, work):
                 if cm[e] == 0:
                     for j in range(L[e]):
                         A[r, ui[eu[e] + j]] += Al[i, j]
-        if not lu_solve(A, b, n, un):
+        if not lu_factor(A, piv, n):
             return False
+        for i in range(n):
+            un[i] = b[i]
+        lu_apply(A, piv, un, n)
         un[n] = 0.0
         if nonlin == 0:
             for i in range(n + 1):
@@ -295,9 +262,10 @@ def jacobian_into(t, x, f0, P, lay, work, scales, J, ft, xt, ftmp):
 
 
 @njit(cache=True, nogil=True)
-def lu_factor(W, piv):
-    """In-place LU with partial pivoting of W (m, m); False if singular."""
-    m = W.shape[0]
+def lu_factor(W, piv, m):
+    """In-place LU with partial pivoting of the leading m x m block of W; False if singular.
+    (The nodal system uses it with m = n, leaving out the ground slot; the integrator's W
+    matrix with m = nx.)"""
     for c in range(m):
         p = c
         best = abs(W[c, c])
@@ -324,9 +292,8 @@ def lu_factor(W, piv):
 
 
 @njit(cache=True, nogil=True)
-def lu_apply(W, piv, v):
-    """Solve with the factors of lu_factor, in place on v."""
-    m = W.shape[0]
+def lu_apply(W, piv, v, m):
+    """Solve with the factors of lu_factor (size m), in place on v[:m]."""
     for c in range(m):
         p = piv[c]
         if p != c:
@@ -449,7 +416,7 @@ def integrate(t_out, x0, P, lay, scales, lim_i, lim_b, lim_r, breaks, rtol, atol
             for j in range(nx):
                 W[i, j] = -GAMMA * hh * J[i, j]
             W[i, i] += 1.0
-        if not lu_factor(W, piv):
+        if not lu_factor(W, piv, nx):
             h = 0.25 * hh
             age = JAC_REUSE
             nrej += 1
@@ -483,7 +450,7 @@ def integrate(t_out, x0, P, lay, scales, lim_i, lim_b, lim_r, breaks, rtol, atol
                 for j in range(nx):
                     acc += J[i, j] * gs[j]
                 K[s, i] = hh * fn[i] + hh * acc + hh * hh * RD[s] * ft[i]
-            lu_apply(W, piv, K[s])
+            lu_apply(W, piv, K[s], nx)
         enorm = np.inf
         if good:
             enorm = 0.0
