@@ -227,8 +227,12 @@ def _extra_commands():
         if callable(getattr(m, "register_cli", None)):
             out.append(m.register_cli)
     for ep in metadata.entry_points(group="hemocircuit.analyses"):
-        obj = ep.load()
-        out.append(obj if callable(obj) and not hasattr(obj, "register_cli") else obj.register_cli)
+        try:
+            obj = ep.load()
+            out.append(obj if callable(obj) and not hasattr(obj, "register_cli") else obj.register_cli)
+        except Exception as exc:  # noqa: BLE001 - one broken plug-in must not take the CLI down
+            print(f"warning: analysis plug-in {ep.name!r} ({ep.value}) could not be loaded: {exc}",
+                  file=sys.stderr)
     return out
 
 

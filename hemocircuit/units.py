@@ -120,11 +120,14 @@ class _DiskCache:
         self.loaded = True
         atexit.register(self.save)
         try:
+            import hashlib
+
             version = metadata.version("pint")
+            rules = hashlib.sha256(Path(__file__).read_bytes()).hexdigest()[:12]  # our parsing rules
             folder = Path(os.environ.get("HEMOCIRCUIT_CACHE_DIR") or Path.home() / ".cache" / "hemocircuit")
-            self.path = folder / f"units-pint-{version}.json"
+            self.path = folder / f"units-pint-{version}-{rules}.json"
             rows = json.loads(self.path.read_text()) if self.path.exists() else []
-            for text, unit, value in rows:
+            for text, unit, value in rows:  # text None: the factor of a bare number to ``unit``
                 _CONVERTED.setdefault((text, unit), float(value))
         except (OSError, ValueError, TypeError, metadata.PackageNotFoundError):
             self.path = None  # no cache: every conversion goes through pint
@@ -170,10 +173,10 @@ def parse_quantity(value, unit: str, what: str = "value") -> float:
         # a bare number is valid only for a dimensionless unit: cache that unit's factor
         if not _DISK.loaded:
             _DISK.load()
-        factor = _CONVERTED.get(("#number", unit))
+        factor = _CONVERTED.get((None, unit))  # None: never a string input's key
         if factor is None:
             out = _parse_quantity(value, unit, what)  # raises for a dimensioned unit
-            _CONVERTED[("#number", unit)] = _parse_quantity(1.0, unit, what)
+            _CONVERTED[(None, unit)] = _parse_quantity(1.0, unit, what)
             _DISK.dirty = True
             return out
         return float(value) * factor

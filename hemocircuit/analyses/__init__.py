@@ -21,3 +21,9 @@ def _method(name, module):
 def attach(circuit_class):
     for name, module in METHODS.items():
         setattr(circuit_class, name, _method(name, module))
+
+
+def __getattr__(name):  # ``from hemocircuit.analyses import simulate`` still works, lazily
+    if name in METHODS:
+        return getattr(import_module(f"{__name__}.{METHODS[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -195,6 +195,8 @@ def _collect(c_last, ts, xs, segs):
 def _simulate_compiled(system, c, x, t0, t_end, dt, events, rtol, atol, max_step, first_step):
     """simulate() on the compiled engine: one kernel call per protocol segment (hard limits and
     source breakpoints are handled inside the kernel)."""
+    from ..kernels.system import CompiledSystem
+
     if dt is None:
         t_grid = np.linspace(t0, t_end, 1001)
     else:
@@ -211,6 +213,14 @@ def _simulate_compiled(system, c, x, t0, t_end, dt, events, rtol, atol, max_step
         if k > 0:
             c = c.copy()
             events[k - 1][1].apply(c)
+            # an event may change waveforms, options or expressions: the layout follows the
+            # circuit (cheap; the compiled engine itself is reused)
+            system = CompiledSystem.of(c)
+            if system is None:
+                raise SolverError(f"the event at t = {t_a:g} s leaves a circuit that cannot run compiled; "
+                                  "use engine='scipy'", time=t_a)
+        if t_b <= t_a:  # several events at one time: apply them all, integrate nothing
+            continue
         tpts = t_grid[(t_grid > t_a) & (t_grid < t_b)]
         tpts = np.concatenate([[t_a], tpts, [t_b]])
         X, st = system.integrate(tpts, x, system.params(c)[0], rtol=rtol, atol=atol,

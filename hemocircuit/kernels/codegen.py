@@ -82,9 +82,15 @@ def _fingerprint(kernels) -> str:
     return h.hexdigest()[:20]
 
 
+_keys: dict = {}
+
+
 def engine_module(kernels):
     """The compiled engine module for these Kernel objects (ordered: index = type code)."""
-    key = _fingerprint(kernels)
+    ident = tuple(id(f) for k in kernels for f in (k.stamp, k.derivs, k.observe))
+    key = _keys.get(ident)
+    if key is None:  # hashing the sources costs ~0.6 ms: once per process and kernel list
+        key = _keys[ident] = _fingerprint(kernels)
     mod = _loaded.get(key)
     if mod is not None:
         return mod

@@ -242,7 +242,8 @@ FD_REL = 1e-7  # finite-difference step, relative to max(|x|, the state's scale)
 
 @njit(cache=True, nogil=True)
 def jacobian_into(t, x, f0, P, lay, work, scales, J, ft, xt, ftmp):
-    """Forward-difference Jacobian J (nx, nx) and df/dt ft (nx,) at (t, x) with f0 = f(t, x)."""
+    """Forward-difference Jacobian J (nx, nx) and df/dt ft (nx,) at (t, x) with f0 = f(t, x).
+    Returns the number of evaluations, or -1 if one failed (singular nodal system)."""
     nx = x.shape[0]
     for i in range(nx):
         xt[i] = x[i]
@@ -250,12 +251,14 @@ def jacobian_into(t, x, f0, P, lay, work, scales, J, ft, xt, ftmp):
         hj = FD_REL * max(abs(x[j]), scales[j])
         xt[j] = x[j] + hj
         hj = xt[j] - x[j]
-        rhs_into(t, xt, P, lay, work, ftmp)
+        if not rhs_into(t, xt, P, lay, work, ftmp):
+            return -1
         for i in range(nx):
             J[i, j] = (ftmp[i] - f0[i]) / hj
         xt[j] = x[j]
     ht = FD_REL * max(abs(t), 1.0)
-    rhs_into(t + ht, x, P, lay, work, ftmp)
+    if not rhs_into(t + ht, x, P, lay, work, ftmp):
+        return -1
     for i in range(nx):
         ft[i] = (ftmp[i] - f0[i]) / ht
     return nx + 1
@@ -395,7 +398,11 @@ def integrate(t_out, x0, P, lay, scales, lim_i, lim_b, lim_r, breaks, rtol, atol
         if ib < breaks.shape[0] and breaks[ib] < t_end:
             tb = breaks[ib]
         if age >= JAC_REUSE:
-            nfev += jacobian_into(t, x, f, P, lay, work, scales, J, ft, xt, ftmp)
+            nj = jacobian_into(t, x, f, P, lay, work, scales, J, ft, xt, ftmp)
+            if nj < 0:
+                status = -3
+                break
+            nfev += nj
             age = 0
         hh = min(h, hmax)
         at_break = False
@@ -409,7 +416,9 @@ def integrate(t_out, x0, P, lay, scales, lim_i, lim_b, lim_r, breaks, rtol, atol
                 if tb < t_end:
                     ib += 1
                 nfev += 1
-                rhs_into(t, x, P, lay, work, f)
+                if not rhs_into(t, x, P, lay, work, f):
+                    status = -3
+                    break
                 age = JAC_REUSE
                 continue
         for i in range(nx):
@@ -475,9 +484,18 @@ def integrate(t_out, x0, P, lay, scales, lim_i, lim_b, lim_r, breaks, rtol, atol
             # hard limits: end the step at the earliest crossing
             s_hit = 2.0
             k_hit = -1
+            held = False
             for k in range(lim_i.shape[0]):
                 li = lim_i[k]
-                if xn[li] < lim_b[k] and x[li] >= lim_b[k]:
+                if xn[li] < lim_b[k] and x[li] <= lim_b[k]:
+                    # already on the bound (just reset): hold it there, as the floor means,
+                    # instead of locating the same crossing again at s ~ 0 every step
+                    xn[li] = lim_b[k]
+                    if lim_r[k] >= 0:
+                        xn[lim_r[k]] = max(xn[lim_r[k]], 0.0)
+                    held = True
+                    continue
+                if xn[li] < lim_b[k] and x[li] > lim_b[k]:
                     sk = hermite_root(x[li] - lim_b[k], f[li] * hh, xn[li] - lim_b[k], fn[li] * hh)
                     if sk < s_hit:
                         s_hit, k_hit = sk, k
@@ -495,6 +513,9 @@ def integrate(t_out, x0, P, lay, scales, lim_i, lim_b, lim_r, breaks, rtol, atol
                 ok = rhs_into(tn, xn, P, lay, work, fn)
                 age = JAC_REUSE
                 nev += 1
+            elif held:
+                nfev += 1
+                ok = rhs_into(min(tn, tlim), xn, P, lay, work, fn)
             if not ok:
                 status = -3
                 break
@@ -514,7 +535,9 @@ def integrate(t_out, x0, P, lay, scales, lim_i, lim_b, lim_r, breaks, rtol, atol
                 ib += 1
                 age = JAC_REUSE
                 nfev += 1
-                rhs_into(t, x, P, lay, work, f)
+                if not rhs_into(t, x, P, lay, work, f):
+                    status = -3
+                    break
             h = hh * fac if not at_break else max(h, hh * fac)
             age += 1
             nrej_run = 0
