@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .derivatives import fd_steps, time_step
+
 # ROS34PW2 tableau (Hairer convention: W = I - gamma h J,
 # W k_i = h f(t + c_i h, x + sum_j A_ij k_j) + h J sum_j G_ij k_j + h^2 d_i f_t)
 GAMMA = 4.3586652150845900e-01
@@ -180,8 +182,8 @@ def _rhs(circuit, t, x, members=None, B=None):
 def jac_and_ft(circuit, t, x, f0):
     """Batched finite-difference Jacobian (n, nx, nx) and df/dt (n, nx), one evaluation."""
     n, nx = x.shape
-    hx = 1e-7 * np.maximum(np.abs(x), circuit.state_scales)
-    ht = 1e-7 * np.maximum(np.abs(t), 1.0)
+    hx = fd_steps(x, circuit.state_scales)
+    ht = time_step(t)
     stack = np.repeat(x[:, None, :], nx + 1, axis=1)
     stack[:, np.arange(nx), np.arange(nx)] += hx
     tt = np.repeat(t[:, None], nx + 1, axis=1)

@@ -858,17 +858,10 @@ class Circuit:
         if self.sparse:
             Js = self.sparse_jacobian(t, x)[0]
             return Js[0] if np.ndim(x) == 1 else Js
+        from .derivatives import dense_jacobian
+
         single = np.ndim(x) == 1
-        X = np.atleast_2d(np.asarray(x, dtype=float))
-        B, nx = X.shape
-        h = 1e-7 * np.maximum(np.abs(X), self.state_scales)  # (B, nx)
-        h = (X + h) - X
-        stack = np.repeat(X[:, None, :], nx + 1, axis=1)  # (B, nx+1, nx)
-        idx = np.arange(nx)
-        stack[:, idx + 1, idx] += h
-        F = self.evaluate(t, stack.reshape(B * (nx + 1), nx)).reshape(B, nx + 1, nx)
-        J = (F[:, 1:, :] - F[:, :1, :]) / h[:, :, None]  # (B, col, row)
-        J = np.swapaxes(J, 1, 2)
+        J, _ = dense_jacobian(lambda rows: self.evaluate(t, rows), x, self.state_scales)
         return J[0] if single else J
 
     def jacobian_plan(self, key, fun, X, t=0.0, row_reads=None, how="auto"):

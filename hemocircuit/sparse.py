@@ -22,6 +22,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
+from .derivatives import fd_steps
+
 #: default threshold: circuits with more nodal unknowns than this take the sparse path
 SPARSE_MIN_UNKNOWNS = 64
 #: rows x columns of the largest array a pattern-detection block may create (~16 MB of floats)
@@ -336,11 +338,10 @@ def coloured_jacobian(fun, X, scales, plan):
     """Finite-difference Jacobians at every member of X (B, nx) from ONE evaluation of
     B * (colours + 1) stacked rows.  Returns ([csc_matrix (nx, nx)] * B, F(X) (B, nx)).
 
-    The step of column j is the one of the dense Jacobian: 1e-7 max(|x_j|, scale_j)."""
+    The steps are hemocircuit.derivatives' (those of the dense Jacobian)."""
     X = np.atleast_2d(np.asarray(X, dtype=float))
     B, nx = X.shape
-    h = 1e-7 * np.maximum(np.abs(X), scales)
-    h = (X + h) - X
+    h = fd_steps(X, scales)
     K = plan.ncolours
     stack = np.repeat(X[:, None, :], K + 1, axis=1)  # (B, K+1, nx)
     idx = np.arange(nx)

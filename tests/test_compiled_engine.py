@@ -112,3 +112,17 @@ def test_batch_members_independent():
     alone, _ = system.integrate(t, x0, P[2], rtol=1e-7)
     assert np.array_equal(X[2], alone)
     assert not np.allclose(X[0], X[2])
+
+
+def test_one_finite_difference_rule():
+    """The derivatives service's dense Jacobian of a known function: d(x^2, x0*x1)/dx."""
+    from hemocircuit.derivatives import dense_jacobian
+
+    def fun(rows):
+        return np.stack([rows[:, 0] ** 2, rows[:, 0] * rows[:, 1]], axis=1)
+
+    X = np.array([[3.0, -2.0], [0.5, 4.0]])
+    J, F = dense_jacobian(fun, X, np.ones(2))
+    expect = np.array([[[6.0, 0.0], [-2.0, 3.0]], [[1.0, 0.0], [4.0, 0.5]]])
+    assert np.allclose(F, fun(X))
+    assert np.allclose(J, expect, rtol=1e-6, atol=1e-6)

@@ -19,6 +19,7 @@ import scipy.sparse as sp
 from scipy.sparse.linalg import lsqr, splu
 
 from .. import sparse as sparse_la
+from ..derivatives import dense_jacobian
 from ..errors import HemocircuitError, SolverError
 
 
@@ -75,15 +76,9 @@ def _jac(circuit, t, X, law_totals):
         key = ("residual", tuple(spec.get("_target") is not None for spec in circuit.law_specs))
         plan = circuit.jacobian_plan(key, fun, X, t, row_reads=reads)
         return sparse_la.coloured_jacobian(fun, X, circuit.state_scales, plan)
-    B, nx = X.shape
-    h = 1e-7 * np.maximum(np.abs(X), circuit.state_scales)
-    h = (X + h) - X
-    stack = np.repeat(X[:, None, :], nx + 1, axis=1)
-    idx = np.arange(nx)
-    stack[:, idx + 1, idx] += h
-    F = residual(circuit, t, stack.reshape(B * (nx + 1), nx), _rep(law_totals, nx + 1)).reshape(B, nx + 1, nx)
-    J = (F[:, 1:, :] - F[:, :1, :]) / h[:, :, None]
-    return np.swapaxes(J, 1, 2), F[:, 0, :]
+    nx = X.shape[1]
+    return dense_jacobian(lambda rows: residual(circuit, t, rows, _rep(law_totals, nx + 1)), X,
+                          circuit.state_scales)
 
 
 def _rep(totals, k):

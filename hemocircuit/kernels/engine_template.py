@@ -237,7 +237,7 @@ def nodes_batch(T, X, P, lay):
 from hemocircuit.batch_integrator import GAMMA, A as RA, G as RG, B_SOL as RB, B_EMB as _RB_EMB, C_T as RC, D_T as RD  # noqa: E402
 RE = RB - _RB_EMB  # error estimate: solution minus embedded solution
 JAC_REUSE = 6  # accepted steps per Jacobian (a W-method stays consistent with an old one)
-FD_REL = 1e-7  # finite-difference step, relative to max(|x|, the state's scale)
+FD_REL = 1e-7  # finite-difference step, relative to max(|x|, the state's scale): hemocircuit.derivatives' rule
 
 
 @njit(cache=True, nogil=True)
