@@ -125,14 +125,11 @@ def rel(a, b):
 
 
 def period(t, y):
-    """Mean interval between upward crossings of the mean (linear interpolation), NaN if < 2
-    (the definition of hemocircuit's envelope analysis and of the peers README)."""
-    z = y - y.mean()
-    up = np.nonzero((z[:-1] < 0) & (z[1:] >= 0))[0]
-    if len(up) < 2:
-        return float("nan")
-    tc = t[up] - z[up] * (t[up + 1] - t[up]) / (z[up + 1] - z[up])
-    return float(np.mean(np.diff(tc)))
+    """Mean interval between upward crossings of the mean, NaN if < 2 (hemocircuit's envelope
+    definition, which the peers README uses too)."""
+    from hemocircuit.analyses.envelope import _period
+
+    return _period(t, y)
 
 
 def on_grid(t, dt, t0=0.0):

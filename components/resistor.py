@@ -18,14 +18,6 @@ def kernel_stamp(p, x, u, t, iopt, A, b):
     A[1, 1] = g
 
 
-@_jit
-def kernel_derivs(p, x, u, t, iopt, dx):
-    pass
-
-
-@_jit
-def kernel_observe(p, x, iopt, out):
-    pass
 
 
 class Resistor(Component):
@@ -41,4 +33,5 @@ class Resistor(Component):
 
     def kernel(self):
         from hemocircuit.kernels import Kernel
-        return Kernel(stamp=kernel_stamp, derivs=kernel_derivs, observe=kernel_observe, observables=())
+        from hemocircuit.kernels.stateless import no_derivs, no_observables
+        return Kernel(stamp=kernel_stamp, derivs=no_derivs, observe=no_observables, observables=())

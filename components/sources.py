@@ -72,14 +72,6 @@ def flow_stamp(p, x, u, t, iopt, A, b):
     b[1] = q
 
 
-@_jit
-def kernel_derivs(p, x, u, t, iopt, dx):
-    pass
-
-
-@_jit
-def kernel_observe(p, x, iopt, out):
-    pass
 
 
 class PressureSource(Component):
@@ -114,7 +106,8 @@ class PressureSource(Component):
 
     def kernel(self):
         from hemocircuit.kernels import Kernel
-        return Kernel(stamp=pressure_stamp, derivs=kernel_derivs, observe=kernel_observe, observables=())
+        from hemocircuit.kernels.stateless import no_derivs, no_observables
+        return Kernel(stamp=pressure_stamp, derivs=no_derivs, observe=no_observables, observables=())
 
 
 class FlowSource(Component):
@@ -139,4 +132,5 @@ class FlowSource(Component):
 
     def kernel(self):
         from hemocircuit.kernels import Kernel
-        return Kernel(stamp=flow_stamp, derivs=kernel_derivs, observe=kernel_observe, observables=())
+        from hemocircuit.kernels.stateless import no_derivs, no_observables
+        return Kernel(stamp=flow_stamp, derivs=no_derivs, observe=no_observables, observables=())

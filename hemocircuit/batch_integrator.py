@@ -58,6 +58,8 @@ def integrate(circuit, x0, t_out, rtol=1e-5, atol=None, h0=1e-3, max_steps=50000
 
     engine: 'auto' runs the compiled kernel (hemocircuit.kernels: the same method, one
     member after another inside numba) when the circuit has one, 'numpy' this vectorised code."""
+    if engine not in ("auto", "numpy"):
+        raise ValueError(f"engine {engine!r}: choose 'auto' or 'numpy'")
     if engine == "auto":
         from .kernels.system import CompiledSystem
         system = CompiledSystem.of(circuit)

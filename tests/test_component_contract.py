@@ -18,7 +18,6 @@ value inside its declared bounds.
 from __future__ import annotations
 
 import glob
-import itertools
 import math
 import numbers
 
@@ -30,22 +29,11 @@ from hemocircuit.registry import component_types
 from hemocircuit.units import Q_, parse_quantity
 
 from paths import NETLISTS, ROOT
+from options import option_combinations
 
 TYPES = component_types()
 ROLES = {"conductive", "pressure", "flow"}
 B, E = 2, 3  # batch and elements of the shape checks
-
-
-def option_combinations(cls):
-    axes = []
-    for name, opt in cls.options.items():
-        if opt.choices is not None:
-            axes.append([(name, c) for c in opt.choices])
-        elif opt.kind is bool:
-            axes.append([(name, False), (name, True)])
-        else:
-            axes.append([(name, opt.default)])
-    return [dict(c) for c in itertools.product(*axes)]
 
 
 def _okey(opts):

@@ -1,7 +1,6 @@
 """Compiled kernels of the simple element types, waveform records and expression bytecode,
 each against its numpy / Python reference (component hooks, Waveform.__call__,
 Expression.evaluate) over random inputs, every option combination and the branch edges."""
-import itertools
 import math
 import pickle
 import zlib
@@ -24,6 +23,7 @@ from hemocircuit.netlist import load_netlist
 from hemocircuit.waveforms import Constant, Sine, Sum, Table, parse_waveform
 
 from paths import ROOT
+from options import option_combinations
 
 RTOL = 1e-13
 E = 400  # elements per random draw
@@ -134,18 +134,6 @@ OPTION_ENCODINGS = [
     (TissuePool, {"units_reading": "consistent"}, [0]),
     (TissuePool, {"units_reading": "thesis", "scale": "1e-17"}, [1]),
 ]
-
-
-def option_combinations(cls):
-    axes = []
-    for name, opt in cls.options.items():
-        if opt.choices is not None:
-            axes.append([(name, c) for c in opt.choices])
-        elif opt.kind is bool:
-            axes.append([(name, False), (name, True)])
-        else:
-            axes.append([(name, opt.default)])
-    return [dict(c) for c in itertools.product(*axes)]
 
 
 CASES = [(tn, opts) for tn, (cls, _) in TYPES.items() for opts in option_combinations(cls)]

@@ -213,24 +213,6 @@ def rhs_batch(t, X, P, lay):
     return out
 
 
-@njit(cache=True, nogil=True)
-def nodes_batch(T, X, P, lay):
-    """Solved nodal unknowns (m, n) for rows X (m, nx) at times T (m,)."""
-    work = make_work(lay)
-    n = lay[0]
-    out = np.empty((X.shape[0], n))
-    for k in range(X.shape[0]):
-        p = P[k if P.shape[0] > 1 else 0]
-        if k == 0 or P.shape[0] > 1:
-            prepare_static(T[k], X[k], p, lay, work)
-        Pe = effective_params(T[k], X[k], p, lay, work)
-        if solve_nodes(T[k], X[k], Pe, lay, work):
-            out[k] = work[4][:n]
-        else:
-            out[k] = np.nan
-    return out
-
-
 # --- ROS34PW2 (Rang & Angermann 2005, BIT 45:761): 4 stages, order 3, embedded order 2,
 # L-stable, stiffly accurate Rosenbrock-W: consistent with an approximate (reused) Jacobian.
 # the tableau is the numpy batch integrator's (one copy; numba freezes these arrays as constants)

@@ -72,6 +72,19 @@ def concat(records) -> tuple[np.ndarray, np.ndarray]:
 
 
 @_jit
+def _last_at_or_before(data, ts, n, t):
+    """Largest j with times[j] <= t (-1 if none), times = data[ts:ts+n] sorted."""
+    lo, hi = 0, n
+    while lo < hi:
+        mid = lo + ((hi - lo) >> 1)
+        if t >= data[ts + mid]:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo - 1
+
+
+@_jit
 def _interp(data, ts, n, t):
     """np.interp(t, data[ts:ts+n], data[ts+n:ts+2n]) with the default left/right values."""
     vs = ts + n
@@ -83,15 +96,7 @@ def _interp(data, ts, n, t):
         return data[vs + n - 1]
     if t < data[ts]:
         return data[vs]
-    # j: the last index with times[j] <= t (numpy's binary_search_with_guess)
-    lo, hi = 0, n
-    while lo < hi:
-        mid = lo + ((hi - lo) >> 1)
-        if t >= data[ts + mid]:
-            lo = mid + 1
-        else:
-            hi = mid
-    j = lo - 1
+    j = _last_at_or_before(data, ts, n, t)  # numpy's binary_search_with_guess
     if j == n - 1:
         return data[vs + j]
     xj = data[ts + j]
@@ -112,14 +117,7 @@ def _steps(data, ts, n, t):
     """values[max(searchsorted(times, t, 'right') - 1, 0)]."""
     if t != t:  # NaN sorts after everything
         return data[ts + n + n - 1]
-    lo, hi = 0, n
-    while lo < hi:
-        mid = lo + ((hi - lo) >> 1)
-        if t >= data[ts + mid]:
-            lo = mid + 1
-        else:
-            hi = mid
-    i = lo - 1
+    i = _last_at_or_before(data, ts, n, t)
     if i < 0:
         i = 0
     return data[ts + n + i]
