@@ -8,6 +8,7 @@ exit with status 2; they never show a traceback.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 
 from . import io
@@ -94,16 +95,40 @@ def cmd_check(args):
     print("ok: the netlist is valid" + (" and so is the protocol" if proto else ""))
 
 
+def record(args, res):
+    """Add this invocation's provenance (command line, --set, --protocol) to a result."""
+    from .provenance import add_invocation
+    netlists = getattr(args, "netlists", None) or [getattr(args, "netlist", None)]
+    add_invocation(res.metadata, getattr(args, "argv", sys.argv[1:]), _sets(getattr(args, "set", None)),
+                   getattr(args, "protocol", None), netlists=[n for n in netlists if n])
+    return res
+
+
+def save_outputs(args, res, plot=None):
+    """Write ``--out`` (the result, with provenance) and ``--plot`` (``plot(path)``, default
+    ``res.plot``); both were checked before the computation (:func:`_check_outputs`)."""
+    record(args, res)
+    if getattr(args, "out", None):
+        print(f"wrote {res.save(args.out)}")
+    if getattr(args, "plot", None):
+        (plot or (lambda path: res.plot(path, select=getattr(args, "show", None))))(args.plot)
+        print(f"wrote {args.plot}")
+
+
+def partial_path(path):
+    """'run.csv' -> 'run.partial.csv': where a failed run's computed part goes."""
+    stem, ext = os.path.splitext(path)
+    return f"{stem}.partial{ext or '.csv'}"
+
+
 def cmd_op(args):
+    if args.plot:
+        raise HemocircuitError("op --plot: an operating point is one steady state, nothing to plot; "
+                               "use 'dc --sweep ... --plot' for curves")
     c, _ = _load(args)
     op = c.operating_point()
-    flat = op.as_flat_dict()
-    width = max(len(k) for k in flat)
-    for k, v in flat.items():
-        print(f"{k:<{width}}  {v:.8g}")
-    if args.out:
-        io.write_json(args.out, flat)
-        print(f"wrote {args.out}")
+    print(op.summary(show=args.show))
+    save_outputs(args, op)
 
 
 def cmd_dc(args):
@@ -112,20 +137,12 @@ def cmd_dc(args):
         raise HemocircuitError("dc needs --sweep ID.PARAM=START:STOP:STEP UNIT (e.g. Pa.value=20:200:5mmHg)")
     param, rng = args.sweep.split("=", 1)
     res = c.dc_sweep(param.strip(), _range_spacing(rng))
-    cols = {k: v for k, v in res.items() if k != param.strip()}
+    cols = res.columns
     show = args.show or [k for k in cols if k.startswith("Q(")][:1] + [k for k in cols if k.startswith("P(")][:3]
-    print("  ".join(f"{h:>14}" for h in [io.labelled(param, res.units)] + [io.labelled(s, res.units) for s in show]))
-    for i in range(len(res[param.strip()])):
-        print("  ".join(f"{v:>14.6g}" for v in [res[param.strip()][i]] + [cols[s][i] for s in show]))
+    print(res.summary(show=show, max_rows=0, where=args.out))
     for v, why in res.failed:
         print(f"failed at {param}={v:g}: {why}", file=sys.stderr)
-    if args.out:
-        io.write_csv(args.out, cols, res.units, first=(param.strip(), res[param.strip()], res.units[param.strip()]))
-        print(f"wrote {args.out}")
-    if args.plot:
-        io.plot_series(args.plot, res[param.strip()], io.labelled(param.strip(), res.units), cols, res.units,
-                       title=f"{c.netlist.name}: DC sweep", select=args.show)
-        print(f"wrote {args.plot}")
+    save_outputs(args, res)
 
 
 def _range_spacing(r):
@@ -134,27 +151,86 @@ def _range_spacing(r):
 
 
 def cmd_tran(args):
+    from .errors import SolverError
+
     c, proto = _load(args, uses_events=True)
     t_end = float(_unit_to(args.t_end, "s")) if args.t_end else None
     dt = float(_unit_to(args.dt, "s")) if args.dt else None
     ic = _assignments(args.ic, "--ic", "ID.STATE=VALUE", "Cv.V=20mL")
-    res = c.simulate(t_end, dt=dt, protocol=events_only(proto), method=args.method, ic=ic)
+    try:
+        res = c.simulate(t_end, dt=dt, protocol=events_only(proto), method=args.method, ic=ic)
+    except SolverError as exc:
+        part = exc.partial
+        if args.out and part is not None and part.n_rows:
+            record(args, part)
+            path = part.save(partial_path(args.out))
+            print(f"error: {exc}", file=sys.stderr)
+            print(f"the part computed (t = {part.t[0]:g} .. {part.t[-1]:g} s, {part.n_rows} points) is in "
+                  f"{path}, marked partial", file=sys.stderr)
+            raise _Reported() from None
+        raise
     print(f"{len(res.t)} points, t = {res.t[0]:g} .. {res.t[-1]:g} s; solver {res.stats}")
-    last = {k: v[-1] for k, v in res.columns.items()}
-    for k in (args.show or list(last)[:12]):
-        print(f"  {io.labelled(k, res.units)} at end: {last[k]:.6g}")
-    if args.out:
-        io.write_csv(args.out, res.columns, res.units, first=("time", res.t, "s"))
-        print(f"wrote {args.out}")
-    if args.plot:
-        io.plot_series(args.plot, res.t, "time [s]", res.columns, res.units, title=c.netlist.name, select=args.show)
-        print(f"wrote {args.plot}")
+    names = args.show or list(res.columns)[:12]
+    res.check_columns(names)
+    for k in names:
+        print(f"  {res.label(k)} at end: {res[k][-1]:.6g}")
+    if len(names) < len(res.columns):
+        print(f"  (showing {len(names)} of {len(res.columns)} columns; "
+              + (f"all in {args.out})" if args.out else "all with --out FILE.csv)"))
+    save_outputs(args, res)
+
+
+class _Reported(HemocircuitError):
+    """An error already reported on stderr (exit status 2, nothing more printed)."""
 
 
 def _unit_to(text, unit):
     from .units import parse_quantity
     return parse_quantity(_unit_spacing(str(text)) if not str(text).replace(".", "").isdigit() else f"{text} {unit}",
                           unit)
+
+
+def cmd_show(args):
+    """Reload a result file: its provenance, a summary, optionally a plot or a re-run."""
+    from .provenance import command_of, describe
+    from .results import Result
+
+    res = Result.load(args.result)
+    print(describe(res.metadata))
+    print(f"{res.n_rows} rows x {len(res)} columns; index {res.index}")
+    print(res.summary(show=args.show, where=args.result))
+    if args.plot:
+        res.plot(args.plot, select=args.show)
+        print(f"wrote {args.plot}")
+    if args.rerun:
+        argv, cwd = command_of(res.metadata)
+        if not argv:
+            raise HemocircuitError(f"{args.result}: no command line in its provenance (written by the API?)")
+        new = _rerun_argv(argv, os.path.abspath(args.rerun))
+        print("re-running: hemocircuit " + " ".join(new) + (f"  (in {cwd})" if cwd else ""))
+        here = os.getcwd()
+        try:
+            if cwd:
+                os.chdir(cwd)
+            return main(new)
+        finally:
+            os.chdir(here)
+    return 0
+
+
+def _rerun_argv(argv, out):
+    """The stored command line with --out replaced by ``out`` and plot outputs dropped."""
+    new, skip = [], False
+    for a in argv:
+        if skip:
+            skip = False
+            continue
+        key = a.split("=", 1)[0]
+        if key in ("--out", "--plot", "--phase-plot"):
+            skip = "=" not in a
+            continue
+        new.append(a)
+    return new + ["--out", out]
 
 
 def cmd_graph(args):
@@ -199,6 +275,14 @@ def build_parser():
                          "the others at the operating point; repeatable")
     sp.set_defaults(func=cmd_tran)
     common(sub.add_parser("graph", help="draw the circuit graph to PNG")).set_defaults(func=cmd_graph)
+    sp = sub.add_parser("show", help="reload a result file: provenance, summary, re-plot, re-run")
+    sp.add_argument("result", help="a CSV or JSON file written by a hemocircuit command (--out)")
+    sp.add_argument("--plot", help="draw it again to this PNG file")
+    sp.add_argument("--show", action="append", help="column to print/plot (repeatable)")
+    sp.add_argument("--rerun", metavar="OUT", help="run the command stored in its provenance again, writing OUT")
+    sp.add_argument("--set", action="append", help=argparse.SUPPRESS)
+    sp.add_argument("--protocol", help=argparse.SUPPRESS)
+    sp.set_defaults(func=cmd_show)
     for register in _extra_commands():
         register(sub, common)
     return p
@@ -236,11 +320,27 @@ def _extra_commands():
     return out
 
 
+OUTPUT_OPTIONS = ("out", "plot", "phase_plot")
+
+
+def _check_outputs(args):
+    """Every output file's folder is checked (or created) before anything is computed."""
+    for key in OUTPUT_OPTIONS:
+        path = getattr(args, key, None)
+        if path:
+            io.prepare_output(path, "--" + key.replace("_", "-"))
+
+
 def main(argv=None):
+    argv = sys.argv[1:] if argv is None else [str(a) for a in argv]
     parser = build_parser()
     args = parser.parse_args(argv)
+    args.argv = argv
     try:
-        args.func(args)
+        _check_outputs(args)
+        rc = args.func(args)
+    except _Reported:
+        return 2
     except HemocircuitError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -250,7 +350,7 @@ def main(argv=None):
         import os
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
-    return 0
+    return rc if isinstance(rc, int) else 0
 
 
 if __name__ == "__main__":

@@ -4,6 +4,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import NetlistError, SolverError
+from ..provenance import clock, stamp
+from ..results import Result
 from ..units import UnitError, parse_quantity
 
 
@@ -44,11 +46,12 @@ def dc_sweep(circuit, param: str, values, progress=False):
     """Operating points for ``param`` (ID.PARAM) over ``values`` (array in the declared unit,
     or a range string like '20:200:5 mmHg').  Each point starts from the previous solution.
 
-    Returns a dict column -> array with the swept parameter first; points that fail are NaN
-    and listed in result['_failed'] with their reasons.
+    Returns a :class:`SweepResult` indexed by ``param``; points that fail are NaN rows and
+    listed in ``result.failed`` [(value, reason)] (``metadata['failed']``).
     """
     from .op import operating_point
 
+    started = clock()
     unit = circuit.param_unit(param)
     vals = parse_range(values, unit) if isinstance(values, str) else np.asarray(values, dtype=float)
     c = circuit.copy()
@@ -72,13 +75,23 @@ def dc_sweep(circuit, param: str, values, progress=False):
     for k in keys:
         out[k] = np.array([r[k] if r is not None else np.nan for r in rows])
     units = {param: unit, **c.column_units()}
-    return SweepResult(out, units, failed)
+    res = SweepResult(out, units, failed, param)
+    return stamp(res, "dc", circuit, {"param": param, "values": values if isinstance(values, str) else None,
+                                      "continuation": True}, started)
 
 
-class SweepResult(dict):
-    """Columns of a sweep (dict name -> array) with units and failures."""
+class SweepResult(Result):
+    """Operating points along a swept parameter (the index column); ``failed`` [(value, reason)]."""
 
-    def __init__(self, data, units, failed):
-        super().__init__(data)
-        self.units = units
-        self.failed = failed
+    def __init__(self, data, units, failed, param=None):
+        param = param or next(iter(data))
+        super().__init__(data, units, index=[param])
+        self.metadata["failed"] = [[v, why] for v, why in failed]
+
+    @property
+    def param(self):
+        return self.index[0]
+
+    @property
+    def failed(self):
+        return [(v, why) for v, why in self.metadata.get("failed", [])]

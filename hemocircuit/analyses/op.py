@@ -12,8 +12,6 @@ names the worst-balanced state.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import lsqr, splu
@@ -21,24 +19,32 @@ from scipy.sparse.linalg import lsqr, splu
 from .. import sparse as sparse_la
 from ..derivatives import dense_jacobian
 from ..errors import HemocircuitError, SolverError
+from ..provenance import clock, stamp
+from ..results import Result
 
 
-@dataclass
-class OperatingPoint:
-    circuit: object
-    x: np.ndarray  # (nx,) or (B, nx)
-    values: dict  # column -> value (single) or (B,) array
-    units: dict
-    method: str
-    residual: float
+class OperatingPoint(Result):
+    """The steady state: a one-row :class:`hemocircuit.results.Result` (a batch circuit: one
+    row per member, indexed by ``member``).  ``op["P(a)"]`` is a number (an array for a
+    batch); ``x`` the states, ``values`` {column: value}, ``method``, ``residual`` (scaled)."""
+
+    def __init__(self, circuit, x, values, units, method, residual):
+        single = np.ndim(x) == 1
+        cols = dict(values) if single else {"member": np.arange(np.shape(x)[0]), **values}
+        super().__init__(cols, units, index=[] if single else ["member"])
+        self.circuit, self.x, self.method, self.residual = circuit, x, method, residual
+        self.metadata["solver"] = {"method": method, "residual": residual}
+
+    @property
+    def values(self):
+        """{column: value} (numbers; arrays over the members of a batch)."""
+        single = not self.index
+        return {k: (float(v[0]) if single and v.dtype.kind == "f" else (v[0] if single else v))
+                for k, v in self.columns.items()}
 
     def __getitem__(self, key):
-        return self.values[key]
-
-    def as_flat_dict(self):
-        """{'P(a) [mmHg]': 78.67, ...} (same names as the CSV columns)."""
-        return {f"{k} [{self.units[k]}]": (float(v) if np.ndim(v) == 0 else np.asarray(v).tolist())
-                for k, v in self.values.items()}
+        col = super().__getitem__(key)
+        return col[0].item() if not self.index else col
 
 
 def residual(circuit, t, X, law_totals):
@@ -260,6 +266,12 @@ def _source_stepping(circuit, totals, t):
 
 def operating_point(circuit, t: float = 0.0, x0=None) -> OperatingPoint:
     """Steady state of the circuit (every parameter set of a batch at once)."""
+    started = clock()
+    op = _operating_point(circuit, t, x0)
+    return stamp(op, "op", circuit, {"t": t, "x0": None if x0 is None else "given", "tol": 1e-10}, started)
+
+
+def _operating_point(circuit, t, x0):
     reporting = circuit
     circuit = circuit.steady_variant()
     _calibrate(circuit, t)

@@ -14,23 +14,35 @@ from scipy.integrate import solve_ivp
 
 from ..errors import SolverError
 from ..protocol import Protocol
+from ..provenance import clock, stamp
+from ..results import Result
 
 
-class TransientResult:
-    """Time series: ``t`` (T,), ``x`` (T, nx) states, ``columns`` {name: (T,) array}, ``units``."""
+class TransientResult(Result):
+    """Time series (a :class:`hemocircuit.results.Result` indexed by ``time`` [s]): ``t`` (T,),
+    ``x`` (T, nx) states (not written to files; the outputs are), ``columns`` {name: (T,)
+    array}, ``units``, ``state_names``, ``stats`` (solver statistics, ``metadata['solver']``)."""
 
     def __init__(self, t, x, columns, units, state_names, stats=None):
-        self.t, self.x, self.columns, self.units = t, x, columns, units
+        super().__init__({"time": t, **columns}, {"time": "s", **units}, index=["time"])
+        self.x = x
         self.state_names = state_names
         self.stats = stats or {}
 
-    def __getitem__(self, key):
-        if key in ("t", "time"):
-            return self.t
-        return self.columns[key]
+    @property
+    def t(self):
+        return self.data["time"]
 
-    def keys(self):
-        return ["time"] + list(self.columns)
+    @property
+    def stats(self):
+        return self.metadata["solver"]
+
+    @stats.setter
+    def stats(self, value):
+        self.metadata["solver"] = dict(value)
+
+    def __getitem__(self, key):
+        return super().__getitem__("time" if key == "t" else key)
 
 
 def _jac_for(c, method):
@@ -68,7 +80,26 @@ def simulate(circuit, t_end, dt=None, t0=0.0, x0=None, protocol=None, method="BD
     engine: 'compiled' (numba Rosenbrock-W ROS34PW2, hemocircuit.kernels), 'scipy'
         (solve_ivp with ``method``), or 'auto': compiled when every component type has a
         kernel and ``method`` is left at its default, scipy otherwise.
+
+    Returns a :class:`TransientResult`.  A solver failure raises SolverError whose ``partial``
+    is the result up to the failure, marked ``metadata['status'] = 'partial'``.
     """
+    started = clock()
+    settings = {"t_end": t_end, "dt": dt, "t0": t0, "method": method, "engine": engine, "rtol": rtol,
+                "atol": atol, "max_step": None if max_step == np.inf else max_step, "first_step": first_step,
+                "ic": dict(ic) if ic else None, "x0": None if x0 is None else "given",
+                "protocol": protocol if isinstance(protocol, str) else getattr(protocol, "file", None)}
+    try:
+        res = _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step, first_step, engine, ic)
+    except SolverError as exc:
+        if exc.partial is not None:
+            stamp(exc.partial, "tran", circuit, settings, started, status="partial")
+            exc.partial.metadata["error"] = str(exc)
+        raise
+    return stamp(res, "tran", circuit, settings, started)
+
+
+def _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step, first_step, engine, ic):
     from .op import operating_point
 
     c = circuit.copy()
