@@ -75,7 +75,7 @@ def test_rc_low_pass_gain_phase_and_relative_gain(write):
     assert res.y0["P(a)"] == pytest.approx(40.0)
     assert res.p0 == pytest.approx(40.0)
     assert res.input == "Ps.value"
-    assert res.units["input"] == "mmHg"
+    assert res.input_unit == "mmHg" and res.units["gain(Q(R1)/Ps.value)"] == "mL/s/mmHg"
     # no flow at DC; the flow leads by 45 deg at the corner
     assert abs(res.H["Q(R1)"][0]) < 1e-9
     assert res.phase["Q(R1)"][1] == pytest.approx(45.0, abs=1e-5)
@@ -190,9 +190,9 @@ def test_cli_ac(tmp_path, capsys):
                "--output", "Q(Rsv)", "--freq", "0.001:10Hz", "--per-decade", "5", "--set", "art.tau_Ca=1s",
                "--out", str(out), "--plot", str(png)])
     assert rc == 0
-    lines = out.read_text().splitlines()
-    assert lines[0].split(",")[:4] == ["f [Hz]", "gain Q(Rla) [mL/s/mmHg]", "rel_gain Q(Rla) [1]",
-                                       "phase Q(Rla) [deg]"]
+    lines = [ln for ln in out.read_text().splitlines() if not ln.startswith("#")]  # provenance header
+    assert lines[0].split(",")[:4] == ["frequency [Hz]", "gain(Q(Rla)/Pa.value) [mL/s/mmHg]",
+                                       "rel_gain(Q(Rla)/Pa.value) [1]", "phase(Q(Rla)/Pa.value) [deg]"]
     assert len(lines) == 1 + 21
     assert png.stat().st_size > 10_000
     capsys.readouterr()

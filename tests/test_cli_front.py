@@ -30,8 +30,9 @@ def active():
 
 
 def read_csv(path):
+    """(header, rows) of a result CSV, its '# key: value' provenance lines skipped."""
     with open(path) as fh:
-        rows = list(csv.reader(fh))
+        rows = list(csv.reader(ln for ln in fh if not ln.startswith("#")))
     return rows[0], rows[1:]
 
 

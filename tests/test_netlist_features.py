@@ -369,7 +369,7 @@ def test_protocol_via_cli_tran(write, tmp_path, capsys):
     assert main(["tran", str(net), "--protocol", str(p), "--dt", "0.5 s", "--out", str(out),
                  "--set", "R1.R=4mmHg*s/mL"]) == 0
     with open(out) as fh:
-        rows = list(csv.reader(fh))
+        rows = list(csv.reader(ln for ln in fh if not ln.startswith("#")))  # provenance lines skipped
     assert rows[0] == ["time [s]", "P(in) [mmHg]", "P(a) [mmHg]", "Q(Ps) [mL/s]", "Q(R1) [mL/s]",
                        "Q(C1) [mL/s]", "V(C1) [mL]", "C1.C [mL/mmHg]"]
     data = np.array(rows[1:], dtype=float)
@@ -453,7 +453,9 @@ def test_cli_op_json(tmp_path, capsys):
     out = tmp_path / "op.json"
     assert main(["op", str(PAYNE06), "--set", "Pa.value=90mmHg", "--out", str(out)]) == 0
     printed = capsys.readouterr().out
-    data = json.loads(out.read_text())
+    doc = json.loads(out.read_text())
+    assert doc["metadata"]["analysis"] == "op" and doc["metadata"]["provenance"]["sets"] == {"Pa.value": "90 mmHg"}
+    data = doc["values"]
     q = (90 - 6) / 22.28
     assert data["P(alpha) [mmHg]"] == pytest.approx(90 - 0.4 * q, rel=1e-10)
     assert data["Q(Rla) [mL/s]"] == pytest.approx(q, rel=1e-10)
@@ -467,7 +469,7 @@ def test_cli_dc_sweep_pressure_flow_line(tmp_path, capsys):
     out = tmp_path / "sweep.csv"
     assert main(["dc", str(PAYNE06), "--sweep", "Pa.value=20:200:5mmHg", "--out", str(out)]) == 0
     with open(out) as fh:
-        rows = list(csv.reader(fh))
+        rows = list(csv.reader(ln for ln in fh if not ln.startswith("#")))  # provenance lines skipped
     head = rows[0]
     assert head[0] == "Pa.value [mmHg]" and "Q(Rla) [mL/s]" in head and "P(alpha) [mmHg]" in head
     data = np.array(rows[1:], dtype=float)

@@ -166,10 +166,10 @@ def test_cli_stability(tmp_path, capsys):
     assert rc == 0
     text = capsys.readouterr().out
     assert "complex pair for Pa.value in [" in text
-    lines = out.read_text().splitlines()
+    lines = [ln for ln in out.read_text().splitlines() if not ln.startswith("#")]  # provenance header
     head = lines[0].split(",")
-    assert head[:3] == ["Pa.value [mmHg]", "classification", "n_unstable"]
-    assert "pair_freq [Hz]" in head and "re5 [1/s]" in head and "re6 [1/s]" not in head
+    assert head[:3] == ["Pa.value [mmHg]", "classification", "n_unstable [1]"]
+    assert "frequency(pair) [Hz]" in head and "re(lambda5) [1/s]" in head and "re(lambda6) [1/s]" not in head
     assert len(lines) == 1 + 5
     assert png.stat().st_size > 10_000
     assert main(["stability", str(NETS / "arterial_compliance.yaml")]) == 2
