@@ -2,74 +2,97 @@
 
 ``hemocircuit compare A.yaml B.yaml ... --sweep Pa.value=20:200:2mmHg`` computes the steady
 states of every netlist over the sweep; ``--tran --protocol P.yaml`` runs the same protocol
-on each.  Output: one tidy CSV (netlist, x, quantity, value, unit) and one overlay plot per
-quantity.  Quantities are every netlist's ``derived`` entries plus the columns they share.
+on each.  Output: one CSV, a row per (netlist, x) and a column per quantity (``name [unit]``),
+and one overlay plot per quantity.  Quantities are every netlist's ``derived`` entries plus the columns they share.
 """
 from __future__ import annotations
 
-import csv
 import os
+import sys
 
 import numpy as np
 
 from ..derived import derived_units, evaluate_derived
 from ..errors import HemocircuitError
 from ..io import pyplot, save_figure
+from ..provenance import clock, stamp
+from ..results import Result
 
 
 def compare_sweep(circuits, param, values):
-    """{netlist name: (x, {quantity: array}, {quantity: unit})} for a DC sweep."""
-    out = {}
+    """Steady states of every circuit over ``param`` = ``values`` -> :class:`CompareResult`."""
+    started = clock()
+    parts = {}
     for c in circuits:
         res = c.dc_sweep(param, values)
-        cols = {k: v for k, v in res.items() if k != param}
+        cols = res.columns
         d = evaluate_derived(c.netlist.derived, cols, c.file)
         units = {**res.units, **derived_units(c.netlist.derived)}
-        out[c.netlist.name] = (np.asarray(res[param]), {**d, **cols}, units, res.failed)
-    return out
+        parts[c.netlist.name] = (np.asarray(res[param]), {**d, **cols}, units, res.failed)
+    res = CompareResult(parts, param, circuits[0].param_unit(param))
+    return stamp(res, "compare", circuits[0], {"mode": "sweep", "param": param,
+                                               "values": values if isinstance(values, str) else None,
+                                               "netlists": [c.file for c in circuits]}, started)
 
 
 def compare_transient(circuits, protocol, t_end=None, dt=None):
-    out = {}
+    """The same protocol on every circuit -> :class:`CompareResult` indexed by netlist and time."""
+    started = clock()
+    parts = {}
     for c in circuits:
         r = c.simulate(t_end, dt=dt, protocol=protocol)
         d = evaluate_derived(c.netlist.derived, r.columns, c.file)
-        out[c.netlist.name] = (r.t, {**d, **r.columns}, {**r.units, **derived_units(c.netlist.derived)}, [])
-    return out
+        parts[c.netlist.name] = (r.t, {**d, **r.columns}, {**r.units, **derived_units(c.netlist.derived)}, [])
+    res = CompareResult(parts, "time", "s")
+    return stamp(res, "compare", circuits[0], {"mode": "tran", "protocol": protocol if isinstance(protocol, str)
+                                               else getattr(protocol, "file", None), "t_end": t_end, "dt": dt,
+                                               "netlists": [c.file for c in circuits]}, started)
 
 
-def shared_quantities(results, derived_first=True):
-    names = None
-    for _, (_, q, _, _) in results.items():
-        names = set(q) if names is None else names & set(q)
-    names = names or set()
-    return sorted(names)
+class CompareResult(Result):
+    """Several netlists side by side: one row per (netlist, x), indexed by ``netlist`` and the
+    swept parameter (or ``time``); every quantity any netlist has is a column, NaN for the
+    netlists without it.  ``parts`` {netlist name: (x, {quantity: array}, units, failed)}."""
+
+    def __init__(self, parts, xname, xunit):
+        self.parts = parts
+        names = []
+        for _, (_, q, _, _) in parts.items():
+            names += [k for k in q if k not in names]
+        units = {xname: xunit}
+        for _, (_, q, u, _) in parts.items():
+            for k in q:
+                units.setdefault(k, u.get(k, ""))
+        cols = {"netlist": np.concatenate([np.array([n] * len(x), dtype=object) for n, (x, _, _, _) in parts.items()]),
+                xname: np.concatenate([np.asarray(x, dtype=float) for x, _, _, _ in parts.values()])}
+        for k in names:
+            cols[k] = np.concatenate([np.asarray(q[k], dtype=float) if k in q else np.full(len(x), np.nan)
+                                      for x, q, _, _ in parts.values()])
+        super().__init__(cols, units, index=["netlist", xname])
+        self.metadata["failed"] = [[n, v, why] for n, (_, _, _, failed) in parts.items() for v, why in failed]
+
+    def shared_quantities(self):
+        """Quantities every netlist has, sorted."""
+        names = None
+        for _, (_, q, _, _) in self.parts.items():
+            names = set(q) if names is None else names & set(q)
+        return sorted(names or set())
 
 
-def write_tidy(path, results, xname, xunit):
-    with open(path, "w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(["netlist", f"{xname} [{xunit}]", "quantity", "value", "unit"])
-        for name, (x, q, units, _) in results.items():
-            for k in sorted(q):
-                v = np.asarray(q[k], dtype=float)
-                for xi, vi in zip(x, v):
-                    w.writerow([name, repr(float(xi)), k, repr(float(vi)), units.get(k, "")])
-
-
-def plot_overlays(prefix, results, quantities, xlabel):
+def plot_overlays(prefix, res, quantities, xlabel=None):
+    """One PNG per quantity, ``PREFIX_QUANTITY.png``, every netlist a line; returns the files."""
     plt = pyplot()
 
+    xname = res.index[1]
     files = []
     for k in quantities:
         fig, ax = plt.subplots(figsize=(6.4, 4))
-        unit = ""
-        for name, (x, q, units, _) in results.items():
-            if k in q:
-                ax.plot(x, q[k], label=name)
-                unit = units.get(k, unit)
-        ax.set_xlabel(xlabel)
-        ax.set_ylabel(f"{k} [{unit}]" if unit else k)
+        for name in dict.fromkeys(res["netlist"]):
+            sel = res["netlist"] == name
+            if np.any(np.isfinite(res[k][sel])):
+                ax.plot(res[xname][sel], res[k][sel], label=name)
+        ax.set_xlabel(xlabel or res.label(xname))
+        ax.set_ylabel(res.label(k))
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
         safe = "".join(ch if ch.isalnum() or ch in "._-" else "_" for ch in k)
@@ -87,14 +110,14 @@ def register_cli(sub, common):
     sp.add_argument("--tran", action="store_true", help="run --protocol on each netlist instead of a sweep")
     sp.add_argument("--t-end", help="end time for --tran")
     sp.add_argument("--dt", help="output interval for --tran")
-    sp.add_argument("--out", help="tidy CSV file")
+    sp.add_argument("--out", help="result CSV (a row per netlist and x; or .json)")
     sp.add_argument("--plot", help="prefix of the overlay PNG files (one per quantity)")
     sp.add_argument("--show", action="append", help="quantity to print/plot (default: derived quantities)")
     sp.set_defaults(func=cmd_compare)
 
 
 def cmd_compare(args):
-    from ..cli import _range_spacing, _sets, _unit_to, events_only, load_circuit
+    from ..cli import _range_spacing, _sets, _unit_to, events_only, load_circuit, record
 
     circuits, proto = [], None
     for path in args.netlists:
@@ -105,33 +128,23 @@ def cmd_compare(args):
             raise HemocircuitError("compare --tran needs --protocol")
         t_end = float(_unit_to(args.t_end, "s")) if args.t_end else None
         dt = float(_unit_to(args.dt, "s")) if args.dt else None
-        results = compare_transient(circuits, events_only(proto), t_end, dt)
-        xname, xunit = "time", "s"
+        res = compare_transient(circuits, events_only(proto), t_end, dt)
     else:
         if not args.sweep or "=" not in args.sweep:
             raise HemocircuitError("compare needs --sweep ID.PARAM=START:STOP:STEP UNIT (or --tran)")
         param, rng = args.sweep.split("=", 1)
-        param = param.strip()
-        results = compare_sweep(circuits, param, _range_spacing(rng))
-        xname, xunit = param, circuits[0].param_unit(param)
+        res = compare_sweep(circuits, param.strip(), _range_spacing(rng))
     derived = []
     for c in circuits:
         derived += [k for k in c.netlist.derived if k not in derived]
-    shown = args.show or [k for k in derived if all(k in q for _, q, _, _ in results.values())] or \
-        shared_quantities(results)[:6]
-    header = ["netlist", f"{xname} [{xunit}]"] + shown
-    print("  ".join(f"{h:>16}" for h in header))
-    for name, (x, q, units, failed) in results.items():
-        step = max(1, len(x) // 10)
-        for i in range(0, len(x), step):
-            vals = [q[k][i] if k in q else np.nan for k in shown]
-            print("  ".join([f"{name:>16}", f"{x[i]:>16.6g}"] + [f"{v:>16.6g}" for v in vals]))
-        for v, why in failed:
-            print(f"{name}: failed at {xname}={v:g}: {why}")
+    shown = args.show or [k for k in derived if all(k in q for _, q, _, _ in res.parts.values())] or \
+        res.shared_quantities()[:6]
+    print(res.summary(show=shown, max_rows=24, where=args.out))
+    for name, v, why in res.metadata["failed"]:
+        print(f"{name}: failed at {res.index[1]}={v:g}: {why}", file=sys.stderr)
+    record(args, res)
     if args.out:
-        write_tidy(args.out, results, xname, xunit)
-        print(f"wrote {args.out}")
+        print(f"wrote {res.save(args.out)}")
     if args.plot:
-        prefix = os.path.splitext(args.plot)[0]
-        files = plot_overlays(prefix, results, shown, f"{xname} [{xunit}]")
+        files = plot_overlays(os.path.splitext(args.plot)[0], res, shown)
         print("wrote " + ", ".join(files))

@@ -13,12 +13,17 @@ mean and the second half of the window has at least half the peak-to-peak of the
 """
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 
-from ..batch import build_batches, expand_grid, parse_grid_arg, resolve_values
+from ..batch import build_batches, expand_grid, grid_columns, parse_grid_arg, resolve_values
 from ..batch_integrator import integrate
 from ..execution import run_chunks, split
+from ..derived import derived_units
 from ..io import pyplot, save_figure
+from ..provenance import clock, stamp
+from ..results import Result
 
 
 def _law_states(c):
@@ -91,12 +96,13 @@ def _period(t, y):
 
 def envelope(circuit, sweep, grid=None, outputs=None, t_end=1000.0, dt=0.1, window=0.3,
              kick=1e-3, osc_tol=1e-3, rtol=1e-5, keep_series=None, scheduler=None, workers=None, progress=False):
-    """sweep: (ID.PARAM, values) ; grid: [(ID.PARAM, values)].  Returns tidy rows (dicts).
+    """sweep: (ID.PARAM, values) ; grid: [(ID.PARAM, values)].  Returns an :class:`EnvelopeResult`.
 
     outputs: columns to report, the first giving the period; default the netlist's
     ``outputs:`` for 'envelope' (:func:`hemocircuit.outputs.default_outputs`)."""
     from ..outputs import default_outputs
 
+    started = clock()
     outputs = list(default_outputs(circuit, "envelope") if outputs is None else outputs)
     grids = resolve_values(circuit, ([sweep] if sweep else []) + list(grid or []))
     assignments = expand_grid(grids)
@@ -111,50 +117,100 @@ def envelope(circuit, sweep, grid=None, outputs=None, t_end=1000.0, dt=0.1, wind
             jobs.append((sub, opt))
             where.append([members[j] for j in chunk])
     results = run_chunks(_run_chunk, jobs, scheduler=scheduler, workers=workers, progress=progress, desc="envelope")
-    rows = []
+    by_member = [None] * len(assignments)
     for chunk, res in zip(where, results):
         for k, r in zip(chunk, res):
-            rows.append({**{p: v for p, v in assignments[k].items()}, **r})
-    return rows
+            by_member[k] = r
+    res = EnvelopeResult(circuit, [p for p, _ in grids], assignments, by_member, outputs)
+    settings = dict(sweep=[sweep[0], [str(v) for v in grids[0][1]]] if sweep else None,
+                    grid={p: [str(v) for v in vals] for p, vals in grids[1 if sweep else 0:]}, outputs=outputs,
+                    t_end=float(t_end), dt=float(dt), window=float(window), kick=kick, osc_tol=osc_tol, rtol=rtol,
+                    atol=rtol)
+    return stamp(res, "envelope", circuit, settings, started)
 
 
-def plot_envelope(path, rows, output, sweep_param):
+class EnvelopeResult(Result):
+    """One row per member of the sweep x grid, indexed by the swept and grid parameters.  Per
+    output ``o``: ``min(o)``, ``max(o)``, ``mean(o)`` (over whole periods of the window) and
+    ``steady(o)`` (the operating point), in ``o``'s unit; per member ``oscillating``,
+    ``period`` [s] (NaN when steady) and ``error`` (empty if it ran).  ``series`` (with
+    ``keep_series``): per row {column: values over the window} and ``t`` its times (not written
+    to files)."""
+
+    def __init__(self, circuit, paths, assignments, by_member, outputs):
+        self.outputs = list(outputs)
+        cols, units = grid_columns(circuit, paths, assignments)
+        cu = {**circuit.column_units(), **derived_units(circuit.netlist.derived or {})}
+        n = len(assignments)
+        for o in outputs:
+            for q in ("min", "max", "mean", "steady"):
+                cols[f"{q}({o})"], units[f"{q}({o})"] = np.full(n, np.nan), cu.get(o, "")
+        cols["oscillating"] = np.zeros(n, bool)
+        cols["period"], units["period"] = np.full(n, np.nan), "s"
+        cols["error"] = np.array([""] * n, dtype=object)
+        self.series, self.t = [None] * n, [None] * n
+        for k, r in enumerate(by_member):
+            if "error" in r:
+                cols["error"][k] = r["error"]
+                continue
+            for o in outputs:
+                for q in ("min", "max", "mean", "steady"):
+                    cols[f"{q}({o})"][k] = r[f"{o} {q}"]
+            cols["oscillating"][k] = r["oscillating"]
+            cols["period"][k] = r["period [s]"]
+            self.series[k], self.t[k] = r.get("series"), r.get("t")
+        super().__init__(cols, units, index=list(paths))
+        self.metadata["failed"] = [[{p: str(a[p]) for p in paths}, r["error"]]
+                                   for a, r in zip(assignments, by_member) if "error" in r]
+
+
+def plot_result(res, path, select=None, title=None):
+    """Envelope of the first output (or ``select[0]``) against the swept parameter: the steady
+    value as a line, the [min, max] range shaded, one per grid member (fresh or reloaded)."""
     plt = pyplot()
 
-    series = {}
-    for r in rows:
-        if "error" in r:
-            continue
-        key = tuple((k, str(v)) for k, v in r.items() if "." in k and k != sweep_param and " " not in k)
-        series.setdefault(key, []).append(r)
+    outs = [k[4:-1] for k in res.keys() if k.startswith("min(")]
+    output = next((o for o in (select or []) if o in outs), outs[0])
+    sweep_param, grid = res.index[0], res.index[1:]
+    ok = np.array([not e for e in res["error"]], bool)
+    keys = sorted({tuple(res[g][i] for g in grid) for i in np.nonzero(ok)[0]}, key=str)
     fig, ax = plt.subplots(figsize=(7, 4.5))
-    for key, rs in series.items():
-        x = [float(str(r[sweep_param]).split()[0]) for r in rs]
-        lab = ", ".join(f"{k}={v}" for k, v in key)
-        line, = ax.plot(x, [r[f"{output} steady"] for r in rs], "-", lw=1, label=f"steady {lab}")
-        ax.fill_between(x, [r[f"{output} min"] for r in rs], [r[f"{output} max"] for r in rs], alpha=0.25,
-                        color=line.get_color(), label=f"range {lab}")
-    ax.set_xlabel(sweep_param)
-    ax.set_ylabel(output)
+    for key in keys:
+        sel = ok & np.all([res[g] == v for g, v in zip(grid, key)], axis=0) if grid else ok
+        x = np.asarray(res[sweep_param][sel], dtype=float)
+        order = np.argsort(x)
+        lab = ", ".join(f"{g}={v:.4g} {res.units.get(g, '')}".rstrip() if isinstance(v, float) else f"{g}={v}"
+                        for g, v in zip(grid, key))
+        line, = ax.plot(x[order], res[f"steady({output})"][sel][order], "-", lw=1,
+                        label=("steady " + lab).strip())
+        ax.fill_between(x[order], res[f"min({output})"][sel][order], res[f"max({output})"][sel][order], alpha=0.25,
+                        color=line.get_color(), label=("range " + lab).strip())
+    ax.set_xlabel(res.label(sweep_param))
+    ax.set_ylabel(f"{output} [{res.units.get(f'min({output})', '')}]")
+    ax.set_title(title or f"{res._title()}: range of {output} over the last part of each run")
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=6)
+    ax.legend(fontsize=7)
     save_figure(fig, path)
+    return str(path)
 
 
-def plot_phase_plane(path, rows, x_col, y_col):
+def plot_phase_plane(path, res, x_col, y_col):
     plt = pyplot()
 
     fig, ax = plt.subplots(figsize=(5.5, 4.5))
-    for r in rows:
-        s = r.get("series")
+    for r, s in zip(res.rows(), res.series):
         if s and x_col in s and y_col in s:
-            lab = ", ".join(f"{k}={v}" for k, v in r.items() if "." in k and " " not in k)
+            lab = ", ".join(f"{k}={_fmt(r[k])}" for k in res.index)
             ax.plot(s[x_col], s[y_col], lw=0.7, label=lab)
     ax.set_xlabel(x_col)
     ax.set_ylabel(y_col)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=6)
     save_figure(fig, path)
+
+
+def _fmt(v):
+    return f"{v:.4g}" if isinstance(v, float) else str(v)
 
 
 def register_cli(sub, common):
@@ -168,17 +224,17 @@ def register_cli(sub, common):
     sp.add_argument("--rtol", type=float, default=1e-5)
     sp.add_argument("--scheduler")
     sp.add_argument("--workers", type=int)
-    sp.add_argument("--out", help="tidy CSV")
+    sp.add_argument("--out", help="result CSV (one row per member; or .json)")
     sp.add_argument("--plot", help="envelope PNG (first output)")
+    sp.add_argument("--show", action="append", help="column to print (repeatable)")
     sp.add_argument("--phase-plot", help="phase-plane PNG (the netlist's 'outputs: {phase_plane: [x, y]}')")
     sp.set_defaults(func=cmd_envelope)
 
 
 def cmd_envelope(args):
-    from ..cli import _load
+    from ..cli import _load, save_outputs
     from ..errors import HemocircuitError
     from ..outputs import default_outputs
-    from .freq import write_rows
 
     c, _ = _load(args)
     outputs = args.output or default_outputs(c, "envelope")
@@ -191,22 +247,14 @@ def cmd_envelope(args):
             raise HemocircuitError(f"--phase-plot needs two columns (x, y): declare 'outputs: {{phase_plane: [X, Y]}}' "
                                    f"in the netlist (found {keep})")
         keep = keep[:2]
-    rows = envelope(c, sweep, grid, outputs, t_end=args.t_end, dt=args.dt, rtol=args.rtol, keep_series=keep,
-                    scheduler=args.scheduler, workers=args.workers, progress=True)
+    res = envelope(c, sweep, grid, outputs, t_end=args.t_end, dt=args.dt, rtol=args.rtol, keep_series=keep,
+                   scheduler=args.scheduler, workers=args.workers, progress=True)
     o = outputs[0]
-    for r in rows:
-        if "error" in r:
-            print(f"failed: {r}")
-            continue
-        lab = ", ".join(f"{k}={v}" for k, v in r.items() if "." in k and " " not in k)
-        print(f"{lab:>40}: {o} {r[f'{o} min']:.4g}..{r[f'{o} max']:.4g} (steady {r[f'{o} steady']:.4g}) "
-              f"{'OSCILLATING period %.3g s' % r['period [s]'] if r['oscillating'] else 'steady'}")
-    if args.out:
-        write_rows(args.out, [{k: v for k, v in r.items() if k not in ("series", "t")} for r in rows])
-        print(f"wrote {args.out}")
-    if args.plot:
-        plot_envelope(args.plot, rows, o, sweep[0])
-        print(f"wrote {args.plot}")
+    show = [f"min({o})", f"max({o})", f"steady({o})", "oscillating", "period"]
+    print(res.summary(show=args.show or show, max_rows=0, where=args.out))
+    for where, why in res.metadata["failed"]:
+        print(f"failed: {where}: {why}", file=sys.stderr)
+    save_outputs(args, res)
     if args.phase_plot:
-        plot_phase_plane(args.phase_plot, rows, keep[0], keep[1])
+        plot_phase_plane(args.phase_plot, res, keep[0], keep[1])
         print(f"wrote {args.phase_plot}")

@@ -18,14 +18,31 @@ import numpy as np
 
 from ..batch_integrator import integrate
 from ..errors import HemocircuitError, SolverError
+from ..provenance import clock, stamp
+from ..results import Result
 
 
-class PeriodicOrbit:
+class PeriodicOrbit(Result):
+    """One period of the orbit as a :class:`hemocircuit.results.Result` indexed by ``time`` [s]
+    (401 points, both ends included), plus ``x0``, ``period``, ``x`` (states), ``multipliers``,
+    ``converged``, ``iterations``, ``residual``, ``forced`` (measures also in ``metadata``)."""
+
     def __init__(self, x0, period, t, x, multipliers, converged, iterations, residual, forced, columns, units):
-        self.x0, self.period, self.t, self.x = x0, period, t, x
+        super().__init__({"time": t, **columns}, {"time": "s", **units}, index=["time"])
+        self.x0, self.period, self.x = x0, period, x
         self.multipliers, self.converged, self.iterations = multipliers, converged, iterations
-        self.residual, self.forced, self.columns, self.units = residual, forced, columns, units
+        self.residual, self.forced = residual, forced
         self.n_laws = 0  # conserved quantities (each gives a trivial multiplier 1)
+
+    @property
+    def t(self):
+        return self.data["time"]
+
+    def time_average(self, name):
+        """Mean of a column over the period (trapezoidal rule in time; the end point, equal to
+        the start, is not counted twice)."""
+        y, t = self[name], self.t
+        return float(np.sum(0.5 * (y[1:] + y[:-1]) * np.diff(t)) / (t[-1] - t[0]))
 
     @property
     def nontrivial_multipliers(self):
@@ -70,6 +87,7 @@ def _laws(circuit):
 
 def shoot(circuit, x_guess, T_guess, forced=False, rtol=1e-9, tol=1e-8, max_iter=25, rel_step=1e-6):
     """Newton shooting from (x_guess, T_guess).  Returns a PeriodicOrbit."""
+    started = clock()
     c = circuit
     if c.B != 1:
         raise HemocircuitError("periodic orbits are computed one parameter set at a time")
@@ -123,7 +141,10 @@ def shoot(circuit, x_guess, T_guess, forced=False, rtol=1e-9, tol=1e-8, max_iter
     orb = PeriodicOrbit(x0, T, t, xs, np.linalg.eigvals(M) if M is not None else np.zeros(0), converged, it,
                         res_norm, forced, cols, c.column_units())
     orb.n_laws = len(L)
-    return orb
+    orb.metadata["measures"] = {"period": T, "converged": converged, "iterations": it, "residual": res_norm,
+                                "nontrivial_multipliers": orb.nontrivial_multipliers, "orbitally_stable": orb.stable}
+    return stamp(orb, "periodic", circuit, {"forced": forced, "T_guess": float(T_guess), "rtol": rtol, "atol": rtol,
+                                            "tol": tol, "max_iter": max_iter, "rel_step": rel_step}, started)
 
 
 def guess_from_run(circuit, output=None, t_settle=400.0, dt=0.05, kick=1e-3, rtol=1e-6):
@@ -161,14 +182,13 @@ def register_cli(sub, common):
     sp.add_argument("--t-settle", type=float, default=400.0, help="settling run for the initial guess, s")
     sp.add_argument("--forced", help="source element with a built-in sine term: periodic steady state at "
                                      "its frequency")
-    sp.add_argument("--out", help="CSV of one period of the orbit")
+    sp.add_argument("--out", help="CSV of one period of the orbit (or .json)")
     sp.add_argument("--plot", help="PNG of the orbit")
     sp.set_defaults(func=cmd_periodic)
 
 
 def cmd_periodic(args):
-    from .. import io
-    from ..cli import _load
+    from ..cli import _load, save_outputs
 
     from ..outputs import default_outputs, drive_of, input_element
 
@@ -191,17 +211,14 @@ def cmd_periodic(args):
     else:
         x, T = guess_from_run(c, output, args.t_settle)
         orb = shoot(c, x, T)
-    y = orb.columns[output]
+    y = orb[output]
     print(f"{'converged' if orb.converged else 'NOT converged'} after {orb.iterations} Newton iterations "
           f"(residual {orb.residual:.2e}); period {orb.period:.6g} s")
-    print(f"{output}: min {y.min():.6g}, max {y.max():.6g}, mean {y.mean():.6g}")
+    print(f"{orb.label(output)}: min {y.min():.6g}, max {y.max():.6g}, time average {orb.time_average(output):.6g}")
     mu = orb.nontrivial_multipliers
     print("Floquet multipliers (non-trivial): " + ", ".join(f"{m:.4g}" for m in mu))
     print("orbitally stable" if orb.stable else "orbitally UNSTABLE")
-    if args.out:
-        io.write_csv(args.out, orb.columns, orb.units, first=("time", orb.t, "s"))
-        print(f"wrote {args.out}")
-    if args.plot:
-        io.plot_series(args.plot, orb.t, "time [s]", orb.columns, orb.units, title="periodic orbit",
-                       select=[output] + [k for k in interest if k in orb.columns and k != output])
-        print(f"wrote {args.plot}")
+    orb.metadata["measures"].update({f"min({output})": float(y.min()), f"max({output})": float(y.max()),
+                                     f"time_average({output})": orb.time_average(output)})
+    select = [output] + [k for k in interest if k in orb.columns and k != output]
+    save_outputs(args, orb, plot=lambda path: orb.plot(path, select=select, title="periodic orbit"))
