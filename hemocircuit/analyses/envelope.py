@@ -59,7 +59,7 @@ def _summary(bc, k, r, grid, opv, kk, opt):
         n_win = max(int(len(grid) * opt["window"]), 4)
         if not r.ok[k]:
             return {"error": r.message[k]}
-        cols = bc.member(k).outputs(grid[-n_win:], r.x[k, -n_win:])
+        cols = bc.subset([k]).outputs(grid[-n_win:], r.x[k, -n_win:])
         tw = grid[-n_win:]
         osc = {}
         for o in opt["outputs"]:

@@ -299,7 +299,7 @@ def _operating_point(circuit, t, x0):
     else:
         vals = {}
         for k in range(circuit.B):
-            for key, v in circuit.member(k).outputs(t, X[k:k + 1]).items():
+            for key, v in circuit.subset([k]).outputs(t, X[k:k + 1]).items():  # a view: no deep copy
                 vals.setdefault(key, []).append(float(v[0]))
         vals = {k: np.array(v) for k, v in vals.items()}
     return OperatingPoint(circuit, X[0] if single else X, vals, circuit.column_units(), method,
