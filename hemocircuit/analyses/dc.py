@@ -51,11 +51,10 @@ def dc_sweep(circuit, param: str, values, progress=False):
 
     unit = circuit.param_unit(param)
     vals = parse_range(values, unit) if isinstance(values, str) else np.asarray(values, dtype=float)
-    c = circuit.copy()
     rows, failed = [], []
     x_prev = None
     for v in vals:
-        c.set_param(param, float(v))
+        c = circuit.with_values({param: float(v)})
         try:
             op = operating_point(c, x0=None if x_prev is None else x_prev)
         except SolverError:
