@@ -70,7 +70,7 @@ def dc_sweep(circuit, param: str, values, progress=False):
     out = {f"{param}": vals}
     for k in keys:
         out[k] = np.array([r[k] if r is not None else np.nan for r in rows])
-    units = {param: unit, **c.column_units()}
+    units = {param: unit, **circuit.column_units()}
     return SweepResult(out, units, failed)
 
 
