@@ -186,8 +186,24 @@ class CircuitStructure:
         self.schema = ParameterSchema(self.file, self.elements, [g.ids for g in self.groups])
         self._bind_constraints()
         self._steady = None
+        self._memo = {}
+
+    def __getstate__(self):
+        return {**self.__dict__, "_memo": {}}
 
     # ------------------------------------------------------------------ parameters ----
+    def cached(self, key, compute):
+        """Memo of a pure function of this structure and ``key`` (the key must hold every
+        input, e.g. a ParameterSet.fingerprint()); the 64 most recent entries are kept."""
+        memo = self._memo
+        if key in memo:
+            memo[key] = memo.pop(key)  # most recent last
+        else:
+            memo[key] = compute()
+            if len(memo) > 64:
+                memo.pop(next(iter(memo)))
+        return memo[key]
+
     def steady(self) -> "CircuitStructure":
         """This structure with each component's ``steady_opts`` applied (for steady-state
         solves; same topology and numbering); itself when no component has any."""
@@ -206,6 +222,7 @@ class CircuitStructure:
             s._locate = {eid: (s.groups[g.index], i) for eid, (g, i) in self._locate.items()}
             s.law_specs = [_remap_spec(spec, s.groups) for spec in self.law_specs]
             s._steady = s
+            s._memo = {}
             self._steady = s
         return self._steady
 

@@ -261,6 +261,20 @@ class ParameterSet:
                            for n, v in a.items()})
         return cls(first.schema, B, arrays, first._waves)
 
+    def fingerprint(self) -> str:
+        """A digest of every value and waveform (equal sets have equal fingerprints): a key
+        for memos of results that depend only on the values."""
+        import hashlib
+
+        h = hashlib.sha1(str(self.B).encode())
+        for a, w in zip(self._arrays, self._waves):
+            for n in sorted(a):
+                h.update(n.encode())
+                h.update(str(a[n].shape).encode())
+                h.update(np.ascontiguousarray(a[n]).tobytes())
+            h.update(repr(w).encode())
+        return h.hexdigest()
+
     def __eq__(self, other):
         if not isinstance(other, ParameterSet):
             return NotImplemented

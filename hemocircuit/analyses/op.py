@@ -222,13 +222,19 @@ def _calibrate(circuit, t):
             u, _, _ = cal.evaluate(t, X, want="u")
             return (u[:, node_j] - spec["pressure"]) / 1.0
 
-        X0 = dc_guess(cal, t)
-        X, ok, res = _solve_with_fallbacks(cal, X0, [target if j == k else totals[j] for j in range(len(totals))], t)
-        if not ok:
-            raise SolverError(f"calibration of the conserved volume at node '{spec['node']}' "
-                              f"({spec['pressure']} mmHg when {spec['when']}) did not converge",
-                              where="computing the operating point")
-        totals[k] = cal.law_volumes(X)[k]
+        def solve(cal=cal, k=k, target=target, spec=spec, known=list(totals)):
+            X0 = dc_guess(cal, t)
+            X, ok, res = _solve_with_fallbacks(cal, X0, [target if j == k else known[j] for j in range(len(known))], t)
+            if not ok:
+                raise SolverError(f"calibration of the conserved volume at node '{spec['node']}' "
+                                  f"({spec['pressure']} mmHg when {spec['when']}) did not converge",
+                                  where="computing the operating point")
+            return cal.law_volumes(X)[k]
+
+        # the total depends only on the calibration circuit (its values with 'when' applied):
+        # sweeping a parameter that 'when' fixes reuses it
+        known = tuple(None if v is None else np.asarray(v).tobytes() for v in totals)
+        totals[k] = cal.structure.cached(("calibration", k, float(t), cal.parameters.fingerprint(), known), solve)
     return totals
 
 
