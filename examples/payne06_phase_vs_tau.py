@@ -63,7 +63,7 @@ def main(argv=None):
     args = ap.parse_args(argv)
 
     c = hc.load(NETLIST)
-    P0 = float(c.get_param("Pa.value")[0])
+    P0 = float(c.parameters.values["Pa.value"][0])
     taus = np.logspace(np.log10(0.5), np.log10(20.0), args.n_tau)
     grid = [("art.volume_flow", [vf for vf, _ in CASES]), ("art.tau_Ca", list(taus))]
     print(f"payne06: Pa = {P0:g} + {STEP * P0:g} + {AMPLITUDE * P0:g} sin(2 pi {FREQ:g} t) mmHg; "

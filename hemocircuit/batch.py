@@ -79,21 +79,21 @@ def build_batches(circuit, assignments):
         base = circuit.with_options(group_opts[key]) if key else circuit
         b = base.batch(len(members))
         params = sorted({p for k in members for p in assignments[k] if not _is_option(circuit, p)})
+        columns = {}
         for p in params:
             unit = b.param_unit(p)
             vals = []
             for k in members:
                 v = assignments[k].get(p, None)
                 if v is None:
-                    vals.append(float(base.get_param(p)[0]))
+                    vals.append(float(base.parameters.values[p][0]))
                 else:
                     try:
                         vals.append(float(v) if isinstance(v, (int, float, np.floating)) else parse_quantity(v, unit, p))
                     except UnitError as exc:
                         raise NetlistError(str(exc)) from None
-            b.set_param(p, np.array(vals), prepare=False)
-        b.prepare()
-        out.append((b, members))
+            columns[p] = np.array(vals)
+        out.append((b.with_values(columns), members))
     return out
 
 

@@ -56,7 +56,7 @@ def load_circuit(netlist, sets=None, protocol=None):
     opts = {k: v for k, v in sets.items() if _is_option(c, k)}
     if opts:
         c = c.with_options({k: _option_literal(v) for k, v in opts.items()})
-    c.set_params({k: v for k, v in sets.items() if k not in opts})
+    c = c.with_values({k: v for k, v in sets.items() if k not in opts})
     proto = None
     if protocol:
         proto = Protocol.load(str(protocol), c)

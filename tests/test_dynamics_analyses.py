@@ -107,9 +107,9 @@ def ac_cases(artc):
     f = np.logspace(-3, 0, 121)
     out = {}
     for name, sets in (("80", {}), ("tau10", {"art.tau_Ca": 10.0}), ("30", {"Pa.value": 30.0})):
-        c = artc.copy()
+        c = artc
         if sets:
-            c.set_params(sets)
+            c = c.with_values(sets)
         out[name] = ac_response(c, "Pa", [Q1, Q2], f)
     return out
 
@@ -189,12 +189,11 @@ def test_settle_detection_is_not_fooled_by_a_slow_drift(artc, nl_pa):
     the batch stops after 4 periods with q2 at 0.13690 against 0.13583 (+0.79 %), q1 at 0.39838
     against 0.39795 (+0.11 %), well above the 1e-3 settle tolerance for q2.  (With
     settle_tol = 1e-12 and 60 periods the batch gives 0.135827, the shooting value.)"""
-    c = artc.copy()
-    c.set_param("Pa.value", 30.0)
+    c = artc.with_values({"Pa.value": 30.0})
     op = operating_point(c)
-    c.set_param("Pa.value", 33.0)
-    c.set_param("Pa.amplitude", 3.0)
-    c.set_param("Pa.frequency", 1.0)
+    c = c.with_values({"Pa.value": 33.0})
+    c = c.with_values({"Pa.amplitude": 3.0})
+    c = c.with_values({"Pa.frequency": 1.0})
     orb = shoot(c, op.x, 1.0, forced=True, rtol=1e-8, tol=1e-7)
     assert orb.converged
     n = len(orb.t) - 1
@@ -254,7 +253,7 @@ def test_member_trajectory_does_not_depend_on_its_batch_companions(vaso):
     vasomotion members that both reach the Ca floor (second-order Ca), together and alone."""
     x = np.array(operating_point(vaso).x, float).reshape(-1)
     b = vaso.batch(2)
-    b.set_param("art.zeta", np.array([0.1, 0.2]))
+    b = b.with_values({"art.zeta": np.array([0.1, 0.2])})
     i = vaso.state_names.index("art.dCa")
     x0 = np.repeat(x[None], 2, axis=0)
     x0[0, i], x0[1, i] = -5 * vaso.state_scales[i], -8 * vaso.state_scales[i]
@@ -262,7 +261,7 @@ def test_member_trajectory_does_not_depend_on_its_batch_companions(vaso):
     together = integrate(b, x0, grid, rtol=1e-6, atol=1e-6)
     assert together.ok.all()
     for k in range(2):
-        alone = integrate(b.subset([k]).copy(), x0[k:k + 1], grid, rtol=1e-6, atol=1e-6)
+        alone = integrate(b.subset([k]), x0[k:k + 1], grid, rtol=1e-6, atol=1e-6)
         diff = np.max(np.abs(alone.x[0] - together.x[k]) / vaso.state_scales)
         assert diff <= 1e-12, (k, diff)  # measured: 5.9e-8 and 1.5e-4
 
@@ -371,10 +370,9 @@ def test_forced_periodic_steady_state_matches_the_frequency_response(artc, nl_pa
     """Pa = 88 + 8 sin(2 pi 0.1 t) mmHg = the thesis forcing (10 % step + 10 % sine of 80 mmHg):
     shooting from the 80 mmHg operating point gives the periodic steady state directly."""
     x_op = operating_point(artc).x
-    c = artc.copy()
-    c.set_param("Pa.value", 88.0)
-    c.set_param("Pa.amplitude", 8.0)
-    c.set_param("Pa.frequency", 0.1)
+    c = artc.with_values({"Pa.value": 88.0})
+    c = c.with_values({"Pa.amplitude": 8.0})
+    c = c.with_values({"Pa.frequency": 0.1})
     orb = shoot(c, x_op, 10.0, forced=True, rtol=1e-8, tol=1e-7)
     assert orb.converged and orb.period == 10.0
     assert orb.stable  # a stable equilibrium forced: every multiplier inside (|mu| <= 0.62)

@@ -94,7 +94,7 @@ def test_netlist_hash_covers_the_extends_chain_and_tables(write):
     assert [os.path.basename(f) for f in files] == ["child.yaml", "parent.yaml", "drive.csv"]
     h0 = provenance.sha256_files(files)
     c = hc.load(child)
-    assert c.get_param("R1.R")[0] == 3.0  # the chain the hash covers is the one the loader reads
+    assert c.parameters.values["R1.R"][0] == 3.0  # the chain the hash covers is the one the loader reads
     parent = child.parent / "base" / "parent.yaml"
     parent.write_text(parent.read_text().replace("2 mmHg", "5 mmHg"))
     h1 = provenance.sha256_files(provenance.source_files(child))

@@ -16,7 +16,7 @@ NETS = ROOT / "netlists"
 @pytest.fixture(scope="module")
 def artcomp_sweep():
     c = hc.load(NETS / "arterial_compliance.yaml")
-    c.set_param("art.tau_Ca", 1.0)
+    c = c.with_values({"art.tau_Ca": 1.0})
     return stability_sweep(c, "Pa.value", "20:200:10 mmHg")
 
 
@@ -80,7 +80,7 @@ def test_hard_limit_gives_no_false_huge_eigenvalue(artcomp_sweep):
     assert all(a == [] for a, v in zip(r.at_limit, r.values) if v >= 40)
     # the artefact itself: the dynamic (clamped) circuit, V at its limit 0, forward difference
     c = hc.load(NETS / "arterial_compliance.yaml")
-    c.set_param("Pa.value", 20.0)
+    c = c.with_values({"Pa.value": 20.0})
     x = r.x[np.flatnonzero(low)[0]].copy()
     x[c.state_names.index("Cv.V")] = 0.0
     lam_false = np.linalg.eigvals(c.jacobian(0.0, x))

@@ -54,11 +54,10 @@ def dc_sweep(circuit, param: str, values, progress=False):
     started = clock()
     unit = circuit.param_unit(param)
     vals = parse_range(values, unit) if isinstance(values, str) else np.asarray(values, dtype=float)
-    c = circuit.copy()
     rows, failed = [], []
     x_prev = None
     for v in vals:
-        c.set_param(param, float(v))
+        c = circuit.with_values({param: float(v)})
         try:
             op = operating_point(c, x0=None if x_prev is None else x_prev)
         except SolverError:
@@ -74,7 +73,7 @@ def dc_sweep(circuit, param: str, values, progress=False):
     out = {f"{param}": vals}
     for k in keys:
         out[k] = np.array([r[k] if r is not None else np.nan for r in rows])
-    units = {param: unit, **c.column_units()}
+    units = {param: unit, **circuit.column_units()}
     res = SweepResult(out, units, failed, param)
     return stamp(res, "dc", circuit, {"param": param, "values": values if isinstance(values, str) else None,
                                       "continuation": True}, started)

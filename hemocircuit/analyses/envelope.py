@@ -112,9 +112,7 @@ def envelope(circuit, sweep, grid=None, outputs=None, t_end=1000.0, dt=0.1, wind
     for bc, members in build_batches(circuit, assignments):
         n = (workers or 2) if scheduler != "serial" else 1
         for chunk in split(list(range(len(members))), n):
-            sub = bc.subset(chunk).copy()
-            sub.__dict__.pop("_subset_cache", None)
-            jobs.append((sub, opt))
+            jobs.append((bc.subset(chunk), opt))  # pickles without caches
             where.append([members[j] for j in chunk])
     results = run_chunks(_run_chunk, jobs, scheduler=scheduler, workers=workers, progress=progress, desc="envelope")
     by_member = [None] * len(assignments)

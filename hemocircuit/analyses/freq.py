@@ -57,14 +57,13 @@ def _run_chunk(job):
     from .op import operating_points
     X0, opv, errors = operating_points(bc)
     y0 = np.stack([opv.get(o, np.full(B, np.nan)) for o in outputs], axis=1) if opv else np.full((B, len(outputs)), np.nan)
-    P0 = bc.get_param(f"{inp}.{drive.value}")
+    P0 = bc.parameters.values[f"{inp}.{drive.value}"]
     f = np.array([m["frequency"] for m in members])
-    bc.set_param(f"{inp}.{drive.value}", P0 * (1 + opt["step"]), prepare=False)
-    bc.set_param(f"{inp}.{drive.amplitude}", P0 * opt["rel_amplitude"], prepare=False)
-    bc.set_param(f"{inp}.{drive.frequency}", f, prepare=False)
-    bc.set_param(f"{inp}.{drive.phase}", np.zeros(B), prepare=False)
-    bc.set_param(f"{inp}.{drive.start}", np.zeros(B), prepare=False)
-    bc.prepare()
+    bc = bc.with_values({f"{inp}.{drive.value}": P0 * (1 + opt["step"]),
+                         f"{inp}.{drive.amplitude}": P0 * opt["rel_amplitude"],
+                         f"{inp}.{drive.frequency}": f,
+                         f"{inp}.{drive.phase}": np.zeros(B),
+                         f"{inp}.{drive.start}": np.zeros(B)})
     period = 1.0 / f
     t = np.zeros(B)
     x = X0.copy()
@@ -154,9 +153,8 @@ def frequency_response(circuit, freqs, outputs=None, input=None, step=0.1, ampli
     for bc, members in build_batches(circuit, assignments):
         # chunks of one batch keep contiguous members (similar frequencies) together
         for chunk in split(list(members), (workers or 2) if scheduler != "serial" else 1):
-            sub = bc.subset([members.index(k) for k in chunk])
-            sub = sub.copy() if sub is bc else sub
-            jobs.append((_detach(sub), [descr[k] for k in chunk], opt))
+            sub = bc.subset([members.index(k) for k in chunk])  # pickles without caches
+            jobs.append((sub, [descr[k] for k in chunk], opt))
             where.append(chunk)
     results = run_chunks(_run_chunk, jobs, scheduler=scheduler, workers=workers, progress=progress,
                          desc="frequency response")
@@ -218,13 +216,6 @@ class FreqResult(Result):
         super().__init__(cols, units, index=list(paths) + ["frequency"])
         self.metadata["failed"] = [[{p: str(a[p]) for p in paths} | {"frequency": d["frequency"]}, r["error"]]
                                    for a, d, r in zip(assignments, descr, by_member) if "error" in r]
-
-
-def _detach(c):
-    """A self-contained picklable copy of a (subset) circuit."""
-    c = c.copy()
-    c.__dict__.pop("_subset_cache", None)
-    return c
 
 
 def plot_result(res, path, select=None, title=None):

@@ -48,17 +48,18 @@ class OperatingPoint(Result):
 
 
 def residual(circuit, t, X, law_totals):
-    """f(x) with the conservation-law rows replaced by their constraints."""
+    """f(x) with the conservation-law rows replaced by their constraints.  law_totals: per
+    law its total (array), or a function of X whose zero the row is (a calibration)."""
     F = circuit.evaluate(t, X)
     if circuit.law_specs:
         vols = circuit.law_volumes(X)
         Bx = X.shape[0]
         for spec, total, vol in zip(circuit.law_specs, law_totals, vols):
+            if callable(total):  # a calibration being solved: its target replaces the row
+                F[:, spec["row"]] = total(X) * circuit.state_scales[spec["row"]]
+                continue
             rep = Bx // np.size(total) if np.size(total) else 1
-            if spec.get("_target") is not None:
-                F[:, spec["row"]] = spec["_target"](X) * circuit.state_scales[spec["row"]]
-            else:
-                F[:, spec["row"]] = (vol - np.repeat(np.atleast_1d(total), rep)) * 1.0
+            F[:, spec["row"]] = (vol - np.repeat(np.atleast_1d(total), rep)) * 1.0
     return F
 
 
@@ -74,12 +75,12 @@ def _jac(circuit, t, X, law_totals):
         # conservation-law rows: the stored volumes of the law's stores, or (calibration) the
         # pressure of its node
         reads = {}
-        for spec in circuit.law_specs:
-            if spec.get("_target") is not None:
+        for spec, total in zip(circuit.law_specs, law_totals):
+            if callable(total):
                 reads[spec["row"]] = ((), (circuit.nodes.index(spec["node"]),))
             else:
                 reads[spec["row"]] = (tuple(g.ids[i] for g, i, _, _ in spec["terms"]), ())
-        key = ("residual", tuple(spec.get("_target") is not None for spec in circuit.law_specs))
+        key = ("residual", tuple(callable(total) for total in law_totals))
         plan = circuit.jacobian_plan(key, fun, X, t, row_reads=reads)
         return sparse_la.coloured_jacobian(fun, X, circuit.state_scales, plan)
     nx = X.shape[1]
@@ -88,7 +89,7 @@ def _jac(circuit, t, X, law_totals):
 
 
 def _rep(totals, k):
-    return [None if t is None else np.repeat(np.atleast_1d(t), k) for t in totals]
+    return [t if t is None or callable(t) else np.repeat(np.atleast_1d(t), k) for t in totals]
 
 
 def newton(circuit, X, law_totals, t=0.0, tol=1e-10, max_iter=50, ptc=False):
@@ -207,28 +208,40 @@ def _dc_u(circuit, t, X):
     return circuit.dc_unknowns(t, X)
 
 
+def conserved_totals(circuit, t=0.0):
+    """Totals of the conservation laws of ``circuit`` ([array or None] per law): a volume
+    constraint's number, or a calibration's total solved with P(node) = target at its 'when'
+    values (on the steady variant).  Computed once per circuit (Circuit.cached)."""
+    sv = circuit.steady_variant()
+    return sv.cached(("conserved_totals", float(t)), lambda: _calibrate(sv, t))
+
+
 def _calibrate(circuit, t):
-    """Fix conserved totals given by calibrations: solve with P(node) = target at 'when'."""
+    totals = list(circuit.law_totals)
     for k, spec in enumerate(circuit.law_specs):
-        if spec["kind"] != "calibration" or circuit.law_totals[k] is not None:
+        if spec["kind"] != "calibration" or totals[k] is not None:
             continue
-        cal = circuit.copy()
-        cal.set_params(spec["when"])
+        cal = circuit.with_values(spec["when"])
         node_j = cal.nodes.index(spec["node"])
-        cspec = cal.law_specs[k]
+
         def target(X, cal=cal, node_j=node_j, spec=spec):
             u, _, _ = cal.evaluate(t, X, want="u")
             return (u[:, node_j] - spec["pressure"]) / 1.0
 
-        cspec["_target"] = target
-        totals = [None if j == k else cal.law_totals[j] for j in range(len(cal.law_specs))]
-        X0 = dc_guess(cal, t)
-        X, ok, res = _solve_with_fallbacks(cal, X0, totals, t)
-        if not ok:
-            raise SolverError(f"calibration of the conserved volume at node '{spec['node']}' "
-                              f"({spec['pressure']} mmHg when {spec['when']}) did not converge",
-                              where="computing the operating point")
-        circuit.law_totals[k] = cal.law_volumes(X)[k]
+        def solve(cal=cal, k=k, target=target, spec=spec, known=list(totals)):
+            X0 = dc_guess(cal, t)
+            X, ok, res = _solve_with_fallbacks(cal, X0, [target if j == k else known[j] for j in range(len(known))], t)
+            if not ok:
+                raise SolverError(f"calibration of the conserved volume at node '{spec['node']}' "
+                                  f"({spec['pressure']} mmHg when {spec['when']}) did not converge",
+                                  where="computing the operating point")
+            return cal.law_volumes(X)[k]
+
+        # the total depends only on the calibration circuit (its values with 'when' applied):
+        # sweeping a parameter that 'when' fixes reuses it
+        known = tuple(None if v is None else np.asarray(v).tobytes() for v in totals)
+        totals[k] = cal.structure.cached(("calibration", k, float(t), cal.parameters.fingerprint(), known), solve)
+    return totals
 
 
 def _solve_with_fallbacks(circuit, X0, totals, t):
@@ -248,15 +261,12 @@ def _source_stepping(circuit, totals, t):
     """Ramp every source's drive parameter (Component.drive: a pressure or flow source's value)
     from 30 % to 100 %, continuing the solution."""
     paths = [f"{e}.{g.comp.drive.value}" for g in circuit.groups if g.comp.drive is not None for e in g.ids]
-    base = {p: circuit.get_param(p) for p in paths}
+    base = {p: circuit.parameters.values[p] for p in paths}
     X = None
     ok = False
     res = np.inf
     for lam in np.linspace(0.3, 1.0, 15):
-        c = circuit.copy()
-        for p in paths:
-            c.set_param(p, base[p] * lam if c.B > 1 else float(base[p][0] * lam), prepare=False)
-        c.prepare()
+        c = circuit.with_values({p: base[p] * lam if circuit.B > 1 else float(base[p][0] * lam) for p in paths})
         X0 = dc_guess(c, t) if X is None else X
         X, ok, res = newton(c, X0, totals, t, ptc=True)
         if not ok:
@@ -272,11 +282,8 @@ def operating_point(circuit, t: float = 0.0, x0=None) -> OperatingPoint:
 
 
 def _operating_point(circuit, t, x0):
-    reporting = circuit
+    totals = [np.atleast_1d(v) if v is not None else None for v in conserved_totals(circuit, t)]
     circuit = circuit.steady_variant()
-    _calibrate(circuit, t)
-    reporting.law_totals = circuit.law_totals
-    totals = [np.atleast_1d(v) if v is not None else None for v in circuit.law_totals]
     X0 = dc_guess(circuit, t) if x0 is None else np.atleast_2d(np.asarray(x0, float)).copy()
     X, ok, res = newton(circuit, X0, totals, t)
     method = "newton"

@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..batch_integrator import integrate
+from ..derivatives import dense_jacobian, flow_steps
 from ..errors import HemocircuitError, SolverError
 from ..provenance import clock, stamp
 from ..results import Result
@@ -104,12 +105,11 @@ def shoot(circuit, x_guess, T_guess, forced=False, rtol=1e-9, tol=1e-8, max_iter
     converged = False
     M = None
     for it in range(1, max_iter + 1):
-        h = rel_step * S
-        X = np.repeat(x0[None], nx + 1, axis=0)
-        X[1 + np.arange(nx), np.arange(nx)] += h
-        X_end, _ = _flow(c, X, np.full(nx + 1, T), rtol=rtol)
-        phi = X_end[0]
-        M = ((X_end[1:] - phi[None]) / h[:, None]).T  # d phi / d x0 (columns = perturbed states)
+        # monodromy d phi / d x0 by forward differences of the flow map (the derivatives
+        # service; steps rel_step * scale, above the integrator's error), one batched run
+        Mb, phi = dense_jacobian(lambda rows: _flow(c, rows, np.full(rows.shape[0], T), rtol=rtol)[0],
+                                 x0[None], S, steps=flow_steps(S, rel_step))
+        M, phi = Mb[0], phi[0]
         r_orbit = (phi - x0) / S
         rows = [r_orbit]
         J = [np.hstack([(M - np.eye(nx)) * (S[None, :] / S[:, None]), np.zeros((nx, 0 if forced else 1))])]
@@ -201,12 +201,11 @@ def cmd_periodic(args):
         if not drive.has_sine:
             raise HemocircuitError(f"--forced {src}: a '{comp.type_name}' has no built-in sine term")
         amp, freq = f"{src}.{drive.amplitude}", f"{src}.{drive.frequency}"
-        f = float(c.get_param(freq)[0])
-        if f <= 0 or float(c.get_param(amp)[0]) == 0:
+        f = float(c.parameters.values[freq][0])
+        if f <= 0 or float(c.parameters.values[amp][0]) == 0:
             raise HemocircuitError(f"--forced {src}: give it a sine term (--set {amp}=..., {freq}=...)")
         from .op import operating_point
-        c0 = c.copy()
-        c0.set_param(amp, 0.0)
+        c0 = c.with_values({amp: 0.0})
         orb = shoot(c, operating_point(c0).x, 1.0 / f, forced=True)
     else:
         x, T = guess_from_run(c, output, args.t_settle)

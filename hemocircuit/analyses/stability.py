@@ -96,12 +96,12 @@ def equilibrium(c, x0=None, t=0.0, tol=1e-10):
     If x0 already balances (scaled residual below ``tol``, e.g. when the swept parameter does
     not move the equilibrium: zeta, omega_n, tau_Ca), it is returned as it is -- Newton started
     on a converged point can spend a long time in its line search at round-off level."""
-    from .op import operating_point, residual
+    from .op import conserved_totals, operating_point, residual
 
-    if x0 is not None and all(v is not None for v in c.law_totals):
+    if x0 is not None:
         sv = c.steady_variant()
-        totals = [np.atleast_1d(v) for v in c.law_totals]
         try:
+            totals = [np.atleast_1d(v) for v in conserved_totals(c, t)]
             F = residual(sv, t, np.asarray(x0, dtype=float)[None, :], totals)
             if np.all(np.isfinite(F)) and np.max(np.abs(F) / sv.state_scales) < tol:
                 return np.asarray(x0, dtype=float).copy()
@@ -117,8 +117,7 @@ def equilibrium(c, x0=None, t=0.0, tol=1e-10):
 
 def _solve_at(circuit, param, value, x0, t=0.0):
     """(circuit with param = value, its equilibrium continued from x0)."""
-    c = circuit.copy()
-    c.set_param(param, float(value))
+    c = circuit.with_values({param: float(value)})
     return c, equilibrium(c, x0, t)
 
 
@@ -269,7 +268,6 @@ def stability_sweep(circuit, param=None, values=None, t=0.0, locate=True, xtol=N
     vals = parse_range(values, unit) if isinstance(values, str) else np.atleast_1d(np.asarray(values, dtype=float))
     if circuit.B != 1:
         raise HemocircuitError("stability_sweep runs on a single circuit (the sweep is the batch)")
-    c = circuit.copy()
     points, failed = [], []
     x_prev = None
     it = vals
@@ -278,7 +276,7 @@ def stability_sweep(circuit, param=None, values=None, t=0.0, locate=True, xtol=N
         it = tqdm(vals, desc="stability", leave=False)
     for v in it:
         try:
-            c.set_param(param, float(v))
+            c = circuit.with_values({param: float(v)})
             x = equilibrium(c, x_prev, t)
             pt = analyse_point(c, x, t)
         except HemocircuitError as exc:
@@ -290,7 +288,7 @@ def stability_sweep(circuit, param=None, values=None, t=0.0, locate=True, xtol=N
     events = []
     if locate and len(vals) > 1:
         step = float(np.min(np.abs(np.diff(vals)))) if len(vals) > 1 else 1.0
-        events = _locate_events(c, param, vals, points, t, xtol or 1e-6 * step, 1e-3 * step)
+        events = _locate_events(circuit, param, vals, points, t, xtol or 1e-6 * step, 1e-3 * step)
     res = StabilityResult(param, unit, vals, points, events, failed, list(circuit.state_names))
     return stamp(res, "stability", circuit, {"param": param, "values": values if isinstance(values, str) else None,
                                              "t": t, "locate": locate, "xtol": xtol, "re_tol": RE_TOL,

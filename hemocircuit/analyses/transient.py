@@ -102,7 +102,7 @@ def simulate(circuit, t_end, dt=None, t0=0.0, x0=None, protocol=None, method="BD
 def _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step, first_step, engine, ic):
     from .op import operating_point
 
-    c = circuit.copy()
+    c = circuit
     if isinstance(protocol, str):
         protocol = Protocol.load(protocol, c)
     if protocol is not None:
@@ -172,8 +172,7 @@ def _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step
     for k in range(len(bounds) - 1):
         t_a, t_b = bounds[k], bounds[k + 1]
         if k > 0:
-            c = c.copy()
-            events[k - 1][1].apply(c)
+            c = events[k - 1][1].apply(c)
         # restart at waveform breakpoints inside the segment
         cuts = [t_a] + c.breakpoints(t_a, t_b) + [t_b]
         for a, b in zip(cuts, cuts[1:]):
@@ -242,8 +241,7 @@ def _simulate_compiled(system, c, x, t0, t_end, dt, events, rtol, atol, max_step
     for k in range(len(bounds) - 1):
         t_a, t_b = bounds[k], bounds[k + 1]
         if k > 0:
-            c = c.copy()
-            events[k - 1][1].apply(c)
+            c = events[k - 1][1].apply(c)
             # an event may change waveforms, options or expressions: the layout follows the
             # circuit (cheap; the compiled engine itself is reused)
             system = CompiledSystem.of(c)
