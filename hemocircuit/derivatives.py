@@ -12,10 +12,12 @@ import numpy as np
 FD_REL = 1e-7
 
 
-def fd_steps(X, scales):
-    """Forward-difference steps (same shape as X) for states X (..., nx)."""
+def fd_steps(X, scales, rel=FD_REL):
+    """Forward-difference steps (same shape as X) for states X (..., nx).  ``rel`` replaces
+    FD_REL where the function differentiated is itself only accurate to a tolerance (a fit
+    through an integrator with rtol: rel ~ sqrt(rtol), hemocircuit.fitting)."""
     X = np.asarray(X, dtype=float)
-    h = FD_REL * np.maximum(np.abs(X), scales)
+    h = rel * np.maximum(np.abs(X), scales)
     return (X + h) - X
 
 
