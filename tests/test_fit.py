@@ -208,3 +208,13 @@ def test_docs_worked_example_runs(tmp_path, capsys):
     assert "art.q1" in text and "rms passive" in text
     assert os.path.exists(out / "fit.png") and os.path.exists(out / "fitted.yaml")
     assert main(["op", str(out / "fitted.yaml"), "--set", "art.passive=true"]) == 0
+
+
+def test_a_parameter_set_without_operating_point_gives_nan_not_an_error(tmp_path):
+    """A failed member is NaN in rms_error (the sensitivity analysis excludes it), the others
+    are unaffected."""
+    problem = load_problem(ARTERIOLE, EXAMPLES / "kuo91_1_passive.yaml")
+    vals = {k: np.array([v, v]) for k, v in KUO91_PASSIVE.items()}
+    vals["art.q1"] = np.array([KUO91_PASSIVE["art.q1"], 1e-30])   # no stiffness: no equilibrium in range
+    rms = problem.rms_error(vals)
+    assert rms[0] < 1e-6 and np.isnan(rms[1])

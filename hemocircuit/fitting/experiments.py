@@ -57,6 +57,8 @@ def solve_steady(circuit, X0=None):
         except HemocircuitError:
             pass
     X, vals, errors = operating_points(circuit)
+    # every member failed: no column was filled
+    vals = {k: vals.get(k, np.full(B, np.nan)) for k in circuit.column_units()}
     return X, vals, np.array([e is None for e in errors], dtype=bool)
 
 

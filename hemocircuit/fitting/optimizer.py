@@ -167,26 +167,37 @@ def run_starts(problem, Z0, settings, workers=None, progress=False):
     return out
 
 
-def uncertainty(problem, space, z):
-    """Standard errors, correlation matrix and diagnostics at z (declared units).
+def uncertainty(problem, space, u):
+    """Standard errors, correlation matrix and diagnostics at u (declared units).
 
-    Returns a dict: p (values), se, corr (p x p), cov, dof, s2 (residual variance), ssr,
-    cond (condition number of J^T J), f (residuals), J (m x p, d residual / d p)."""
-    f, Jz = residual_and_jacobian(problem, space, z)
-    P = space.to_p(z)
-    J = Jz * space.dz_dp(P)[None, :]
+    cov = s^2 (J^T J)^-1 with J = d residual / d p, computed through the well-scaled u
+    coordinates (J_u = J dp/du; cov_p = D cov_u D, D = diag(dp/du)) with a pseudo-inverse.  A
+    parameter with weight on a direction that the data do not determine (singular value of
+    J_u below 1e-8 of the largest) gets an infinite standard error: it is not identifiable.
+
+    Returns a dict: p, se, corr, cov, dof, s2 (residual variance), ssr, cond (condition number
+    of J_u^T J_u), unidentifiable (bool per parameter), f (residuals), J (m x p)."""
+    f, Ju = residual_and_jacobian(problem, space, u)
+    P = space.to_p(u)
+    dudp = space.dz_dp(P)
+    J = Ju * dudp[None, :]
     m, p = J.shape
     ssr = float(np.sum(f ** 2))
     dof = m - p
     s2 = ssr / dof if dof > 0 else np.nan
-    JTJ = J.T @ J
+    _, sv, Vt = np.linalg.svd(Ju, full_matrices=False)
+    small = sv < 1e-8 * sv[0] if sv.size and sv[0] > 0 else np.ones(p, bool)
+    unident = np.any(np.abs(Vt[small]) > 1e-3, axis=0) if small.any() else np.zeros(p, bool)
     with np.errstate(divide="ignore", invalid="ignore"):
-        cond = float(np.linalg.cond(JTJ))
-        cov = np.linalg.pinv(JTJ) * s2
+        cond = float((sv[0] / sv[-1]) ** 2) if sv.size and sv[-1] > 0 else np.inf
+        cov_u = np.linalg.pinv(Ju.T @ Ju, rcond=1e-16) * s2
+        D = 1.0 / dudp
+        cov = cov_u * np.outer(D, D)
         se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-        corr = cov / np.outer(se, se)
+        se = np.where(unident, np.inf, se)
+        corr = cov / np.outer(np.sqrt(np.diag(cov)), np.sqrt(np.diag(cov)))
     return {"p": P, "se": se, "corr": corr, "cov": cov, "dof": dof, "s2": s2, "ssr": ssr, "cond": cond,
-            "f": f, "J": J}
+            "unidentifiable": unident, "f": f, "J": J}
 
 
 def on_bounds(space, z, tol=1e-3):

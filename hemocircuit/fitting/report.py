@@ -64,7 +64,8 @@ def summary(problem, result):
                        "rel_se": float(result["se"][j] / abs(result["p"][j])) if result["p"][j] else None,
                        "lower": float(problem.lower[j]), "upper": float(problem.upper[j]),
                        "log": bool(problem.log[j]), "start": float(problem.start[j]),
-                       "on_bound": result["bounds_hit"][j] or None})
+                       "on_bound": result["bounds_hit"][j] or None,
+                       "identifiable": not bool(result["unidentifiable"][j])})
     return {
         "name": spec.name,
         "parameters": params,
@@ -73,7 +74,7 @@ def summary(problem, result):
         "rms": {d.name: {"value": float(r), "unit": d.unit} for d, r in zip(problem.datasets, result["rms"])},
         "rms_error": float(result["rms_error"]),
         "ssr": result["ssr"], "dof": result["dof"], "residual_variance": result["s2"],
-        "condition_number_JTJ": result["cond"],
+        "condition_number_JTJ_in_u": result["cond"],
         "starts": [{"index": i, "cost": s["cost"], "nfev": s["nfev"], "njev": s["njev"], "status": s["status"],
                     "message": s["message"], "seconds": round(s["seconds"], 3),
                     "start": [float(v) for v in problem_space_to_p(problem, s["z0"])],
@@ -220,6 +221,8 @@ def text(problem, result):
     lines.append(f"  {'parameter':<{w}}  {'value':>12}  {'std. error':>10}  unit")
     for j, p in enumerate(problem.parameters):
         flag = f"  ON {result['bounds_hit'][j].upper()} BOUND (suspect)" if result["bounds_hit"][j] else ""
+        if result["unidentifiable"][j]:
+            flag += "  NOT IDENTIFIABLE from these data"
         lines.append(f"  {p:<{w}}  {result['p'][j]:12.6g}  {result['se'][j]:10.3g}  {problem.units[j]}{flag}")
     for k, v in result["tied"].items():
         lines.append(f"  {k:<{w}}  {v:12.6g}  (tied)")

@@ -103,6 +103,11 @@ def _spaced(v):
     """'239s' -> '239 s' (a number glued to its unit); strings with a space are left alone."""
     if " " in str(v).strip():
         return str(v)
+    try:  # '10e-3' (YAML reads it as a string): a plain number
+        float(v)
+        return str(v)
+    except ValueError:
+        pass
     m = re.match(r"^([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([A-Za-z].*)$", str(v).strip())
     return f"{m.group(1)} {m.group(2)}" if m else str(v)
 
