@@ -36,7 +36,9 @@ FLOW_REL = 1e-6
 
 
 def fd_steps(X, scales, rel=FD_REL):
-    """Steps (same shape as X) for states X (..., nx): rel * max(|x|, scale), representable."""
+    """Forward-difference steps (same shape as X) for states X (..., nx).  ``rel`` replaces
+    FD_REL where the function differentiated is itself only accurate to a tolerance (a fit
+    through an integrator with rtol: rel ~ sqrt(rtol), hemocircuit.fitting)."""
     X = np.asarray(X, dtype=float)
     h = rel * np.maximum(np.abs(X), scales)
     return (X + h) - X

@@ -186,6 +186,7 @@ def dc_guess(circuit, t=0.0, max_iter=200, tol=1e-12):
         X[:, g.sidx[i]] = g.comp.initial_states(plist[circuit.groups.index(g)], u)[:, i]
     anchors = {(id(s["anchor"][0]), s["anchor"][1]) for s in circuit.law_specs}
     relax = 1.0 if circuit.all_constant else 0.5
+    Xn_prev = None
     for it in range(max_iter):
         u, plist_b, stamps = _dc_u(circuit, t, X)
         Xn = X.copy()
@@ -198,6 +199,11 @@ def dc_guess(circuit, t=0.0, max_iter=200, tol=1e-12):
             free = np.array([(id(g), i) not in anchors for i in range(g.E)], dtype=bool)
             Xn[:, g.sidx[free]] = new[:, free]
         step = Xn - X
+        # the map's image stopped moving (the states do not feed back on the pressures, as
+        # when sources fix every node): it is the fixed point, no need to relax towards it
+        if Xn_prev is not None and np.max(np.abs(Xn - Xn_prev) / (np.abs(Xn) + circuit.state_scales)) < tol:
+            return Xn
+        Xn_prev = Xn
         X = X + relax * step
         if np.max(np.abs(step) / (np.abs(X) + circuit.state_scales)) < tol:
             break
@@ -303,12 +309,8 @@ def _operating_point(circuit, t, x0):
     single = circuit.B == 1
     if single:
         vals = {k: float(v[0]) for k, v in circuit.outputs(t, X).items()}
-    else:
-        vals = {}
-        for k in range(circuit.B):
-            for key, v in circuit.subset([k]).outputs(t, X[k:k + 1]).items():  # a view: no deep copy
-                vals.setdefault(key, []).append(float(v[0]))
-        vals = {k: np.array(v) for k, v in vals.items()}
+    else:  # one row per member: outputs() evaluates the whole batch at once
+        vals = {k: np.array(v, dtype=float) for k, v in circuit.outputs(t, X).items()}
     return OperatingPoint(circuit, X[0] if single else X, vals, circuit.column_units(), method,
                           float(np.max(res)))
 
