@@ -117,9 +117,11 @@ def _run_chunk(job):
 
 def frequency_response(circuit, freqs, outputs=None, input=None, step=0.1, amplitude=0.1,
                        grid=None, settle_tol=1e-3, n_periods=2, block_periods=4, max_periods=400, rtol=1e-8,
-                       scheduler=None, workers=None, progress=False):
-    """Batched nonlinear frequency response.  ``grid``: [(ID.PARAM, [values])].  Returns a list
-    of rows (dicts), one per (grid point, frequency, output): tidy data.
+                       scheduler=None, workers=None, progress=False, members=None):
+    """Batched nonlinear frequency response.  ``grid``: [(ID.PARAM, [values])]; or ``members``:
+    an explicit list of parameter sets [{ID.PARAM: value}] (e.g. sensitivity samples) in place
+    of the grid's cartesian product.  Returns a list of rows (dicts), one per (grid point or
+    member, frequency, output), in that order: tidy data.
 
     ``input``: a source element with a built-in sine term (Component.drive); default the
     netlist's ``input:``.  ``outputs``: default the netlist's ``outputs:`` for 'freq'."""
@@ -128,7 +130,7 @@ def frequency_response(circuit, freqs, outputs=None, input=None, step=0.1, ampli
     outputs = list(default_outputs(circuit, "freq") if outputs is None else outputs)
     grid = resolve_values(circuit, grid or [])
     assignments, descr = [], []
-    for g in expand_grid(grid):
+    for g in (expand_grid(grid) if members is None else members):
         for f in np.atleast_1d(freqs):
             assignments.append(dict(g))
             descr.append({"grid": g, "frequency": float(f)})
