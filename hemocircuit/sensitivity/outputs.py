@@ -77,6 +77,10 @@ class Objective:
     def default_parameters(self):
         return []
 
+    def check_value(self, path, value):
+        """None if ``path`` may take ``value``, else the reason."""
+        return None
+
     def evaluate_batch(self, values):  # -> (Y (B, m), errors)
         raise NotImplementedError
 
@@ -106,6 +110,13 @@ def _nonfinite(Y, errors):
 
 class CircuitObjective(Objective):
     """Shared by the circuit outputs: parameter units and centres from the circuit."""
+
+    def check_value(self, path, value):
+        try:
+            _with_values(self.circuit, {path: float(value)})
+        except HemocircuitError as exc:
+            return getattr(exc, "bare_message", str(exc))
+        return None
 
     def __init__(self, circuit, columns, events=()):
         self.circuit = circuit
@@ -223,7 +234,7 @@ def dc_points(circuit, sweep):
     from ..analyses.dc import parse_range
 
     if not isinstance(sweep, dict) or not sweep:
-        raise NetlistError("dc output: 'sweep' must map ID.PARAM to a range, e.g. "
+        raise NetlistError("'sweep' must map ID.PARAM to a range, e.g. "
                            "{Pup.value: '20:140:20 cmH2O', Pdown.value: '20:140:20 cmH2O'}")
     cols = {}
     for path, spec in sweep.items():
@@ -233,7 +244,7 @@ def dc_points(circuit, sweep):
         cols[path] = (vals, unit)
     n = {len(v) for v, _ in cols.values()}
     if len(n) != 1:
-        raise NetlistError(f"dc output: the swept paths have different numbers of points {sorted(n)}")
+        raise NetlistError(f"the swept paths have different numbers of points {sorted(n)}")
     N = n.pop()
     return [{p: f"{v[i]!r} {u}" for p, (v, u) in cols.items()} for i in range(N)]
 
@@ -258,9 +269,9 @@ class TranObjective(CircuitObjective):
             t = parse_range(times, "s") if isinstance(times, str) else np.array(
                 [parse_quantity(v, "s", "time") for v in times], dtype=float)
         except (UnitError, TypeError) as exc:
-            raise NetlistError(f"tran output: times {times!r}: {exc}") from None
+            raise NetlistError(f"times {times!r}: {exc}") from None
         if t.size == 0 or np.any(np.diff(t) <= 0) or t[0] < 0:
-            raise NetlistError(f"tran output: times must be increasing and >= 0 (got {times!r})")
+            raise NetlistError(f"times must be increasing and >= 0 (got {times!r})")
         self.times = t
         self.rtol = float(rtol)
         self.labels = [f"{col} @ t={tt:g} s" for tt in t for col in self.columns]
@@ -350,6 +361,8 @@ class FitErrorObjective(Objective):
     def default_parameters(self):
         from .spec import Parameter
         return [Parameter(p, p) for p in self.problem.parameters]
+
+    check_value = CircuitObjective.check_value
 
     def parameter_info(self, path, event=None):
         if event is not None:

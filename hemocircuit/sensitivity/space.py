@@ -83,6 +83,11 @@ def resolve(spec, objective) -> Space:
                 raise NetlistError(f"{where}: upper ({hi:g}) must exceed lower ({lo:g})", file=spec.file)
             if c is None:
                 c = 0.5 * (lo + hi)
+        for v in (lo, hi):
+            problem = objective.check_value(p.path, v)
+            if problem:
+                raise NetlistError(f"{where}: the range [{lo:g}, {hi:g}] leaves the parameter's physical "
+                                   f"bounds ({problem}); narrow it", file=spec.file)
         names.append(p.name)
         keys.append(p.key)
         units.append(unit)

@@ -155,11 +155,13 @@ def _method(raw, overrides, err):
         raw = {"name": raw}
     if not isinstance(raw, dict):
         raise err("'method' must be a name or a mapping {name: constellation, ...}")
-    raw = {**raw, **overrides}
-    name = raw.get("name", "constellation")
+    name = overrides.get("name", raw.get("name", "constellation"))
     if name not in METHODS:
         raise err(f"unknown method {name!r}; choose one of {sorted(METHODS)}")
     allowed = METHODS[name]
+    if name != raw.get("name", "constellation"):  # another method asked for: keep what applies
+        raw = {k: v for k, v in raw.items() if k in allowed}
+    raw = {**raw, **{k: v for k, v in overrides.items() if k in allowed or k == "name"}}
     unknown = set(raw) - set(allowed) - {"name"}
     if unknown:
         raise err(f"method {name}: unknown setting(s) {sorted(unknown)}; allowed: {sorted(allowed)}")
