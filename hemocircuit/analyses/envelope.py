@@ -95,8 +95,11 @@ def _period(t, y):
 
 
 def envelope(circuit, sweep, grid=None, outputs=None, t_end=1000.0, dt=0.1, window=0.3,
-             kick=1e-3, osc_tol=1e-3, rtol=1e-5, keep_series=None, scheduler=None, workers=None, progress=False):
-    """sweep: (ID.PARAM, values) ; grid: [(ID.PARAM, values)].  Returns an :class:`EnvelopeResult`.
+             kick=1e-3, osc_tol=1e-3, rtol=1e-5, keep_series=None, scheduler=None, workers=None, progress=False,
+             members=None):
+    """sweep: (ID.PARAM, values) ; grid: [(ID.PARAM, values)]; or ``members``: an explicit list
+    of parameter sets [{ID.PARAM: value}] in place of the sweep x grid product.  Returns an
+    :class:`EnvelopeResult` (one row per point or member).
 
     outputs: columns to report, the first giving the period; default the netlist's
     ``outputs:`` for 'envelope' (:func:`hemocircuit.outputs.default_outputs`)."""
@@ -105,7 +108,7 @@ def envelope(circuit, sweep, grid=None, outputs=None, t_end=1000.0, dt=0.1, wind
     started = clock()
     outputs = list(default_outputs(circuit, "envelope") if outputs is None else outputs)
     grids = resolve_values(circuit, ([sweep] if sweep else []) + list(grid or []))
-    assignments = expand_grid(grids)
+    assignments = expand_grid(grids) if members is None else list(members)
     opt = dict(outputs=outputs, t_end=float(t_end), dt=float(dt), window=float(window), kick=kick,
                osc_tol=osc_tol, rtol=rtol, keep_series=keep_series)
     jobs, where = [], []
@@ -119,7 +122,9 @@ def envelope(circuit, sweep, grid=None, outputs=None, t_end=1000.0, dt=0.1, wind
     for chunk, res in zip(where, results):
         for k, r in zip(chunk, res):
             by_member[k] = r
-    res = EnvelopeResult(circuit, [p for p, _ in grids], assignments, by_member, outputs)
+    paths = ([p for p, _ in grids] if members is None
+             else list(dict.fromkeys(k for m in assignments for k in m)))
+    res = EnvelopeResult(circuit, paths, assignments, by_member, outputs)
     settings = dict(sweep=[sweep[0], [str(v) for v in grids[0][1]]] if sweep else None,
                     grid={p: [str(v) for v in vals] for p, vals in grids[1 if sweep else 0:]}, outputs=outputs,
                     t_end=float(t_end), dt=float(dt), window=float(window), kick=kick, osc_tol=osc_tol, rtol=rtol,

@@ -121,8 +121,10 @@ def _run_chunk(job):
 
 def frequency_response(circuit, freqs, outputs=None, input=None, step=0.1, amplitude=0.1,
                        grid=None, settle_tol=1e-3, n_periods=2, block_periods=4, max_periods=400, rtol=1e-8,
-                       scheduler=None, workers=None, progress=False):
-    """Batched nonlinear frequency response.  ``grid``: [(ID.PARAM, [values])].
+                       scheduler=None, workers=None, progress=False, members=None):
+    """Batched nonlinear frequency response.  ``grid``: [(ID.PARAM, [values])]; or ``members``:
+    an explicit list of parameter sets [{ID.PARAM: value}] (e.g. sensitivity samples) in place
+    of the grid's cartesian product.
 
     ``input``: a source element with a built-in sine term (Component.drive); default the
     netlist's ``input:``.  ``outputs``: default the netlist's ``outputs:`` for 'freq'.
@@ -132,7 +134,7 @@ def frequency_response(circuit, freqs, outputs=None, input=None, step=0.1, ampli
     outputs = list(default_outputs(circuit, "freq") if outputs is None else outputs)
     grid = resolve_values(circuit, grid or [])
     assignments, descr = [], []
-    for g in expand_grid(grid):
+    for g in (expand_grid(grid) if members is None else members):
         for f in np.atleast_1d(freqs):
             assignments.append(dict(g))
             descr.append({"grid": g, "frequency": float(f)})
@@ -163,7 +165,8 @@ def frequency_response(circuit, freqs, outputs=None, input=None, step=0.1, ampli
         for k, r in zip(chunk, res):
             by_member[k] = r
     inp_path = f"{input}.{drive.value}"
-    res = FreqResult(circuit, [p for p, _ in grid], assignments, descr, by_member, outputs, inp_path)
+    paths = [p for p, _ in grid] if members is None else list(dict.fromkeys(k for m in members for k in m))
+    res = FreqResult(circuit, paths, assignments, descr, by_member, outputs, inp_path)
     settings = dict(input=inp_path, outputs=outputs, frequencies=[float(f) for f in np.atleast_1d(freqs)],
                     grid={p: [str(v) for v in vals] for p, vals in grid}, step=step, amplitude=amplitude,
                     settle_tol=settle_tol, n_periods=n_periods, block_periods=block_periods,
