@@ -121,15 +121,21 @@ def test_kuo91_passive_recovered_and_fragment_reproduces_the_rms(tmp_path):
     c = hc.load(paths["fragment"]).with_options({"art.passive": True})
     data = problem.datasets[0].table
     mmhg = conversion_factor("cmH2O", "mmHg")
-    c = c.batch(data.n)
-    c.set_params({"Pup.value": data.columns["Pup"] * mmhg, "Pdown.value": data.columns["Pdown"] * mmhg})
+    c = c.batch(data.n).with_values({"Pup.value": data.columns["Pup"] * mmhg,
+                                     "Pdown.value": data.columns["Pdown"] * mmhg})
     r = np.asarray(c.operating_point()["art.r"])
     rms = np.sqrt(np.mean((r - data.columns["r"]) ** 2))
     assert rms == pytest.approx(res["rms"][0], rel=1e-3, abs=1e-6)
     assert rms < 0.05  # um
     # a later stage starts from it
-    p2 = load_problem(ARTERIOLE, EXAMPLES / "kuo91_2_active.yaml")
-    assert p2.start_from  # (the example's own output folder need not exist for this check)
+    stage2 = yaml.safe_load((EXAMPLES / "kuo91_2_active.yaml").read_text())
+    stage2["start_from"] = str(paths["fragment"])
+    for d in stage2["datasets"]:
+        d["file"] = str(EXAMPLES / d["file"])
+    (tmp_path / "stage2.yaml").write_text(yaml.safe_dump(stage2))
+    p2 = load_problem(ARTERIOLE, tmp_path / "stage2.yaml")
+    assert set(KUO91_PASSIVE) <= set(p2.start_from)  # stage 2 starts from stage 1's values
+    assert not set(KUO91_PASSIVE) & set(p2.parameters)  # ... and keeps them fixed
 
 
 # ------------------------------------------------------------- 4. spec errors -------------

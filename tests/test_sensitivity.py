@@ -189,15 +189,26 @@ def test_spec_errors_against_the_circuit():
         make_objective(ev, c)
 
 
-def test_fit_error_without_the_fitting_package_is_a_clear_error():
-    try:
-        import hemocircuit.fitting  # noqa: F401
-        pytest.skip("the fitting package is present")
-    except ImportError:
-        pass
-    s = spec("constellation", None, {"fit_error": "fit.yaml"})
-    with pytest.raises(HemocircuitError, match="needs hemocircuit.fitting"):
-        make_objective(s, load(NETLIST), NETLIST)
+def test_fit_error_output_is_the_rms_of_the_fit_spec(tmp_path):
+    """fit_error on a closed form: P(b) = P0 + R Q fitted to noiseless data (P0 = 10 mmHg,
+    R = 2 mmHg*s/mL).  A P0 off by d gives rms = |d|; an R off by d gives rms = |d| rms(Q)."""
+    import yaml
+    from hemocircuit.fitting.datasets import write_table
+
+    Q = np.linspace(0.5, 4.0, 8)
+    write_table(tmp_path / "line.csv", {"Q": Q, "P": 10.0 + 2.0 * Q}, {"Q": "mL/s", "P": "mmHg"}, ["test data"])
+    fit_spec = tmp_path / "fit.yaml"
+    fit_spec.write_text(yaml.safe_dump({
+        "parameters": {"Ps.value": {"bounds": ["-50 mmHg", "50 mmHg"]},
+                       "R1.R": {"bounds": ["0.1 mmHg*s/mL", "20 mmHg*s/mL"]}},
+        "datasets": [{"name": "line", "file": "line.csv", "observe": "P(b)", "column": "P",
+                      "experiment": {"type": "op", "inputs": {"Qs.value": "Q"}}}]}))
+    netlist = os.path.join(os.path.dirname(__file__), "fitting", "linear.yaml")
+    obj = make_objective(spec("constellation", None, {"fit_error": str(fit_spec)}), load(netlist), netlist)
+    assert [p.path for p in obj.default_parameters()] == ["Ps.value", "R1.R"]
+    y, errors = obj.evaluate_batch({"Ps.value": np.array([10.0, 12.5, 10.0]), "R1.R": np.array([2.0, 2.0, 2.5])})
+    assert errors == [None] * 3
+    assert y[:, 0] == pytest.approx([0.0, 2.5, 0.5 * np.sqrt(np.mean(Q ** 2))], abs=1e-9)
 
 
 # ---------------------------------------------------------------- the real model ----------

@@ -226,7 +226,7 @@ class FitProblem:
         elif p.epoch is not None:
             v = self._protocol_value(p, unit)
         else:
-            v = float(self.circuit.get_param(p.base_path)[0])
+            v = float(self.circuit.parameters.values[p.base_path][0])
         return v
 
     def _protocol_value(self, p, unit):
@@ -237,7 +237,7 @@ class FitProblem:
                     (ev.set for ev in e.protocol.events if float(ev.at) == p.epoch), {})
                 if p.base_path in sets:
                     return parse_value(sets[p.base_path], unit, e.protocol.file, p.path)
-        return float(self.circuit.get_param(p.base_path)[0])
+        return float(self.circuit.parameters.values[p.base_path][0])
 
     # ---------------------------------------------------------------- evaluation ----
     @property
@@ -278,7 +278,7 @@ class FitProblem:
         cols = {}
         for expr in self.tied.values():
             for q in _PATH.findall(expr):
-                cols[q] = assign[q] if q in assign else np.full(B, float(self.circuit.get_param(q)[0]))
+                cols[q] = assign[q] if q in assign else np.full(B, float(self.circuit.parameters.values[q][0]))
         out = evaluate_derived({p: {"expr": e} for p, e in self.tied.items()}, cols, self.spec.file)
         return {p: np.broadcast_to(np.asarray(v, float), (B,)).copy() for p, v in out.items()}
 

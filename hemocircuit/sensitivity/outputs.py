@@ -54,12 +54,6 @@ def _is_option(circuit, path):
     return eid in circuit.elements and name in circuit.elements[eid].cls.options
 
 
-def _detach(c):
-    c = c.copy()
-    c.__dict__.pop("_subset_cache", None)
-    return c
-
-
 # ------------------------------------------------------------------------ objectives ----
 class Objective:
     """Base: ``labels``/``units`` of the m output components, ``evaluate_batch``."""
@@ -131,7 +125,7 @@ class CircuitObjective(Objective):
     def parameter_info(self, path, event=None):
         unit = self.circuit.param_unit(path)
         if event is None:
-            return {"unit": unit, "centre": float(self.circuit.get_param(path)[0])}
+            return {"unit": unit, "centre": float(self.circuit.parameters.values[path][0])}
         for ev in self.events:
             if abs(ev.at - event) <= 1e-9 * max(1.0, abs(event)) and path in ev.set:
                 try:
@@ -174,7 +168,7 @@ def operating_points(c):
     X = np.full((B, c.nx), np.nan)
     vals, errors = {}, []
     for idx in (np.arange(B // 2), np.arange(B // 2, B)):
-        Xi, v, e = operating_points(_detach(c.subset(idx)))
+        Xi, v, e = operating_points(c.subset(idx))
         X[idx] = Xi
         for k, a in v.items():
             vals.setdefault(k, np.full(B, np.nan))[idx] = a
@@ -343,12 +337,7 @@ class FitErrorObjective(Objective):
     ``load_problem(netlist, fitspec)``, ``.parameters``, ``.bounds``, ``.rms_error(values)``."""
 
     def __init__(self, circuit, netlist_path, fit_spec_path):
-        try:
-            from ..fitting import load_problem
-        except ImportError:
-            raise HemocircuitError("the fit_error output needs hemocircuit.fitting (the 'hemocircuit fit' "
-                                   "package), which is not installed in this checkout; use another output "
-                                   "kind or merge the fitting package") from None
+        from ..fitting import load_problem
         self.circuit = circuit
         self.problem = load_problem(netlist_path, fit_spec_path)
         self.labels, self.units = ["rms error"], [getattr(self.problem, "rms_unit", "")]
@@ -363,7 +352,7 @@ class FitErrorObjective(Objective):
     def parameter_info(self, path, event=None):
         if event is not None:
             raise NetlistError(f"parameter {path}: 'event' applies to a tran output only")
-        info = {"unit": self.circuit.param_unit(path), "centre": float(self.circuit.get_param(path)[0])}
+        info = {"unit": self.circuit.param_unit(path), "centre": float(self.circuit.parameters.values[path][0])}
         if path in self._bounds:
             info["lower"], info["upper"] = self._bounds[path]
         return info
