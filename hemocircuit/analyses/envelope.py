@@ -112,11 +112,11 @@ def envelope(circuit, sweep, grid=None, outputs=None, t_end=1000.0, dt=0.1, wind
     opt = dict(outputs=outputs, t_end=float(t_end), dt=float(dt), window=float(window), kick=kick,
                osc_tol=osc_tol, rtol=rtol, keep_series=keep_series)
     jobs, where = [], []
-    for bc, members in build_batches(circuit, assignments):
+    for bc, idx in build_batches(circuit, assignments):
         n = (workers or 2) if scheduler != "serial" else 1
-        for chunk in split(list(range(len(members))), n):
+        for chunk in split(list(range(len(idx))), n):
             jobs.append((bc.subset(chunk), opt))  # pickles without caches
-            where.append([members[j] for j in chunk])
+            where.append([idx[j] for j in chunk])
     results = run_chunks(_run_chunk, jobs, scheduler=scheduler, workers=workers, progress=progress, desc="envelope")
     by_member = [None] * len(assignments)
     for chunk, res in zip(where, results):

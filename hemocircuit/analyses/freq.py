@@ -152,10 +152,10 @@ def frequency_response(circuit, freqs, outputs=None, input=None, step=0.1, ampli
                max_periods=max_periods, rtol=rtol)
     started = clock()
     jobs, where = [], []
-    for bc, members in build_batches(circuit, assignments):
+    for bc, idx in build_batches(circuit, assignments):
         # chunks of one batch keep contiguous members (similar frequencies) together
-        for chunk in split(list(members), (workers or 2) if scheduler != "serial" else 1):
-            sub = bc.subset([members.index(k) for k in chunk])  # pickles without caches
+        for chunk in split(list(idx), (workers or 2) if scheduler != "serial" else 1):
+            sub = bc.subset([idx.index(k) for k in chunk])  # pickles without caches
             jobs.append((sub, [descr[k] for k in chunk], opt))
             where.append(chunk)
     results = run_chunks(_run_chunk, jobs, scheduler=scheduler, workers=workers, progress=progress,
