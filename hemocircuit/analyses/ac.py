@@ -212,11 +212,24 @@ def plot_result(res, path, select=None, title=None):
 
 
 # ------------------------------------------------------------------------------ CLI -------
-def cmd_ac(args):
-    from ..cli import _load, save_outputs
+def _ac(args, c):
+    return ac_response(c, input=args.input, outputs=args.output or None, freqs=args.freq, per_decade=args.per_decade)
 
-    c, _ = _load(args)
-    res = ac_response(c, input=args.input, outputs=args.output or None, freqs=args.freq, per_decade=args.per_decade)
+
+def compute_ac(args, sets):
+    """One --grid member (:func:`hemocircuit.cli.computed`)."""
+    from ..cli import load_circuit
+    return _ac(args, load_circuit(args.netlist, sets, args.protocol)[0])
+
+
+def cmd_ac(args):
+    from ..cli import _load, computed, report_grid, save_outputs
+
+    if args.grid:
+        res = computed(args, compute_ac)
+        show = [k for k in res.keys() if k.startswith(("rel_gain(", "phase("))]
+        return report_grid(args, res, show)
+    res = _ac(args, _load(args)[0])
     outputs = res.outputs
     print(f"AC: {res.input} = {res.p0:.6g} {res.input_unit} -> {', '.join(outputs)}; "
           f"{len(res.freq)} frequencies {res.freq[0]:.4g}..{res.freq[-1]:.4g} Hz")
@@ -249,5 +262,4 @@ def register_cli(sub, common):
     sp.add_argument("--freq", default="0.001:10Hz",
                     help="F1:F2 UNIT (log-spaced), F1:F2:STEP UNIT (linear) or a list (default 0.001:10Hz)")
     sp.add_argument("--per-decade", type=int, default=20, help="points per decade for F1:F2 (default 20)")
-    sp.add_argument("--quiet", action="store_true", help="do not print the table")
     sp.set_defaults(func=cmd_ac)

@@ -32,7 +32,15 @@ def compare_sweep(circuits, param, values):
     res = CompareResult(parts, param, circuits[0].param_unit(param))
     return stamp(res, "compare", circuits[0], {"mode": "sweep", "param": param,
                                                "values": values if isinstance(values, str) else None,
-                                               "netlists": [c.file for c in circuits]}, started)
+                                               "netlists": [c.file for c in circuits],
+                                               "derived": _derived_names(circuits)}, started)
+
+
+def _derived_names(circuits):
+    names = []
+    for c in circuits:
+        names += [k for k in c.netlist.derived if k not in names]
+    return names
 
 
 def compare_transient(circuits, protocol, t_end=None, dt=None):
@@ -46,7 +54,8 @@ def compare_transient(circuits, protocol, t_end=None, dt=None):
     res = CompareResult(parts, "time", "s")
     return stamp(res, "compare", circuits[0], {"mode": "tran", "protocol": protocol if isinstance(protocol, str)
                                                else getattr(protocol, "file", None), "t_end": t_end, "dt": dt,
-                                               "netlists": [c.file for c in circuits]}, started)
+                                               "netlists": [c.file for c in circuits],
+                                               "derived": _derived_names(circuits)}, started)
 
 
 class CompareResult(Result):
@@ -116,35 +125,49 @@ def register_cli(sub, common):
     sp.set_defaults(func=cmd_compare)
 
 
-def cmd_compare(args):
-    from ..cli import _range_spacing, _sets, _unit_to, events_only, load_circuit, record
+def compute_compare(args, sets):
+    """The comparison on the netlists with ``sets`` applied (also one --grid member)."""
+    from ..cli import _range_spacing, _unit_to, events_only, load_circuit
 
     circuits, proto = [], None
     for path in args.netlists:
-        c, proto = load_circuit(path, _sets(args.set), args.protocol)
+        c, proto = load_circuit(path, sets, args.protocol)
         circuits.append(c)
     if args.tran:
-        if not args.protocol:
-            raise HemocircuitError("compare --tran needs --protocol")
         t_end = float(_unit_to(args.t_end, "s")) if args.t_end else None
         dt = float(_unit_to(args.dt, "s")) if args.dt else None
-        res = compare_transient(circuits, events_only(proto), t_end, dt)
-    else:
-        if not args.sweep or "=" not in args.sweep:
-            raise HemocircuitError("compare needs --sweep ID.PARAM=START:STOP:STEP UNIT (or --tran)")
-        param, rng = args.sweep.split("=", 1)
-        res = compare_sweep(circuits, param.strip(), _range_spacing(rng))
-    derived = []
-    for c in circuits:
-        derived += [k for k in c.netlist.derived if k not in derived]
-    shown = args.show or [k for k in derived if all(k in q for _, q, _, _ in res.parts.values())] or \
-        res.shared_quantities()[:6]
+        return compare_transient(circuits, events_only(proto), t_end, dt)
+    param, rng = args.sweep.split("=", 1)
+    return compare_sweep(circuits, param.strip(), _range_spacing(rng))
+
+
+def cmd_compare(args):
+    from ..cli import apply_measures, computed, record
+
+    if args.tran and not args.protocol:
+        raise HemocircuitError("compare --tran needs --protocol")
+    if not args.tran and (not args.sweep or "=" not in args.sweep):
+        raise HemocircuitError("compare needs --sweep ID.PARAM=START:STOP:STEP UNIT (or --tran)")
+    res = computed(args, compute_compare)
+    derived = res.metadata.get("settings", {}).get("derived", [])
+    shown = args.show or [k for k in derived if k in res.data and _in_every_netlist(res, k)] or \
+        [k for k in res.columns if _in_every_netlist(res, k)][:6]
     print(res.summary(show=shown, max_rows=24, where=args.out))
-    for name, v, why in res.metadata["failed"]:
-        print(f"{name}: failed at {res.index[1]}={v:g}: {why}", file=sys.stderr)
+    for item in res.metadata.get("failed", []):
+        print(f"failed: {item}", file=sys.stderr)
+    apply_measures(args, res)
     record(args, res)
     if args.out:
         print(f"wrote {res.save(args.out)}")
     if args.plot:
         files = plot_overlays(os.path.splitext(args.plot)[0], res, shown)
         print("wrote " + ", ".join(files))
+
+
+def _in_every_netlist(res, k):
+    """Whether every netlist of a comparison has quantity ``k`` (some finite value)."""
+    try:
+        v = np.asarray(res[k], dtype=float)
+    except (TypeError, ValueError):
+        return False
+    return all(np.any(np.isfinite(v[res["netlist"] == n])) for n in dict.fromkeys(res["netlist"]))

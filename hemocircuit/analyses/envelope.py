@@ -95,7 +95,7 @@ def _period(t, y):
 
 
 def envelope(circuit, sweep, grid=None, outputs=None, t_end=1000.0, dt=0.1, window=0.3,
-             kick=1e-3, osc_tol=1e-3, rtol=1e-5, keep_series=None, scheduler=None, workers=None, progress=False):
+             kick=1e-3, osc_tol=1e-3, rtol=1e-5, keep_series=None, scheduler=None, workers=None, progress=None):
     """sweep: (ID.PARAM, values) ; grid: [(ID.PARAM, values)].  Returns an :class:`EnvelopeResult`.
 
     outputs: columns to report, the first giving the period; default the netlist's
@@ -110,13 +110,15 @@ def envelope(circuit, sweep, grid=None, outputs=None, t_end=1000.0, dt=0.1, wind
                osc_tol=osc_tol, rtol=rtol, keep_series=keep_series)
     jobs, where = [], []
     for bc, members in build_batches(circuit, assignments):
-        n = (workers or 2) if scheduler != "serial" else 1
+        # a few chunks per worker: the bar (runs done / total) moves while runs last minutes
+        n = min(len(members), 4 * (workers or 2)) if scheduler != "serial" else 1
         for chunk in split(list(range(len(members))), n):
             sub = bc.subset(chunk).copy()
             sub.__dict__.pop("_subset_cache", None)
             jobs.append((sub, opt))
             where.append([members[j] for j in chunk])
-    results = run_chunks(_run_chunk, jobs, scheduler=scheduler, workers=workers, progress=progress, desc="envelope")
+    results = run_chunks(_run_chunk, jobs, scheduler=scheduler, workers=workers, progress=progress, desc="envelope",
+                         sizes=[len(w) for w in where])
     by_member = [None] * len(assignments)
     for chunk, res in zip(where, results):
         for k, r in zip(chunk, res):
@@ -216,14 +218,12 @@ def _fmt(v):
 def register_cli(sub, common):
     sp = common(sub.add_parser("envelope", help="oscillation envelope over a sweep x grid (batched)"), outputs=False)
     sp.add_argument("--sweep", required=True, help="ID.PARAM=START:STOP:STEP UNIT or V1,V2,...")
-    sp.add_argument("--grid", action="append", help="ID.PARAM=V1,V2 (repeatable)")
     sp.add_argument("--output", action="append",
                     help="outputs to report, the first gives the period (default: the netlist's 'outputs:')")
     sp.add_argument("--t-end", type=float, default=1000.0, help="s (default 1000)")
     sp.add_argument("--dt", type=float, default=0.1, help="output interval, s")
     sp.add_argument("--rtol", type=float, default=1e-5)
     sp.add_argument("--scheduler")
-    sp.add_argument("--workers", type=int)
     sp.add_argument("--out", help="result CSV (one row per member; or .json)")
     sp.add_argument("--plot", help="envelope PNG (first output)")
     sp.add_argument("--show", action="append", help="column to print (repeatable)")
@@ -248,7 +248,7 @@ def cmd_envelope(args):
                                    f"in the netlist (found {keep})")
         keep = keep[:2]
     res = envelope(c, sweep, grid, outputs, t_end=args.t_end, dt=args.dt, rtol=args.rtol, keep_series=keep,
-                   scheduler=args.scheduler, workers=args.workers, progress=True)
+                   scheduler=args.scheduler, workers=args.workers)
     o = outputs[0]
     show = [f"min({o})", f"max({o})", f"steady({o})", "oscillating", "period"]
     print(res.summary(show=args.show or show, max_rows=0, where=args.out))
