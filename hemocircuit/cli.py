@@ -353,6 +353,7 @@ def build_parser():
     sp.add_argument("--rerun", metavar="OUT", help="run the command stored in its provenance again, writing OUT")
     sp.add_argument("--set", action="append", help=argparse.SUPPRESS)
     sp.add_argument("--protocol", help=argparse.SUPPRESS)
+    sp.add_argument("--quiet", action="store_true", help="no progress bars (for --rerun)")
     sp.set_defaults(func=cmd_show)
     for register in _extra_commands():
         register(sub, common)

@@ -149,19 +149,20 @@ def _where(a):
     return {p: _as_set(v) for p, v in a.items()}
 
 
-def members(res):
-    """The grid members of a stacked result: [(label, row mask)], in order of first appearance
-    (one member, the whole table, when the result has no grid).  ``label`` reads
-    'art.tau_Ca=10 s, art.ca_order=2'."""
-    paths = [p for p in res.metadata.get("grid", []) if p in res.data] or \
-        [p for p in res.index[:-1] if p in res.data]
-    if not paths:
+def members(res, columns=None):
+    """Rows of a result grouped by ``columns`` (default: its grid parameters, else every index
+    column but the last): [(label, row mask)] in order of first appearance, one group (the
+    whole table) when there is nothing to group by.  ``label`` reads 'art.tau_Ca=10 s, art.ca_order=2'."""
+    if columns is None:
+        columns = [p for p in res.metadata.get("grid", []) if p in res.data] or \
+            [p for p in res.index[:-1] if p in res.data]
+    if not columns:
         return [("", np.ones(res.n_rows, bool))]
-    keys = list(dict.fromkeys(zip(*(res[p].tolist() for p in paths))))
+    keys = list(dict.fromkeys(zip(*(res[p].tolist() for p in columns))))
     out = []
     for key in keys:
-        mask = np.all([np.array([x == v for x in res[p].tolist()]) for p, v in zip(paths, key)], axis=0)
-        lab = ", ".join(f"{p}={_fmt(v)} {res.units.get(p, '')}".rstrip() for p, v in zip(paths, key))
+        mask = np.all([np.array([x == v for x in res[p].tolist()]) for p, v in zip(columns, key)], axis=0)
+        lab = ", ".join(f"{p}={_fmt(v)} {res.units.get(p, '')}".rstrip() for p, v in zip(columns, key))
         out.append((lab, mask))
     return out
 

@@ -186,18 +186,26 @@ def ac_response(circuit, input=None, outputs=None, freqs="0.001:10 Hz", per_deca
 # ------------------------------------------------------------------------------ plots -----
 def plot_result(res, path, select=None, title=None):
     """Bode plot from a result's columns (fresh or reloaded): relative gain (log-log) and phase
-    (deg, leading positive) against frequency, one line per output."""
+    (deg, leading positive) against frequency, one line per output and grid member."""
     plt = pyplot()
 
     f = res["frequency"]
     names = [k[len("rel_gain("):-1] for k in res.keys() if k.startswith("rel_gain(")]
     if select:
         names = [n for n in names if n.split("/")[0] in select] or names
+    from ..grid import members
+    groups = members(res, [k for k in res.index if k != "frequency"])
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(8, 6.5), sharex=True)
-    for n in names:
-        g = res[f"gain({n})"]
-        ax1.loglog(f, res[f"rel_gain({n})"], label=f"{n} (|H| at {f[0]:.3g} Hz: {g[0]:.3g} {res.units[f'gain({n})']})")
-        ax2.semilogx(f, res[f"phase({n})"], label=n)
+    for j, n in enumerate(names):
+        for g, (glab, mask) in enumerate(groups):
+            f = np.asarray(res["frequency"][mask], dtype=float)
+            gain = np.asarray(res[f"gain({n})"][mask], dtype=float)
+            lab = n.split("/")[0] + (f" ({glab})" if glab else
+                                     f" (|H| at {f[0]:.3g} Hz: {gain[0]:.3g} {res.units[f'gain({n})']})")
+            color = f"C{(g if len(groups) > 1 else j) % 10}"
+            style = ["-", "--", ":", "-."][(j if len(groups) > 1 else 0) % 4]
+            ax1.loglog(f, res[f"rel_gain({n})"][mask], style, color=color, label=lab)
+            ax2.semilogx(f, res[f"phase({n})"][mask], style, color=color, label=lab)
     ax1.set_ylabel("relative gain (dy/y0)/(dp/p0) [1]")
     ax1.grid(alpha=0.3, which="both")
     ax1.legend(fontsize=8)
@@ -205,7 +213,6 @@ def plot_result(res, path, select=None, title=None):
     ax2.set_ylabel("phase [deg] (+ = output leads)")
     ax2.set_xlabel("frequency [Hz]")
     ax2.grid(alpha=0.3, which="both")
-    ax2.legend(fontsize=8)
     ax1.set_title(title or res._title())
     save_figure(fig, path)
     return str(path)

@@ -3,18 +3,16 @@
 ``hemocircuit compare A.yaml B.yaml ... --sweep Pa.value=20:200:2mmHg`` computes the steady
 states of every netlist over the sweep; ``--tran --protocol P.yaml`` runs the same protocol
 on each.  Output: one CSV, a row per (netlist, x) and a column per quantity (``name [unit]``),
-and one overlay plot per quantity.  Quantities are every netlist's ``derived`` entries plus the columns they share.
+and one plot (a panel per unit, a line per netlist).  Quantities are every netlist's ``derived`` entries plus the columns they share.
 """
 from __future__ import annotations
 
-import os
 import sys
 
 import numpy as np
 
 from ..derived import derived_units, evaluate_derived
 from ..errors import HemocircuitError
-from ..io import pyplot, save_figure
 from ..provenance import clock, stamp
 from ..results import Result
 
@@ -88,29 +86,6 @@ class CompareResult(Result):
         return sorted(names or set())
 
 
-def plot_overlays(prefix, res, quantities, xlabel=None):
-    """One PNG per quantity, ``PREFIX_QUANTITY.png``, every netlist a line; returns the files."""
-    plt = pyplot()
-
-    xname = res.index[1]
-    files = []
-    for k in quantities:
-        fig, ax = plt.subplots(figsize=(6.4, 4))
-        for name in dict.fromkeys(res["netlist"]):
-            sel = res["netlist"] == name
-            if np.any(np.isfinite(res[k][sel])):
-                ax.plot(res[xname][sel], res[k][sel], label=name)
-        ax.set_xlabel(xlabel or res.label(xname))
-        ax.set_ylabel(res.label(k))
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
-        safe = "".join(ch if ch.isalnum() or ch in "._-" else "_" for ch in k)
-        f = f"{prefix}_{safe}.png"
-        save_figure(fig, f, dpi=100)
-        files.append(f)
-    return files
-
-
 def register_cli(sub, common):
     sp = sub.add_parser("compare", help="steady states (or a protocol) of several netlists side by side")
     sp.add_argument("netlists", nargs="+", help="netlist YAML files (--set and --protocol apply to every one)")
@@ -120,7 +95,7 @@ def register_cli(sub, common):
     sp.add_argument("--t-end", help="end time for --tran")
     sp.add_argument("--dt", help="output interval for --tran")
     sp.add_argument("--out", help="result CSV (a row per netlist and x; or .json)")
-    sp.add_argument("--plot", help="prefix of the overlay PNG files (one per quantity)")
+    sp.add_argument("--plot", help="PNG: the quantities of interest, a panel per unit, a line per netlist")
     sp.add_argument("--show", action="append", help="quantity to print/plot (default: derived quantities)")
     sp.set_defaults(func=cmd_compare)
 
@@ -160,8 +135,8 @@ def cmd_compare(args):
     if args.out:
         print(f"wrote {res.save(args.out)}")
     if args.plot:
-        files = plot_overlays(os.path.splitext(args.plot)[0], res, shown)
-        print("wrote " + ", ".join(files))
+        res.plot(args.plot, select=args.show)
+        print(f"wrote {args.plot}")
 
 
 def _in_every_netlist(res, k):

@@ -397,6 +397,10 @@ def plot_result(res, path, select=None, title=None):
                          fontsize=7, rotation=90, va="bottom", ha="right", color="tab:red")
     ax1.axhline(0, color="k", lw=0.7)
     ax1.set_yscale("symlog", linthresh=lin)
+    re_all = E.real[np.isfinite(E.real)]
+    if re_all.size:  # no empty decades: from the fastest decay to just above the largest real part
+        top = re_all.max() * 3 if re_all.max() > 0 else lin * 3
+        ax1.set_ylim(min(re_all.min() * 2, -lin), top)
     ax1.set_xlabel(f"{param} [{unit}]")
     ax1.set_ylabel("Re(lambda) [1/s]  (orange: complex pair; shaded: complex range)")
     ax1.grid(alpha=0.3)
@@ -408,6 +412,8 @@ def plot_result(res, path, select=None, title=None):
     ax2.axvline(0, color="k", lw=0.7)
     ax2.axhline(0, color="k", lw=0.4)
     ax2.set_xscale("symlog", linthresh=lin)
+    if re_all.size:
+        ax2.set_xlim(min(re_all.min() * 2, -lin), re_all.max() * 3 if re_all.max() > 0 else lin)
     ax2.set_xlabel("Re(lambda) [1/s]")
     ax2.set_ylabel("Im(lambda) [rad/s]")
     ax2.grid(alpha=0.3)
