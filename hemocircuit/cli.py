@@ -301,9 +301,19 @@ def cmd_graph(args):
     print(f"wrote {out}")
 
 
-def build_parser():
+BUILTIN = ("check", "op", "dc", "tran", "graph", "show")
+
+
+def build_parser(command=None):
+    """The argument parser.  ``command``: the command about to run -- only the analysis
+    module that defines it is imported (``hemocircuit CMD`` starts without importing the
+    others); None: every command (also ``--help``, which lists the analysis commands from
+    their sources without importing them)."""
+    from . import __version__
+
     p = argparse.ArgumentParser(prog="hemocircuit", description="Lumped-parameter hemodynamic circuits.")
-    sub = p.add_subparsers(dest="command", required=True)
+    p.add_argument("--version", action="version", version=f"hemocircuit {__version__}")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     def common(sp, outputs=True, netlist=True, grid=True):
         """The loader's arguments (netlist, --set, --protocol: see load_circuit) and --quiet,
@@ -355,12 +365,35 @@ def build_parser():
     sp.add_argument("--protocol", help=argparse.SUPPRESS)
     sp.add_argument("--quiet", action="store_true", help="no progress bars (for --rerun)")
     sp.set_defaults(func=cmd_show)
-    for register in _extra_commands():
+    p.commands = sub.choices  # {name: parser}
+    index = command_index()
+    if command == "--help":  # names and one-line help only: nothing imported
+        for name, (_, text) in index.items():
+            sub.add_parser(name, help=text)
+        return p
+    if command in BUILTIN:
+        return p
+    for register in _extra_commands(index[command][0] if command in index else None):
         register(sub, common)
     return p
 
 
-def _extra_commands():
+def command_index():
+    """{command: (module, help)} of the analysis modules' commands, read from their sources
+    (``sub.add_parser("NAME", help="...")`` in ``register_cli``) without importing them."""
+    import re
+    from pathlib import Path
+    out = {}
+    for path in sorted((Path(__file__).parent / "analyses").glob("*.py")):
+        text = path.read_text(encoding="utf-8")
+        if "def register_cli" not in text:
+            continue
+        for m in re.finditer(r'add_parser\(\s*"([\w-]+)",\s*help="([^"]*)"', text):
+            out[m.group(1)] = (path.stem, m.group(2))
+    return out
+
+
+def _extra_commands(only=None):
     """Commands contributed by analysis modules: every module of ``hemocircuit.analyses`` that
     defines ``register_cli(subparsers, common)`` (found by scanning the package, like the
     components), then third-party ones registered under the entry-point group
@@ -373,6 +406,8 @@ def _extra_commands():
 
     out = []
     for info in sorted(pkgutil.iter_modules(analyses.__path__), key=lambda i: i.name):
+        if only is not None and info.name != only:
+            continue
         spec = info.module_finder.find_spec(info.name)
         origin = getattr(spec, "origin", None)
         if origin and origin.endswith(".py"):
@@ -382,6 +417,8 @@ def _extra_commands():
         m = importlib.import_module(f"{analyses.__name__}.{info.name}")
         if callable(getattr(m, "register_cli", None)):
             out.append(m.register_cli)
+    if only is not None:
+        return out
     for ep in metadata.entry_points(group="hemocircuit.analyses"):
         try:
             obj = ep.load()
@@ -406,7 +443,21 @@ def _check_outputs(args):
 
 def main(argv=None):
     argv = sys.argv[1:] if argv is None else [str(a) for a in argv]
-    parser = build_parser()
+    first = next((a for a in argv if not a.startswith("-")), None)
+    if first is None or first == "help":
+        parser = build_parser("--help")  # --help, --version, or no command: nothing heavy imported
+    else:
+        parser = build_parser(first)
+        if first not in parser.commands:  # maybe a plug-in's command: load them all
+            parser = build_parser()
+        if first not in parser.commands:
+            import difflib
+            known = sorted(parser.commands)
+            near = difflib.get_close_matches(first, known, n=2)
+            print(f"hemocircuit: error: unknown command {first!r}" +
+                  (f"; did you mean {' or '.join(near)}?" if near else f"; commands: {', '.join(sorted(known))}"),
+                  file=sys.stderr)
+            return 2
     args = parser.parse_args(argv)
     args.argv = argv
     from . import progress

@@ -162,9 +162,13 @@ def members(res, columns=None):
     out = []
     for key in keys:
         mask = np.all([np.array([x == v for x in res[p].tolist()]) for p, v in zip(columns, key)], axis=0)
-        lab = ", ".join(f"{p}={_fmt(v)} {res.units.get(p, '')}".rstrip() for p, v in zip(columns, key))
+        lab = ", ".join(f"{p}={_fmt(v)} {_unit(res.units.get(p, ''))}".rstrip() for p, v in zip(columns, key))
         out.append((lab, mask))
     return out
+
+
+def _unit(u):
+    return "" if u in ("1", "dimensionless") else u
 
 
 def _fmt(v):

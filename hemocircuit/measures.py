@@ -9,7 +9,7 @@ A measure is one line ``KIND COLUMN [ARGS] [key=value ...]`` (docs/analyses.md, 
 ``gain P(a) at=0.1Hz``              (ac, freq) gain and relative gain of the column at a
                                     frequency (interpolated in log f)
 ``phase P(a) at=0.1Hz``             (ac, freq) phase [deg] at a frequency
-``resonance P(a)``                  (ac, freq) the frequency of the peak of the relative gain
+``resonance P(a)``                  (ac, freq) the frequency of the peak of the gain |H|
                                     and the peak (parabola through the top three points in
                                     log f, log gain)
 ``settle Q(Rla) tol=2% after=100s`` (tran) settling time after an event at ``after``: the time
@@ -205,14 +205,17 @@ def _freq_measure(res, kind, col, f, mask, order, kw, spec):
     gain = np.asarray(res[f"gain({col})"][mask], dtype=float)[order]
     phase = np.asarray(res[f"phase({col})"][mask], dtype=float)[order]
     gu = res.units.get(f"gain({col})", "")
-    ok = np.isfinite(rel) & (f > 0)
+    ok = np.isfinite(gain) & (f > 0)
     f, rel, gain, phase = f[ok], rel[ok], gain[ok], phase[ok]
     if len(f) < 2:
         raise MeasureError(f"--measure {spec!r}: fewer than two frequencies with a value")
     if kind == "resonance":
-        fr, peak, k = resonance(f, rel)
-        ratio = gain[k] / rel[k] if rel[k] else np.nan  # gain = rel_gain x y0/p0, the same at every f
-        return {"frequency [Hz]": fr, "peak_rel_gain [1]": peak, f"peak_gain [{gu}]": peak * ratio,
+        # the peak of |H| (the relative gain is |H| times the constant p0/y0, undefined when y0 = 0)
+        fr, peak, k = resonance(f, gain)
+        ratio = rel / gain
+        ratio = ratio[np.isfinite(ratio)]
+        return {"frequency [Hz]": fr, f"peak_gain [{gu}]": peak,
+                "peak_rel_gain [1]": float(peak * ratio[0]) if ratio.size else float("nan"),
                 "at_edge": bool(k in (0, len(f) - 1))}
     if "at" not in kw:
         raise MeasureError(f"--measure {spec!r}: give the frequency, e.g. at=0.1Hz")
@@ -224,7 +227,7 @@ def _freq_measure(res, kind, col, f, mask, order, kw, spec):
     if kind == "phase":
         return {"phase [deg]": float(np.interp(np.log(fa), lf, np.unwrap(phase, period=360)))}
     return {f"gain [{gu}]": float(np.exp(np.interp(np.log(fa), lf, np.log(gain)))),
-            "rel_gain [1]": float(np.exp(np.interp(np.log(fa), lf, np.log(rel)))),
+            "rel_gain [1]": float(np.exp(np.interp(np.log(fa), lf, np.log(np.abs(rel))))),
             "phase [deg]": float(np.interp(np.log(fa), lf, np.unwrap(phase, period=360)))}
 
 

@@ -174,24 +174,25 @@ def plot_result(res, path, select=None, title=None):
     outs = [k[4:-1] for k in res.keys() if k.startswith("min(")]
     output = next((o for o in (select or []) if o in outs), outs[0])
     sweep_param, grid = res.index[0], res.index[1:]
+    from ..grid import members
     ok = np.array([not e for e in res["error"]], bool)
-    keys = sorted({tuple(res[g][i] for g in grid) for i in np.nonzero(ok)[0]}, key=str)
-    fig, ax = plt.subplots(figsize=(7, 4.5))
-    for key in keys:
-        sel = ok & np.all([res[g] == v for g, v in zip(grid, key)], axis=0) if grid else ok
+    fig, ax = plt.subplots(figsize=(8, 5))
+    for g, (lab, mask) in enumerate(members(res, grid)):
+        sel = ok & mask
         x = np.asarray(res[sweep_param][sel], dtype=float)
         order = np.argsort(x)
-        lab = ", ".join(f"{g}={v:.4g} {res.units.get(g, '')}".rstrip() if isinstance(v, float) else f"{g}={v}"
-                        for g, v in zip(grid, key))
-        line, = ax.plot(x[order], res[f"steady({output})"][sel][order], "-", lw=1,
-                        label=("steady " + lab).strip())
-        ax.fill_between(x[order], res[f"min({output})"][sel][order], res[f"max({output})"][sel][order], alpha=0.25,
-                        color=line.get_color(), label=("range " + lab).strip())
+        color = f"C{g % 10}"
+        ax.fill_between(x[order], res[f"min({output})"][sel][order], res[f"max({output})"][sel][order], alpha=0.2,
+                        color=color, lw=0, label=f"min..max {lab}".strip())
+        ax.plot(x[order], res[f"steady({output})"][sel][order], ["-", "--", ":", "-."][g % 4], color=color,
+                lw=max(2.2 - 0.4 * g, 1.0), marker=".", label=f"steady state {lab}".strip())
     ax.set_xlabel(res.label(sweep_param))
     ax.set_ylabel(f"{output} [{res.units.get(f'min({output})', '')}]")
-    ax.set_title(title or f"{res._title()}: range of {output} over the last part of each run")
+    win = (res.metadata.get("settings") or {}).get("window")
+    last = f"the last {100 * float(win):.0f} % of each run" if win else "the last part of each run"
+    ax.set_title(title or f"{res._title()}: {output}, steady state and range over {last}", fontsize=10)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0)
     save_figure(fig, path)
     return str(path)
 
