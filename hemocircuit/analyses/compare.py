@@ -26,12 +26,20 @@ def compare_sweep(circuits, param, values):
         cols = res.columns
         d = evaluate_derived(c.netlist.derived, cols, c.file)
         units = {**res.units, **derived_units(c.netlist.derived)}
-        parts[c.netlist.name] = (np.asarray(res[param]), {**d, **cols}, units, res.failed)
+        parts[_name(c, parts)] = (np.asarray(res[param]), {**d, **cols}, units, res.failed)
     res = CompareResult(parts, param, circuits[0].param_unit(param))
     return stamp(res, "compare", circuits[0], {"mode": "sweep", "param": param,
                                                "values": values if isinstance(values, str) else None,
                                                "netlists": [c.file for c in circuits],
                                                "derived": _derived_names(circuits)}, started)
+
+
+def _name(c, parts):
+    """The netlist's name, made unique (two netlists of one name must not merge their rows)."""
+    name, k = c.netlist.name, 2
+    while name in parts:
+        name, k = f"{c.netlist.name} ({k})", k + 1
+    return name
 
 
 def _derived_names(circuits):
@@ -48,7 +56,7 @@ def compare_transient(circuits, protocol, t_end=None, dt=None):
     for c in circuits:
         r = c.simulate(t_end, dt=dt, protocol=protocol)
         d = evaluate_derived(c.netlist.derived, r.columns, c.file)
-        parts[c.netlist.name] = (r.t, {**d, **r.columns}, {**r.units, **derived_units(c.netlist.derived)}, [])
+        parts[_name(c, parts)] = (r.t, {**d, **r.columns}, {**r.units, **derived_units(c.netlist.derived)}, [])
     res = CompareResult(parts, "time", "s")
     return stamp(res, "compare", circuits[0], {"mode": "tran", "protocol": protocol if isinstance(protocol, str)
                                                else getattr(protocol, "file", None), "t_end": t_end, "dt": dt,
