@@ -136,13 +136,13 @@ def _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step
             raise SolverError("this circuit cannot run compiled (a component type without a kernel, or "
                               "too many nodal unknowns); use engine='scipy'")
         if system is not None:
-            with bar(t_end - t0, "tran", unit="s", progress=progress) as pbar:
+            with bar(t_end - t0, "tran (simulated time)", unit="s", progress=progress) as pbar:
                 return _simulate_compiled(system, c, x, t0, t_end, dt, events, rtol, atol, max_step, first_step,
                                           pbar)
     ts, xs, segs = [], [], []
     nfev = njev = nsteps = 0
     t_grid = None if dt is None else np.arange(t0, t_end + 0.5 * dt, dt)
-    pbar = bar(t_end - t0, "tran", unit="s", progress=progress).__enter__()
+    pbar = bar(t_end - t0, "tran (simulated time)", unit="s", progress=progress).__enter__()
 
     def one_segment(t_a, t_b, x_a):
         nonlocal nfev, njev, nsteps
@@ -292,7 +292,7 @@ def _simulate_compiled(system, c, x, t0, t_end, dt, events, rtol, atol, max_step
 def _integrate_pieces(system, c, tpts, x, rtol, atol, h0, max_step, bar, t0):
     """One kernel call over ``tpts``; with a shown ``bar``, ~50 calls over consecutive pieces."""
     shown = bar is not None and getattr(bar, "_t", None) is not None
-    n_pieces = min(50, len(tpts) - 1) if shown else 1
+    n_pieces = min(50, (len(tpts) - 1) // 20) if shown else 1  # pieces of >= 20 output points
     if n_pieces <= 1:
         out = system.integrate(tpts, x, system.params(c)[0], rtol=rtol, atol=atol,
                                breaks=c.breakpoints(tpts[0], tpts[-1]), h0=h0, hmax=max_step)
