@@ -11,7 +11,6 @@ import argparse
 import os
 import sys
 
-from . import io
 from .errors import HemocircuitError
 
 
@@ -105,8 +104,10 @@ def record(args, res):
 
 
 def save_outputs(args, res, plot=None):
-    """Write ``--out`` (the result, with provenance) and ``--plot`` (``plot(path)``, default
-    ``res.plot``); both were checked before the computation (:func:`_check_outputs`)."""
+    """Compute and print ``--measure`` (saved in ``metadata['measures']``), then write ``--out``
+    (the result, with provenance) and ``--plot`` (``plot(path)``, default ``res.plot``); both
+    files were checked before the computation (:func:`_check_outputs`)."""
+    apply_measures(args, res)
     record(args, res)
     if getattr(args, "out", None):
         print(f"wrote {res.save(args.out)}")
@@ -115,30 +116,82 @@ def save_outputs(args, res, plot=None):
         print(f"wrote {args.plot}")
 
 
+def apply_measures(args, res):
+    """``--measure SPEC`` (repeatable): :mod:`hemocircuit.measures`, printed and stored."""
+    specs = getattr(args, "measure", None)
+    if not specs:
+        return
+    from .measures import measure_all
+    for line in measure_all(res, specs):
+        print(line)
+
+
+def computed(args, compute):
+    """The command's result: ``compute(args, sets)`` on the netlist with ``--set`` applied, or,
+    with ``--grid``, every member of the grid run in parallel and stacked into one result
+    (:mod:`hemocircuit.grid`)."""
+    sets = _sets(getattr(args, "set", None))
+    if not getattr(args, "grid", None):
+        return compute(args, sets)
+    from . import grid
+    first = getattr(args, "netlist", None) or args.netlists[0]
+    circuit, _ = load_circuit(first, sets, getattr(args, "protocol", None))
+    return grid.run(compute, args, circuit, sets, workers=getattr(args, "workers", None))
+
+
+def report_grid(args, res, show=None):
+    """What every command prints for a --grid result: the table (grid columns first), the
+    failed members, then --measure, --out and --plot."""
+    if show:
+        show = [k for k in show if k in res.data]
+    print(res.summary(show=getattr(args, "show", None) or show or None, max_rows=24, where=getattr(args, "out", None)))
+    for where, why in res.metadata.get("failed", []):
+        print(f"failed: {where}: {why}", file=sys.stderr)
+    save_outputs(args, res)
+
+
 def partial_path(path):
     """'run.csv' -> 'run.partial.csv': where a failed run's computed part goes."""
     stem, ext = os.path.splitext(path)
     return f"{stem}.partial{ext or '.csv'}"
 
 
+def compute_op(args, sets):
+    """One --grid member (:func:`computed`)."""
+    c, _ = load_circuit(args.netlist, sets, args.protocol)
+    return c.operating_point()
+
+
 def cmd_op(args):
-    if args.plot:
+    if args.plot and not args.grid:
         raise HemocircuitError("op --plot: an operating point is one steady state, nothing to plot; "
-                               "use 'dc --sweep ... --plot' for curves")
-    c, _ = _load(args)
-    op = c.operating_point()
+                               "use 'dc --sweep ... --plot' for curves, or op --grid ... --plot")
+    if args.grid:
+        return report_grid(args, computed(args, compute_op))
+    op = _load(args)[0].operating_point()
     print(op.summary(show=args.show))
     save_outputs(args, op)
 
 
+def _dc(args, c):
+    param, rng = args.sweep.split("=", 1)
+    return c.dc_sweep(param.strip(), _range_spacing(rng))
+
+
+def compute_dc(args, sets):
+    """One --grid member (:func:`computed`)."""
+    return _dc(args, load_circuit(args.netlist, sets, args.protocol)[0])
+
+
 def cmd_dc(args):
-    c, _ = _load(args)
     if not args.sweep or "=" not in args.sweep:
         raise HemocircuitError("dc needs --sweep ID.PARAM=START:STOP:STEP UNIT (e.g. Pa.value=20:200:5mmHg)")
-    param, rng = args.sweep.split("=", 1)
-    res = c.dc_sweep(param.strip(), _range_spacing(rng))
+    param = args.sweep.split("=", 1)[0].strip()
+    res = computed(args, compute_dc) if args.grid else _dc(args, _load(args)[0])
     cols = res.columns
     show = args.show or [k for k in cols if k.startswith("Q(")][:1] + [k for k in cols if k.startswith("P(")][:3]
+    if args.grid:
+        return report_grid(args, res, show)
     print(res.summary(show=show, max_rows=0, where=args.out))
     for v, why in res.failed:
         print(f"failed at {param}={v:g}: {why}", file=sys.stderr)
@@ -150,15 +203,22 @@ def _range_spacing(r):
     return re.sub(r"(\d)([A-Za-z])", r"\1 \2", r, count=1)
 
 
-def cmd_tran(args):
-    from .errors import SolverError
-
-    c, proto = _load(args, uses_events=True)
+def compute_tran(args, sets):
+    """One run (a --grid member, :func:`computed`)."""
+    c, proto = load_circuit(args.netlist, sets, args.protocol)
     t_end = float(_unit_to(args.t_end, "s")) if args.t_end else None
     dt = float(_unit_to(args.dt, "s")) if args.dt else None
     ic = _assignments(args.ic, "--ic", "ID.STATE=VALUE", "Cv.V=20mL")
+    return c.simulate(t_end, dt=dt, protocol=events_only(proto), method=args.method, ic=ic)
+
+
+def cmd_tran(args):
+    from .errors import SolverError
+
+    if args.grid:
+        return report_grid(args, computed(args, compute_tran))
     try:
-        res = c.simulate(t_end, dt=dt, protocol=events_only(proto), method=args.method, ic=ic)
+        res = compute_tran(args, _sets(args.set))
     except SolverError as exc:
         part = exc.partial
         if args.out and part is not None and part.n_rows:
@@ -241,13 +301,24 @@ def cmd_graph(args):
     print(f"wrote {out}")
 
 
-def build_parser():
-    p = argparse.ArgumentParser(prog="hemocircuit", description="Lumped-parameter hemodynamic circuits.")
-    sub = p.add_subparsers(dest="command", required=True)
+BUILTIN = ("check", "op", "dc", "tran", "graph", "show")
 
-    def common(sp, outputs=True, netlist=True):
-        """The loader's arguments (netlist, --set, --protocol: see load_circuit), shared by every
-        command; with ``outputs`` also --out, --plot, --show."""
+
+def build_parser(command=None):
+    """The argument parser.  ``command``: the command about to run -- only the analysis
+    module that defines it is imported (``hemocircuit CMD`` starts without importing the
+    others); None: every command (also ``--help``, which lists the analysis commands from
+    their sources without importing them)."""
+    from . import __version__
+
+    p = argparse.ArgumentParser(prog="hemocircuit", description="Lumped-parameter hemodynamic circuits.")
+    p.add_argument("--version", action="version", version=f"hemocircuit {__version__}")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    def common(sp, outputs=True, netlist=True, grid=True):
+        """The loader's arguments (netlist, --set, --protocol: see load_circuit) and --quiet,
+        shared by every command; with ``grid`` also --grid, --workers and --measure
+        (:func:`computed`, :func:`apply_measures`); with ``outputs`` also --out, --plot, --show."""
         if netlist:
             sp.add_argument("netlist", help="netlist YAML file")
         sp.add_argument("--set", action="append", metavar="ID.PARAM=VALUE",
@@ -255,13 +326,23 @@ def build_parser():
                              "(e.g. art.ca_order=2); repeatable")
         sp.add_argument("--protocol", help="protocol YAML: its 'initial' settings apply to every command, "
                                            "its timed events to tran")
+        sp.add_argument("--quiet", action="store_true", help="no progress bars (and, for ac, no table)")
+        if grid:
+            sp.add_argument("--grid", action="append", metavar="ID.PARAM=V1,V2,...",
+                            help="nested sweep: run the command for each value (units allowed, e.g. "
+                                 "art.tau_Ca=1,10s or Pa.value=60:120:20mmHg; structural options too); "
+                                 "repeatable, Cartesian product; one result, grid columns first")
+            sp.add_argument("--workers", type=int, help="worker processes for --grid (default: all cores)")
+            sp.add_argument("--measure", action="append", metavar="SPEC",
+                            help="a measure of the result (repeatable), e.g. 'plateau Q(Rla) 10%% ref=100mmHg', "
+                                 "'resonance P(a)', 'mean P(a) from=10s' (docs/analyses.md, Measures)")
         if outputs:
             sp.add_argument("--out", help="output file (CSV for series/sweeps, JSON for op, PNG for graph)")
             sp.add_argument("--plot", help="PNG plot file")
             sp.add_argument("--show", action="append", help="column to print/plot (repeatable)")
         return sp
 
-    common(sub.add_parser("check", help="validate a netlist (and protocol)")).set_defaults(func=cmd_check)
+    common(sub.add_parser("check", help="validate a netlist (and protocol)"), grid=False).set_defaults(func=cmd_check)
     common(sub.add_parser("op", help="operating point (steady state)")).set_defaults(func=cmd_op)
     sp = common(sub.add_parser("dc", help="DC sweep of a parameter"))
     sp.add_argument("--sweep", help="ID.PARAM=START:STOP:STEP UNIT, e.g. Pa.value=20:200:5mmHg")
@@ -274,7 +355,7 @@ def build_parser():
                     help="start with this state overridden (units allowed, e.g. Cv.V=20mL, art.Ca=1e-7M); "
                          "the others at the operating point; repeatable")
     sp.set_defaults(func=cmd_tran)
-    common(sub.add_parser("graph", help="draw the circuit graph to PNG")).set_defaults(func=cmd_graph)
+    common(sub.add_parser("graph", help="draw the circuit graph to PNG"), grid=False).set_defaults(func=cmd_graph)
     sp = sub.add_parser("show", help="reload a result file: provenance, summary, re-plot, re-run")
     sp.add_argument("result", help="a CSV or JSON file written by a hemocircuit command (--out)")
     sp.add_argument("--plot", help="draw it again to this PNG file")
@@ -282,13 +363,37 @@ def build_parser():
     sp.add_argument("--rerun", metavar="OUT", help="run the command stored in its provenance again, writing OUT")
     sp.add_argument("--set", action="append", help=argparse.SUPPRESS)
     sp.add_argument("--protocol", help=argparse.SUPPRESS)
+    sp.add_argument("--quiet", action="store_true", help="no progress bars (for --rerun)")
     sp.set_defaults(func=cmd_show)
-    for register in _extra_commands():
+    p.commands = sub.choices  # {name: parser}
+    index = command_index()
+    if command == "--help":  # names and one-line help only: nothing imported
+        for name, (_, text) in index.items():
+            sub.add_parser(name, help=text)
+        return p
+    if command in BUILTIN:
+        return p
+    for register in _extra_commands(index[command][0] if command in index else None):
         register(sub, common)
     return p
 
 
-def _extra_commands():
+def command_index():
+    """{command: (module, help)} of the analysis modules' commands, read from their sources
+    (``sub.add_parser("NAME", help="...")`` in ``register_cli``) without importing them."""
+    import re
+    from pathlib import Path
+    out = {}
+    for path in sorted((Path(__file__).parent / "analyses").glob("*.py")):
+        text = path.read_text(encoding="utf-8")
+        if "def register_cli" not in text:
+            continue
+        for m in re.finditer(r'add_parser\(\s*"([\w-]+)",\s*help="([^"]*)"', text):
+            out[m.group(1)] = (path.stem, m.group(2))
+    return out
+
+
+def _extra_commands(only=None):
     """Commands contributed by analysis modules: every module of ``hemocircuit.analyses`` that
     defines ``register_cli(subparsers, common)`` (found by scanning the package, like the
     components), then third-party ones registered under the entry-point group
@@ -301,6 +406,8 @@ def _extra_commands():
 
     out = []
     for info in sorted(pkgutil.iter_modules(analyses.__path__), key=lambda i: i.name):
+        if only is not None and info.name != only:
+            continue
         spec = info.module_finder.find_spec(info.name)
         origin = getattr(spec, "origin", None)
         if origin and origin.endswith(".py"):
@@ -310,6 +417,8 @@ def _extra_commands():
         m = importlib.import_module(f"{analyses.__name__}.{info.name}")
         if callable(getattr(m, "register_cli", None)):
             out.append(m.register_cli)
+    if only is not None:
+        return out
     for ep in metadata.entry_points(group="hemocircuit.analyses"):
         try:
             obj = ep.load()
@@ -325,6 +434,7 @@ OUTPUT_OPTIONS = ("out", "plot", "phase_plot")
 
 def _check_outputs(args):
     """Every output file's folder is checked (or created) before anything is computed."""
+    from . import io
     for key in OUTPUT_OPTIONS:
         path = getattr(args, key, None)
         if path:
@@ -333,9 +443,25 @@ def _check_outputs(args):
 
 def main(argv=None):
     argv = sys.argv[1:] if argv is None else [str(a) for a in argv]
-    parser = build_parser()
+    first = next((a for a in argv if not a.startswith("-")), None)
+    if first is None or first == "help":
+        parser = build_parser("--help")  # --help, --version, or no command: nothing heavy imported
+    else:
+        parser = build_parser(first)
+        if first not in parser.commands:  # maybe a plug-in's command: load them all
+            parser = build_parser()
+        if first not in parser.commands:
+            import difflib
+            known = sorted(parser.commands)
+            near = difflib.get_close_matches(first, known, n=2)
+            print(f"hemocircuit: error: unknown command {first!r}" +
+                  (f"; did you mean {' or '.join(near)}?" if near else f"; commands: {', '.join(sorted(known))}"),
+                  file=sys.stderr)
+            return 2
     args = parser.parse_args(argv)
     args.argv = argv
+    from . import progress
+    progress.enable(not getattr(args, "quiet", False))
     try:
         _check_outputs(args)
         rc = args.func(args)

@@ -51,6 +51,9 @@ def stamp(result, analysis, circuit=None, settings=None, started=None, status=No
     prov.update(versions())
     if circuit is not None and getattr(circuit, "file", None):
         prov["netlist"] = str(circuit.file)
+    if circuit is not None and "interest" not in md:  # what the default plots draw (hemocircuit.plotting)
+        from .plotting import interest_of
+        md["interest"] = interest_of(circuit)
     prov["date"] = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
     if started is not None:
         prov["wall_time_s"] = round(time.perf_counter() - started, 6)

@@ -382,23 +382,16 @@ class Result:
     # ------------------------------------------------------------------ plots --------------
     def plot(self, path, select=None, title=None):
         """Draw the result to ``path`` (PNG) with its analysis's default plot (the analysis
-        module's ``plot_result(result, path, select, title)``), else every column against
-        the first index column, one panel per unit."""
+        module's ``plot_result(result, path, select, title)``), else the series plot of
+        :func:`hemocircuit.plotting.plot_series` (outputs of interest, one panel per unit)."""
         import importlib
         module = _PLOTTERS.get(self.analysis)
         if module:
             fn = getattr(importlib.import_module(module), "plot_result", None)
             if fn is not None:
                 return fn(self, path, select=select, title=title)
-        from .io import plot_series
-        x = self.index[0] if self.index else None
-        if x is None:
-            from .errors import HemocircuitError
-            raise HemocircuitError(f"a {self.analysis or 'point'} result has no independent variable to plot against")
-        numeric = {k: v for k, v in self.columns.items() if _is_numeric(v)}
-        plot_series(path, self.data[x], self.label(x), numeric, self.units, title=title or self._title(),
-                    select=select)
-        return str(path)
+        from .plotting import plot_series
+        return plot_series(self, path, select=select, title=title)
 
     def _title(self):
         prov = self.metadata.get("provenance", {}) or {}

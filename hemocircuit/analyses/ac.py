@@ -186,18 +186,26 @@ def ac_response(circuit, input=None, outputs=None, freqs="0.001:10 Hz", per_deca
 # ------------------------------------------------------------------------------ plots -----
 def plot_result(res, path, select=None, title=None):
     """Bode plot from a result's columns (fresh or reloaded): relative gain (log-log) and phase
-    (deg, leading positive) against frequency, one line per output."""
+    (deg, leading positive) against frequency, one line per output and grid member."""
     plt = pyplot()
 
     f = res["frequency"]
     names = [k[len("rel_gain("):-1] for k in res.keys() if k.startswith("rel_gain(")]
     if select:
         names = [n for n in names if n.split("/")[0] in select] or names
+    from ..grid import members
+    groups = members(res, [k for k in res.index if k != "frequency"])
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(8, 6.5), sharex=True)
-    for n in names:
-        g = res[f"gain({n})"]
-        ax1.loglog(f, res[f"rel_gain({n})"], label=f"{n} (|H| at {f[0]:.3g} Hz: {g[0]:.3g} {res.units[f'gain({n})']})")
-        ax2.semilogx(f, res[f"phase({n})"], label=n)
+    for j, n in enumerate(names):
+        for g, (glab, mask) in enumerate(groups):
+            f = np.asarray(res["frequency"][mask], dtype=float)
+            gain = np.asarray(res[f"gain({n})"][mask], dtype=float)
+            lab = n.split("/")[0] + (f" ({glab})" if glab else
+                                     f" (|H| at {f[0]:.3g} Hz: {gain[0]:.3g} {res.units[f'gain({n})']})")
+            color = f"C{(g if len(groups) > 1 else j) % 10}"
+            style = ["-", "--", ":", "-."][(j if len(groups) > 1 else 0) % 4]
+            ax1.loglog(f, res[f"rel_gain({n})"][mask], style, color=color, label=lab)
+            ax2.semilogx(f, res[f"phase({n})"][mask], style, color=color, label=lab)
     ax1.set_ylabel("relative gain (dy/y0)/(dp/p0) [1]")
     ax1.grid(alpha=0.3, which="both")
     ax1.legend(fontsize=8)
@@ -205,18 +213,30 @@ def plot_result(res, path, select=None, title=None):
     ax2.set_ylabel("phase [deg] (+ = output leads)")
     ax2.set_xlabel("frequency [Hz]")
     ax2.grid(alpha=0.3, which="both")
-    ax2.legend(fontsize=8)
     ax1.set_title(title or res._title())
     save_figure(fig, path)
     return str(path)
 
 
 # ------------------------------------------------------------------------------ CLI -------
-def cmd_ac(args):
-    from ..cli import _load, save_outputs
+def _ac(args, c):
+    return ac_response(c, input=args.input, outputs=args.output or None, freqs=args.freq, per_decade=args.per_decade)
 
-    c, _ = _load(args)
-    res = ac_response(c, input=args.input, outputs=args.output or None, freqs=args.freq, per_decade=args.per_decade)
+
+def compute_ac(args, sets):
+    """One --grid member (:func:`hemocircuit.cli.computed`)."""
+    from ..cli import load_circuit
+    return _ac(args, load_circuit(args.netlist, sets, args.protocol)[0])
+
+
+def cmd_ac(args):
+    from ..cli import _load, computed, report_grid, save_outputs
+
+    if args.grid:
+        res = computed(args, compute_ac)
+        show = [k for k in res.keys() if k.startswith(("rel_gain(", "phase("))]
+        return report_grid(args, res, show)
+    res = _ac(args, _load(args)[0])
     outputs = res.outputs
     print(f"AC: {res.input} = {res.p0:.6g} {res.input_unit} -> {', '.join(outputs)}; "
           f"{len(res.freq)} frequencies {res.freq[0]:.4g}..{res.freq[-1]:.4g} Hz")
@@ -249,5 +269,4 @@ def register_cli(sub, common):
     sp.add_argument("--freq", default="0.001:10Hz",
                     help="F1:F2 UNIT (log-spaced), F1:F2:STEP UNIT (linear) or a list (default 0.001:10Hz)")
     sp.add_argument("--per-decade", type=int, default=20, help="points per decade for F1:F2 (default 20)")
-    sp.add_argument("--quiet", action="store_true", help="do not print the table")
     sp.set_defaults(func=cmd_ac)

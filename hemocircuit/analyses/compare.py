@@ -3,18 +3,16 @@
 ``hemocircuit compare A.yaml B.yaml ... --sweep Pa.value=20:200:2mmHg`` computes the steady
 states of every netlist over the sweep; ``--tran --protocol P.yaml`` runs the same protocol
 on each.  Output: one CSV, a row per (netlist, x) and a column per quantity (``name [unit]``),
-and one overlay plot per quantity.  Quantities are every netlist's ``derived`` entries plus the columns they share.
+and one plot (a panel per unit, a line per netlist).  Quantities are every netlist's ``derived`` entries plus the columns they share.
 """
 from __future__ import annotations
 
-import os
 import sys
 
 import numpy as np
 
 from ..derived import derived_units, evaluate_derived
 from ..errors import HemocircuitError
-from ..io import pyplot, save_figure
 from ..provenance import clock, stamp
 from ..results import Result
 
@@ -28,11 +26,27 @@ def compare_sweep(circuits, param, values):
         cols = res.columns
         d = evaluate_derived(c.netlist.derived, cols, c.file)
         units = {**res.units, **derived_units(c.netlist.derived)}
-        parts[c.netlist.name] = (np.asarray(res[param]), {**d, **cols}, units, res.failed)
+        parts[_name(c, parts)] = (np.asarray(res[param]), {**d, **cols}, units, res.failed)
     res = CompareResult(parts, param, circuits[0].param_unit(param))
     return stamp(res, "compare", circuits[0], {"mode": "sweep", "param": param,
                                                "values": values if isinstance(values, str) else None,
-                                               "netlists": [c.file for c in circuits]}, started)
+                                               "netlists": [c.file for c in circuits],
+                                               "derived": _derived_names(circuits)}, started)
+
+
+def _name(c, parts):
+    """The netlist's name, made unique (two netlists of one name must not merge their rows)."""
+    name, k = c.netlist.name, 2
+    while name in parts:
+        name, k = f"{c.netlist.name} ({k})", k + 1
+    return name
+
+
+def _derived_names(circuits):
+    names = []
+    for c in circuits:
+        names += [k for k in c.netlist.derived if k not in names]
+    return names
 
 
 def compare_transient(circuits, protocol, t_end=None, dt=None):
@@ -42,11 +56,12 @@ def compare_transient(circuits, protocol, t_end=None, dt=None):
     for c in circuits:
         r = c.simulate(t_end, dt=dt, protocol=protocol)
         d = evaluate_derived(c.netlist.derived, r.columns, c.file)
-        parts[c.netlist.name] = (r.t, {**d, **r.columns}, {**r.units, **derived_units(c.netlist.derived)}, [])
+        parts[_name(c, parts)] = (r.t, {**d, **r.columns}, {**r.units, **derived_units(c.netlist.derived)}, [])
     res = CompareResult(parts, "time", "s")
     return stamp(res, "compare", circuits[0], {"mode": "tran", "protocol": protocol if isinstance(protocol, str)
                                                else getattr(protocol, "file", None), "t_end": t_end, "dt": dt,
-                                               "netlists": [c.file for c in circuits]}, started)
+                                               "netlists": [c.file for c in circuits],
+                                               "derived": _derived_names(circuits)}, started)
 
 
 class CompareResult(Result):
@@ -79,29 +94,6 @@ class CompareResult(Result):
         return sorted(names or set())
 
 
-def plot_overlays(prefix, res, quantities, xlabel=None):
-    """One PNG per quantity, ``PREFIX_QUANTITY.png``, every netlist a line; returns the files."""
-    plt = pyplot()
-
-    xname = res.index[1]
-    files = []
-    for k in quantities:
-        fig, ax = plt.subplots(figsize=(6.4, 4))
-        for name in dict.fromkeys(res["netlist"]):
-            sel = res["netlist"] == name
-            if np.any(np.isfinite(res[k][sel])):
-                ax.plot(res[xname][sel], res[k][sel], label=name)
-        ax.set_xlabel(xlabel or res.label(xname))
-        ax.set_ylabel(res.label(k))
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
-        safe = "".join(ch if ch.isalnum() or ch in "._-" else "_" for ch in k)
-        f = f"{prefix}_{safe}.png"
-        save_figure(fig, f, dpi=100)
-        files.append(f)
-    return files
-
-
 def register_cli(sub, common):
     sp = sub.add_parser("compare", help="steady states (or a protocol) of several netlists side by side")
     sp.add_argument("netlists", nargs="+", help="netlist YAML files (--set and --protocol apply to every one)")
@@ -111,40 +103,54 @@ def register_cli(sub, common):
     sp.add_argument("--t-end", help="end time for --tran")
     sp.add_argument("--dt", help="output interval for --tran")
     sp.add_argument("--out", help="result CSV (a row per netlist and x; or .json)")
-    sp.add_argument("--plot", help="prefix of the overlay PNG files (one per quantity)")
+    sp.add_argument("--plot", help="PNG: the quantities of interest, a panel per unit, a line per netlist")
     sp.add_argument("--show", action="append", help="quantity to print/plot (default: derived quantities)")
     sp.set_defaults(func=cmd_compare)
 
 
-def cmd_compare(args):
-    from ..cli import _range_spacing, _sets, _unit_to, events_only, load_circuit, record
+def compute_compare(args, sets):
+    """The comparison on the netlists with ``sets`` applied (also one --grid member)."""
+    from ..cli import _range_spacing, _unit_to, events_only, load_circuit
 
     circuits, proto = [], None
     for path in args.netlists:
-        c, proto = load_circuit(path, _sets(args.set), args.protocol)
+        c, proto = load_circuit(path, sets, args.protocol)
         circuits.append(c)
     if args.tran:
-        if not args.protocol:
-            raise HemocircuitError("compare --tran needs --protocol")
         t_end = float(_unit_to(args.t_end, "s")) if args.t_end else None
         dt = float(_unit_to(args.dt, "s")) if args.dt else None
-        res = compare_transient(circuits, events_only(proto), t_end, dt)
-    else:
-        if not args.sweep or "=" not in args.sweep:
-            raise HemocircuitError("compare needs --sweep ID.PARAM=START:STOP:STEP UNIT (or --tran)")
-        param, rng = args.sweep.split("=", 1)
-        res = compare_sweep(circuits, param.strip(), _range_spacing(rng))
-    derived = []
-    for c in circuits:
-        derived += [k for k in c.netlist.derived if k not in derived]
-    shown = args.show or [k for k in derived if all(k in q for _, q, _, _ in res.parts.values())] or \
-        res.shared_quantities()[:6]
+        return compare_transient(circuits, events_only(proto), t_end, dt)
+    param, rng = args.sweep.split("=", 1)
+    return compare_sweep(circuits, param.strip(), _range_spacing(rng))
+
+
+def cmd_compare(args):
+    from ..cli import apply_measures, computed, record
+
+    if args.tran and not args.protocol:
+        raise HemocircuitError("compare --tran needs --protocol")
+    if not args.tran and (not args.sweep or "=" not in args.sweep):
+        raise HemocircuitError("compare needs --sweep ID.PARAM=START:STOP:STEP UNIT (or --tran)")
+    res = computed(args, compute_compare)
+    derived = res.metadata.get("settings", {}).get("derived", [])
+    shown = args.show or [k for k in derived if k in res.data and _in_every_netlist(res, k)] or \
+        [k for k in res.columns if _in_every_netlist(res, k)][:6]
     print(res.summary(show=shown, max_rows=24, where=args.out))
-    for name, v, why in res.metadata["failed"]:
-        print(f"{name}: failed at {res.index[1]}={v:g}: {why}", file=sys.stderr)
+    for item in res.metadata.get("failed", []):
+        print(f"failed: {item}", file=sys.stderr)
+    apply_measures(args, res)
     record(args, res)
     if args.out:
         print(f"wrote {res.save(args.out)}")
     if args.plot:
-        files = plot_overlays(os.path.splitext(args.plot)[0], res, shown)
-        print("wrote " + ", ".join(files))
+        res.plot(args.plot, select=args.show)
+        print(f"wrote {args.plot}")
+
+
+def _in_every_netlist(res, k):
+    """Whether every netlist of a comparison has quantity ``k`` (some finite value)."""
+    try:
+        v = np.asarray(res[k], dtype=float)
+    except (TypeError, ValueError):
+        return False
+    return all(np.any(np.isfinite(v[res["netlist"] == n])) for n in dict.fromkeys(res["netlist"]))

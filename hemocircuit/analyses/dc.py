@@ -42,7 +42,7 @@ def parse_range(spec: str, unit: str) -> np.ndarray:
         raise NetlistError(f"sweep {spec!r}: {exc}") from None
 
 
-def dc_sweep(circuit, param: str, values, progress=False):
+def dc_sweep(circuit, param: str, values, progress=None):
     """Operating points for ``param`` (ID.PARAM) over ``values`` (array in the declared unit,
     or a range string like '20:200:5 mmHg').  Each point starts from the previous solution.
 
@@ -56,19 +56,22 @@ def dc_sweep(circuit, param: str, values, progress=False):
     vals = parse_range(values, unit) if isinstance(values, str) else np.asarray(values, dtype=float)
     rows, failed = [], []
     x_prev = None
-    for v in vals:
-        c = circuit.with_values({param: float(v)})
-        try:
-            op = operating_point(c, x0=None if x_prev is None else x_prev)
-        except SolverError:
-            try:  # continuation failed: retry from a fresh DC guess
-                op = operating_point(c)
-            except SolverError as exc2:
-                failed.append((float(v), str(exc2)))
-                rows.append(None)
-                continue
-        x_prev = op.x
-        rows.append(op.values)
+    from ..progress import bar
+    with bar(len(vals), "dc sweep", unit="point", progress=progress) as b:
+        for v in vals:
+            b.update(1)
+            c = circuit.with_values({param: float(v)})
+            try:
+                op = operating_point(c, x0=None if x_prev is None else x_prev)
+            except SolverError:
+                try:  # continuation failed: retry from a fresh DC guess
+                    op = operating_point(c)
+                except SolverError as exc2:
+                    failed.append((float(v), str(exc2)))
+                    rows.append(None)
+                    continue
+            x_prev = op.x
+            rows.append(op.values)
     keys = next((list(r) for r in rows if r is not None), [])
     out = {f"{param}": vals}
     for k in keys:

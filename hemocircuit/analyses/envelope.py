@@ -95,7 +95,7 @@ def _period(t, y):
 
 
 def envelope(circuit, sweep, grid=None, outputs=None, t_end=1000.0, dt=0.1, window=0.3,
-             kick=1e-3, osc_tol=1e-3, rtol=1e-5, keep_series=None, scheduler=None, workers=None, progress=False,
+             kick=1e-3, osc_tol=1e-3, rtol=1e-5, keep_series=None, scheduler=None, workers=None, progress=None,
              members=None):
     """sweep: (ID.PARAM, values) ; grid: [(ID.PARAM, values)]; or ``members``: an explicit list
     of parameter sets [{ID.PARAM: value}] in place of the sweep x grid product.  Returns an
@@ -113,11 +113,13 @@ def envelope(circuit, sweep, grid=None, outputs=None, t_end=1000.0, dt=0.1, wind
                osc_tol=osc_tol, rtol=rtol, keep_series=keep_series)
     jobs, where = [], []
     for bc, idx in build_batches(circuit, assignments):
-        n = (workers or 2) if scheduler != "serial" else 1
+        # a few chunks per worker: the bar (runs done / total) moves while runs last minutes
+        n = min(len(idx), 4 * (workers or 2)) if scheduler != "serial" else 1
         for chunk in split(list(range(len(idx))), n):
             jobs.append((bc.subset(chunk), opt))  # pickles without caches
             where.append([idx[j] for j in chunk])
-    results = run_chunks(_run_chunk, jobs, scheduler=scheduler, workers=workers, progress=progress, desc="envelope")
+    results = run_chunks(_run_chunk, jobs, scheduler=scheduler, workers=workers, progress=progress, desc="envelope",
+                         sizes=[len(w) for w in where])
     by_member = [None] * len(assignments)
     for chunk, res in zip(where, results):
         for k, r in zip(chunk, res):
@@ -175,24 +177,25 @@ def plot_result(res, path, select=None, title=None):
     outs = [k[4:-1] for k in res.keys() if k.startswith("min(")]
     output = next((o for o in (select or []) if o in outs), outs[0])
     sweep_param, grid = res.index[0], res.index[1:]
+    from ..grid import members
     ok = np.array([not e for e in res["error"]], bool)
-    keys = sorted({tuple(res[g][i] for g in grid) for i in np.nonzero(ok)[0]}, key=str)
-    fig, ax = plt.subplots(figsize=(7, 4.5))
-    for key in keys:
-        sel = ok & np.all([res[g] == v for g, v in zip(grid, key)], axis=0) if grid else ok
+    fig, ax = plt.subplots(figsize=(8, 5))
+    for g, (lab, mask) in enumerate(members(res, grid)):
+        sel = ok & mask
         x = np.asarray(res[sweep_param][sel], dtype=float)
         order = np.argsort(x)
-        lab = ", ".join(f"{g}={v:.4g} {res.units.get(g, '')}".rstrip() if isinstance(v, float) else f"{g}={v}"
-                        for g, v in zip(grid, key))
-        line, = ax.plot(x[order], res[f"steady({output})"][sel][order], "-", lw=1,
-                        label=("steady " + lab).strip())
-        ax.fill_between(x[order], res[f"min({output})"][sel][order], res[f"max({output})"][sel][order], alpha=0.25,
-                        color=line.get_color(), label=("range " + lab).strip())
+        color = f"C{g % 10}"
+        ax.fill_between(x[order], res[f"min({output})"][sel][order], res[f"max({output})"][sel][order], alpha=0.2,
+                        color=color, lw=0, label=f"min..max {lab}".strip())
+        ax.plot(x[order], res[f"steady({output})"][sel][order], ["-", "--", ":", "-."][g % 4], color=color,
+                lw=max(2.2 - 0.4 * g, 1.0), marker=".", label=f"steady state {lab}".strip())
     ax.set_xlabel(res.label(sweep_param))
     ax.set_ylabel(f"{output} [{res.units.get(f'min({output})', '')}]")
-    ax.set_title(title or f"{res._title()}: range of {output} over the last part of each run")
+    win = (res.metadata.get("settings") or {}).get("window")
+    last = f"the last {100 * float(win):.0f} % of each run" if win else "the last part of each run"
+    ax.set_title(title or f"{res._title()}: {output}, steady state and range over {last}", fontsize=10)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0)
     save_figure(fig, path)
     return str(path)
 
@@ -219,14 +222,12 @@ def _fmt(v):
 def register_cli(sub, common):
     sp = common(sub.add_parser("envelope", help="oscillation envelope over a sweep x grid (batched)"), outputs=False)
     sp.add_argument("--sweep", required=True, help="ID.PARAM=START:STOP:STEP UNIT or V1,V2,...")
-    sp.add_argument("--grid", action="append", help="ID.PARAM=V1,V2 (repeatable)")
     sp.add_argument("--output", action="append",
                     help="outputs to report, the first gives the period (default: the netlist's 'outputs:')")
     sp.add_argument("--t-end", type=float, default=1000.0, help="s (default 1000)")
     sp.add_argument("--dt", type=float, default=0.1, help="output interval, s")
     sp.add_argument("--rtol", type=float, default=1e-5)
     sp.add_argument("--scheduler")
-    sp.add_argument("--workers", type=int)
     sp.add_argument("--out", help="result CSV (one row per member; or .json)")
     sp.add_argument("--plot", help="envelope PNG (first output)")
     sp.add_argument("--show", action="append", help="column to print (repeatable)")
@@ -251,7 +252,7 @@ def cmd_envelope(args):
                                    f"in the netlist (found {keep})")
         keep = keep[:2]
     res = envelope(c, sweep, grid, outputs, t_end=args.t_end, dt=args.dt, rtol=args.rtol, keep_series=keep,
-                   scheduler=args.scheduler, workers=args.workers, progress=True)
+                   scheduler=args.scheduler, workers=args.workers)
     o = outputs[0]
     show = [f"min({o})", f"max({o})", f"steady({o})", "oscillating", "period"]
     print(res.summary(show=args.show or show, max_rows=0, where=args.out))

@@ -27,6 +27,7 @@ from ..errors import HemocircuitError
 from ..execution import run_chunks, split
 from ..derived import derived_units
 from ..io import pyplot, save_figure
+from ..progress import advance
 from ..provenance import clock, stamp
 from ..results import Result
 
@@ -72,6 +73,7 @@ def _run_chunk(job):
     for k, e in enumerate(errors):
         if e is not None:
             res[k] = {"error": e}
+            advance()
     total_periods = np.zeros(B, int)
     block = opt["block_periods"]
     while True:
@@ -87,6 +89,7 @@ def _run_chunk(job):
             if not r.ok[j]:
                 failed[m] = True
                 res[m] = {"error": r.message[j]}
+                advance()
                 continue
             tt = grid[j]
             Y, X_in = _member_outputs(sub, j, tt, r.x[j], outputs, inp_node_col)
@@ -114,6 +117,7 @@ def _run_chunk(job):
                     "thd": np.sqrt(np.sum(np.abs(harm) ** 2, axis=0)) / np.abs(Y1),
                     "periods": int(total_periods[m]), "settled": bool(np.all(rel < opt["settle_tol"])),
                 }
+                advance()
             t[m] = tt[-1]
             x[m] = r.x[j, -1]
     return res
@@ -121,7 +125,7 @@ def _run_chunk(job):
 
 def frequency_response(circuit, freqs, outputs=None, input=None, step=0.1, amplitude=0.1,
                        grid=None, settle_tol=1e-3, n_periods=2, block_periods=4, max_periods=400, rtol=1e-8,
-                       scheduler=None, workers=None, progress=False, members=None):
+                       scheduler=None, workers=None, progress=None, members=None):
     """Batched nonlinear frequency response.  ``grid``: [(ID.PARAM, [values])]; or ``members``:
     an explicit list of parameter sets [{ID.PARAM: value}] (e.g. sensitivity samples) in place
     of the grid's cartesian product.
@@ -159,7 +163,7 @@ def frequency_response(circuit, freqs, outputs=None, input=None, step=0.1, ampli
             jobs.append((sub, [descr[k] for k in chunk], opt))
             where.append(chunk)
     results = run_chunks(_run_chunk, jobs, scheduler=scheduler, workers=workers, progress=progress,
-                         desc="frequency response")
+                         desc="frequency response", sizes=[len(w) for w in where])
     by_member = [None] * len(descr)
     for chunk, res in zip(where, results):
         for k, r in zip(chunk, res):
@@ -269,9 +273,7 @@ def register_cli(sub, common):
     sp.add_argument("--per-decade", type=float, default=10.0)
     sp.add_argument("--step", type=float, default=10.0, help="step in percent of the baseline (default 10)")
     sp.add_argument("--amplitude", type=float, default=10.0, help="sine amplitude in percent (default 10)")
-    sp.add_argument("--grid", action="append", help="ID.PARAM=V1,V2,... (repeatable; cartesian product)")
     sp.add_argument("--scheduler", help="Dask scheduler address tcp://HOST:PORT (default: local processes)")
-    sp.add_argument("--workers", type=int, help="local worker processes (default: all cores)")
     sp.add_argument("--rtol", type=float, default=1e-8)
     sp.add_argument("--out", help="result CSV (one row per run; or .json)")
     sp.add_argument("--plot", help="Bode plot PNG")
@@ -299,7 +301,7 @@ def cmd_freq(args):
     freqs = parse_freqs(args.freq, args.per_decade)
     grid = [parse_grid_arg(g) for g in (args.grid or [])]
     res = frequency_response(c, freqs, outputs, args.input, args.step / 100, args.amplitude / 100, grid,
-                             rtol=args.rtol, scheduler=args.scheduler, workers=args.workers, progress=True)
+                             rtol=args.rtol, scheduler=args.scheduler, workers=args.workers)
     show = [k for o in res.outputs for k in (f"rel_amplitude({o})", f"rel_gain({o}/{res.input})",
                                              f"phase({o}/{res.input})", f"thd({o})")]
     print(res.summary(show=args.show or show, max_rows=0, max_cols=0, where=args.out))

@@ -86,8 +86,15 @@ def _laws(circuit):
     return np.array(rows).reshape(-1, circuit.nx)
 
 
-def shoot(circuit, x_guess, T_guess, forced=False, rtol=1e-9, tol=1e-8, max_iter=25, rel_step=1e-6):
-    """Newton shooting from (x_guess, T_guess).  Returns a PeriodicOrbit."""
+def shoot(circuit, x_guess, T_guess, forced=False, rtol=1e-9, tol=1e-8, max_iter=25, rel_step=1e-6, progress=None):
+    """Newton shooting from (x_guess, T_guess).  Returns a PeriodicOrbit.  ``progress``: a bar
+    of the Newton iterations (with the residual) on stderr (:mod:`hemocircuit.progress`)."""
+    from ..progress import bar
+    with bar(max_iter, "shooting", unit="iteration", progress=progress) as b:
+        return _shoot(circuit, x_guess, T_guess, forced, rtol, tol, max_iter, rel_step, b)
+
+
+def _shoot(circuit, x_guess, T_guess, forced, rtol, tol, max_iter, rel_step, pbar):
     started = clock()
     c = circuit
     if c.B != 1:
@@ -124,6 +131,7 @@ def shoot(circuit, x_guess, T_guess, forced=False, rtol=1e-9, tol=1e-8, max_iter
         R = np.concatenate(rows)
         JJ = np.vstack(J)
         res_norm = float(np.max(np.abs(R)))
+        pbar.update_to(it, residual=f"{res_norm:.2e}")
         if res_norm < tol:
             converged = True
             break
@@ -187,12 +195,10 @@ def register_cli(sub, common):
     sp.set_defaults(func=cmd_periodic)
 
 
-def cmd_periodic(args):
-    from ..cli import _load, save_outputs
-
+def _periodic(args, c):
+    """The orbit (converged or not) and the output that found its period."""
     from ..outputs import default_outputs, drive_of, input_element
 
-    c, _ = _load(args)
     interest = default_outputs(c, "periodic", required=args.output is None)
     output = args.output or interest[0]
     if args.forced:
@@ -211,13 +217,29 @@ def cmd_periodic(args):
         x, T = guess_from_run(c, output, args.t_settle)
         orb = shoot(c, x, T)
     y = orb[output]
+    orb.metadata["measures"].update({f"min({output})": float(y.min()), f"max({output})": float(y.max()),
+                                     f"time_average({output})": orb.time_average(output)})
+    return orb, output, interest
+
+
+def compute_periodic(args, sets):
+    """One --grid member (:func:`hemocircuit.cli.computed`)."""
+    from ..cli import load_circuit
+    return _periodic(args, load_circuit(args.netlist, sets, args.protocol)[0])[0]
+
+
+def cmd_periodic(args):
+    from ..cli import _load, computed, report_grid, save_outputs
+
+    if args.grid:
+        return report_grid(args, computed(args, compute_periodic))
+    orb, output, interest = _periodic(args, _load(args)[0])
+    y = orb[output]
     print(f"{'converged' if orb.converged else 'NOT converged'} after {orb.iterations} Newton iterations "
           f"(residual {orb.residual:.2e}); period {orb.period:.6g} s")
     print(f"{orb.label(output)}: min {y.min():.6g}, max {y.max():.6g}, time average {orb.time_average(output):.6g}")
     mu = orb.nontrivial_multipliers
     print("Floquet multipliers (non-trivial): " + ", ".join(f"{m:.4g}" for m in mu))
     print("orbitally stable" if orb.stable else "orbitally UNSTABLE")
-    orb.metadata["measures"].update({f"min({output})": float(y.min()), f"max({output})": float(y.max()),
-                                     f"time_average({output})": orb.time_average(output)})
     select = [output] + [k for k in interest if k in orb.columns and k != output]
     save_outputs(args, orb, plot=lambda path: orb.plot(path, select=select, title="periodic orbit"))

@@ -27,6 +27,8 @@ operating point continued from the nearer bracket end:
 """
 from __future__ import annotations
 
+import argparse
+
 import sys
 
 import numpy as np
@@ -250,7 +252,7 @@ def complex_ranges(values, has_pair, onsets):
 
 # ------------------------------------------------------------------------ sweep -----------
 def stability_sweep(circuit, param=None, values=None, t=0.0, locate=True, xtol=None,
-                    progress=False) -> StabilityResult:
+                    progress=None) -> StabilityResult:
     """Eigen-analysis of the equilibria of ``circuit`` over ``param`` = ``values`` (array in the
     parameter's declared unit, or a range string '10:200:2 mmHg'), continuing the operating point
     from point to point.  ``param`` defaults to the netlist's input (a source's drive parameter,
@@ -270,21 +272,20 @@ def stability_sweep(circuit, param=None, values=None, t=0.0, locate=True, xtol=N
         raise HemocircuitError("stability_sweep runs on a single circuit (the sweep is the batch)")
     points, failed = [], []
     x_prev = None
-    it = vals
-    if progress:
-        from tqdm import tqdm
-        it = tqdm(vals, desc="stability", leave=False)
-    for v in it:
-        try:
-            c = circuit.with_values({param: float(v)})
-            x = equilibrium(c, x_prev, t)
-            pt = analyse_point(c, x, t)
-        except HemocircuitError as exc:
-            failed.append((float(v), str(exc)))
-            points.append(None)
-            continue
-        x_prev = x
-        points.append(pt)
+    from ..progress import bar
+    with bar(len(vals), "stability", unit="point", progress=progress) as b:
+        for v in vals:
+            b.update(1)
+            try:
+                c = circuit.with_values({param: float(v)})
+                x = equilibrium(c, x_prev, t)
+                pt = analyse_point(c, x, t)
+            except HemocircuitError as exc:
+                failed.append((float(v), str(exc)))
+                points.append(None)
+                continue
+            x_prev = x
+            points.append(pt)
     events = []
     if locate and len(vals) > 1:
         step = float(np.min(np.abs(np.diff(vals)))) if len(vals) > 1 else 1.0
@@ -394,6 +395,10 @@ def plot_result(res, path, select=None, title=None):
                          fontsize=7, rotation=90, va="bottom", ha="right", color="tab:red")
     ax1.axhline(0, color="k", lw=0.7)
     ax1.set_yscale("symlog", linthresh=lin)
+    re_all = E.real[np.isfinite(E.real)]
+    if re_all.size:  # no empty decades: from the fastest decay to just above the largest real part
+        top = re_all.max() * 3 if re_all.max() > 0 else lin * 3
+        ax1.set_ylim(min(re_all.min() * 2, -lin), top)
     ax1.set_xlabel(f"{param} [{unit}]")
     ax1.set_ylabel("Re(lambda) [1/s]  (orange: complex pair; shaded: complex range)")
     ax1.grid(alpha=0.3)
@@ -405,6 +410,8 @@ def plot_result(res, path, select=None, title=None):
     ax2.axvline(0, color="k", lw=0.7)
     ax2.axhline(0, color="k", lw=0.4)
     ax2.set_xscale("symlog", linthresh=lin)
+    if re_all.size:
+        ax2.set_xlim(min(re_all.min() * 2, -lin), re_all.max() * 3 if re_all.max() > 0 else lin)
     ax2.set_xlabel("Re(lambda) [1/s]")
     ax2.set_ylabel("Im(lambda) [rad/s]")
     ax2.grid(alpha=0.3)
@@ -414,15 +421,28 @@ def plot_result(res, path, select=None, title=None):
 
 
 # ------------------------------------------------------------------------ CLI -------------
-def cmd_stability(args):
-    from ..cli import _load, _range_spacing, save_outputs
+def _stability(args, c):
+    from ..cli import _range_spacing
+    param, rng = (s.strip() for s in args.sweep.split("=", 1))
+    return stability_sweep(c, param, _range_spacing(rng), locate=not args.no_locate)
 
-    c, _ = _load(args)
+
+def compute_stability(args, sets):
+    """One --grid member (:func:`hemocircuit.cli.computed`)."""
+    from ..cli import load_circuit
+    return _stability(args, load_circuit(args.netlist, sets, args.protocol)[0])
+
+
+def cmd_stability(args):
+    from ..cli import _load, computed, report_grid, save_outputs
+
     if not args.sweep or "=" not in args.sweep:
         raise HemocircuitError("stability needs --sweep ID.PARAM=START:STOP:STEP UNIT (e.g. Pa.value=10:200:2mmHg)")
-    param, rng = (s.strip() for s in args.sweep.split("=", 1))
-    res = stability_sweep(c, param, _range_spacing(rng), locate=not args.no_locate, progress=args.progress)
+    param = args.sweep.split("=", 1)[0].strip()
     show = args.show or ["classification", "max_re(lambda)", "zeta(pair)", "frequency(pair)", "at_limit"]
+    if args.grid:
+        return report_grid(args, computed(args, compute_stability), show)
+    res = _stability(args, _load(args)[0])
     print(res.summary(show=show, max_rows=0, where=args.out))
     for v, why in res.failed:
         print(f"failed at {param}={v:g}: {why}", file=sys.stderr)
@@ -433,5 +453,5 @@ def register_cli(sub, common):
     sp = common(sub.add_parser("stability", help="eigenvalues of the equilibria along a sweep; Hopf points"))
     sp.add_argument("--sweep", help="ID.PARAM=START:STOP:STEP UNIT, e.g. Pa.value=10:200:2mmHg")
     sp.add_argument("--no-locate", action="store_true", help="do not locate Hopf points / complex onsets")
-    sp.add_argument("--progress", action="store_true", help="show a progress bar")
+    sp.add_argument("--progress", action="store_true", help=argparse.SUPPRESS)  # on by default now (--quiet: off)
     sp.set_defaults(func=cmd_stability)
