@@ -46,7 +46,7 @@ def cmd_fit(args):
 
 def register_cli(sub, common):
     sp = common(sub.add_parser("fit", help="estimate parameters from data (fit spec YAML; docs/fitting.md)"),
-                outputs=False)
+                outputs=False, grid=False)
     sp.add_argument("spec", help="fit spec YAML: parameters with bounds, datasets, settings")
     sp.add_argument("--out", help="output folder (default: <spec folder>/output/<spec name>/)")
     sp.add_argument("--starts", type=int, help="number of Latin-hypercube starts (overrides the spec)")

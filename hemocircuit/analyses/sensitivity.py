@@ -43,7 +43,8 @@ def write_outputs(result, out=None, plot=None, series=None, failures=None):
 
 def register_cli(sub, common):
     sp = common(sub.add_parser("sensitivity", help="sensitivity analysis of an output (constellation, Morris, "
-                                                   "Sobol, local, dynamic) from a spec YAML"), outputs=False)
+                                                   "Sobol, local, dynamic) from a spec YAML"), outputs=False,
+                grid=False)
     sp.add_argument("spec", help="sensitivity spec YAML (docs/sensitivity.md)")
     sp.add_argument("--method", help="override the spec's method (constellation, morris, sobol, local, dynamic)")
     sp.add_argument("--scheme", choices=("additive", "multiplicative"), help="override the parameter space scheme")
