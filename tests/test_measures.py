@@ -88,9 +88,7 @@ def test_plateau_matches_an_independent_root_search_on_payne06():
     (_, v), = measure(sweep, "plateau Q(Rla) 10% ref=100mmHg")
 
     def q(p):
-        d = c.copy()
-        d.set_param("Pa.value", p)
-        return d.operating_point()["Q(Rla)"]
+        return c.with_values({"Pa.value": p}).operating_point()["Q(Rla)"]
 
     q_ref = q(100.0)
     assert v["Q(Rla) at ref [mL/s]"] == pytest.approx(q_ref, rel=1e-9)
