@@ -410,6 +410,27 @@ def envelope_summary(t, y_r, y_q, window, osc_tol):
     return row
 
 
+def _envelope_rows(res):
+    """Member rows {"Pa.value", "art.zeta", "<output> min|max|mean", "period [s]", "oscillating"
+    [, "error"]} from the envelope's result (a list of such rows, or the columnar
+    EnvelopeResult with min(o)/max(o)/mean(o)/period/oscillating/error columns)."""
+    if isinstance(res, list):
+        return res
+    rows = []
+    for k in range(len(res["period"])):
+        r = {"Pa.value": float(res["Pa.value"][k]), "art.zeta": float(res["art.zeta"][k])}
+        if res["error"][k]:
+            r["error"] = res["error"][k]
+        else:
+            for o in ("art.r", "Q(Rla)"):
+                for q in ("min", "max", "mean"):
+                    r[f"{o} {q}"] = float(res[f"{q}({o})"][k])
+            r["period [s]"] = float(res["period"][k])
+            r["oscillating"] = bool(res["oscillating"][k])
+        rows.append(r)
+    return rows
+
+
 def bench_envelope(a, hc_kw):
     pas, zetas = [60.0, 70.0, 80.0, 90.0, 100.0], [0.1, 0.2]
     t_end, dt = 1000.0, 0.1
@@ -431,6 +452,7 @@ def bench_envelope(a, hc_kw):
         rows = envelope(c, ("Pa.value", pas), [("art.zeta", zetas)], outputs=["art.r", "Q(Rla)"], t_end=t_end,
                         dt=dt, workers=a.workers, **kw)
     t_hc = ck_hc.wall
+    rows = _envelope_rows(rows)
     log(f"  hemocircuit envelope: {t_hc:.1f} s (cpu incl. workers {ck_hc.cpu:.1f} s)")
     # the same start states for roadrunner: operating point at each Pa + the envelope's kick
     t0 = time.perf_counter()

@@ -43,7 +43,14 @@ def make_work(lay):
     return (np.zeros(ep[-1]), np.zeros(max(eb[-1], 1)), np.zeros((n + 1, n + 1)), np.zeros(n + 1),
             np.zeros(n + 1), np.zeros((Lm, Lm)), np.zeros(Lm), np.zeros(Lm), np.zeros(n + 1),
             np.zeros(Pm), np.zeros(Sm), np.zeros(Im, dtype=np.int64), np.zeros(Sm), np.zeros(Om),
-            np.zeros((n + 1, n + 1)), np.zeros(n + 1), np.zeros(n + 1, dtype=np.int64))
+            np.zeros((n + 1, n + 1)), np.zeros(n + 1), np.zeros(n + 1, dtype=np.int64),
+            # static condensation (prepare_static): 17 Acc's LU, 18 Z = Acc^-1 Acv, 19 S0, 20 Avc,
+            # 21 S, 22 pivots of Acc, 23 order (C unknowns, then V), 24 slot in V (-1: in C),
+            # 25 [nc, nv, on], 26 y, 27 rv
+            np.zeros((n + 1, n + 1)), np.zeros((n + 1, n + 1)), np.zeros((n + 1, n + 1)),
+            np.zeros((n + 1, n + 1)), np.zeros((n + 1, n + 1)), np.zeros(n + 1, dtype=np.int64),
+            np.zeros(n + 1, dtype=np.int64), np.zeros(n + 1, dtype=np.int64), np.zeros(3, dtype=np.int64),
+            np.zeros(n + 1), np.zeros(n + 1))
 
 
 # inline="always" (numba IR inlining) on the small helpers called inside the per-evaluation
@@ -117,6 +124,73 @@ def prepare_static(t, x, P, lay, work):
                 b0[r] += bl[i]
             for j in range(L[e]):
                 A0[r, ui[eu[e] + j]] += Al[i, j]
+    condense(lay, work)
+
+
+@njit(cache=True, nogil=True)
+def condense(lay, work):
+    """Static condensation of the nodal system: the unknowns V that state-dependent matrix
+    stamps touch are kept, the constant rest C is eliminated once per parameter set.  With
+    A0 = [[Acc, Acv], [Avc, Avv]]: Acc is factorised, Z = Acc^-1 Acv and the Schur complement
+    S0 = Avv - Avc Z stored; an evaluation then solves only S0 + (varying stamps) (nv x nv).
+    Used when V is at most half the unknowns and Acc is regular; otherwise the dense path."""
+    (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st) = lay
+    A0, Fc, Z, S0, Avc, pivc, order, vpos, meta, y = (work[14], work[17], work[18], work[19], work[20],
+                                                      work[22], work[23], work[24], work[25], work[26])
+    meta[2] = 0
+    for i in range(n + 1):
+        vpos[i] = -1
+    for e in range(et.shape[0]):
+        if cm[e] == 0:
+            for i in range(L[e]):
+                r = ui[eu[e] + i]
+                if r < n:
+                    vpos[r] = 0
+    # unknowns the constant part alone leaves undetermined (e.g. a node joined to the rest
+    # only through a state-dependent element) join V: Acc must be regular
+    while True:
+        nv = 0
+        for i in range(n):
+            if vpos[i] >= 0:
+                nv += 1
+        nc = n - nv
+        if nv == 0 or 2 * nv > n:
+            return
+        k = 0
+        for i in range(n):
+            if vpos[i] < 0:
+                order[k] = i
+                k += 1
+        for i in range(nc):
+            for j in range(nc):
+                Fc[i, j] = A0[order[i], order[j]]
+        bad = lu_factor_at(Fc, pivc, nc)
+        if bad < 0:
+            break
+        vpos[order[bad]] = 0
+    a = 0
+    for i in range(n):
+        if vpos[i] >= 0:
+            order[nc + a] = i
+            vpos[i] = a
+            a += 1
+    for b in range(nv):
+        for i in range(nc):
+            y[i] = A0[order[i], order[nc + b]]
+        lu_apply(Fc, pivc, y, nc)
+        for i in range(nc):
+            Z[i, b] = y[i]
+    for a in range(nv):
+        for i in range(nc):
+            Avc[a, i] = A0[order[nc + a], order[i]]
+        for b in range(nv):
+            acc = A0[order[nc + a], order[nc + b]]
+            for i in range(nc):
+                acc -= Avc[a, i] * Z[i, b]
+            S0[a, b] = acc
+    meta[0] = nc
+    meta[1] = nv
+    meta[2] = 1
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -128,14 +202,26 @@ def solve_nodes(t, x, Pe, lay, work):
     (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st) = lay
     A, b, u, Al, bl, un, A0, b0 = work[2], work[3], work[4], work[5], work[6], work[8], work[14], work[15]
     ul, pl, xl, il, piv = work[7], work[9], work[10], work[11], work[16]
+    Fc, Z, S0, Avc, Sw, pivc, order, vpos, meta, y, rv = (work[17], work[18], work[19], work[20], work[21],
+                                                          work[22], work[23], work[24], work[25], work[26],
+                                                          work[27])
+    schur = meta[2] == 1
+    nc = meta[0]
+    nv = meta[1]
     if nonlin == 0:
         for i in range(n + 1):
             u[i] = 0.0
     for it in range(NEWTON_MAXIT):
         for i in range(n + 1):
             b[i] = b0[i]
-            for j in range(n + 1):
-                A[i, j] = A0[i, j]
+        if schur:
+            for a in range(nv):
+                for c in range(nv):
+                    Sw[a, c] = S0[a, c]
+        else:
+            for i in range(n + 1):
+                for j in range(n + 1):
+                    A[i, j] = A0[i, j]
         for e in range(et.shape[0]):
             if st[e] == 1:
                 continue
@@ -144,13 +230,41 @@ def solve_nodes(t, x, Pe, lay, work):
                 r = ui[eu[e] + i]
                 b[r] += bl[i]
                 if cm[e] == 0:
-                    for j in range(L[e]):
-                        A[r, ui[eu[e] + j]] += Al[i, j]
-        if not lu_factor(A, piv, n):
-            return False
-        for i in range(n):
-            un[i] = b[i]
-        lu_apply(A, piv, un, n)
+                    if schur:
+                        if r < n:
+                            for j in range(L[e]):
+                                c = ui[eu[e] + j]
+                                if c < n:
+                                    Sw[vpos[r], vpos[c]] += Al[i, j]
+                    else:
+                        for j in range(L[e]):
+                            A[r, ui[eu[e] + j]] += Al[i, j]
+        if schur:
+            # y = Acc^-1 b_C;  (S0 + varying) u_V = b_V - Avc y;  u_C = y - Z u_V
+            for i in range(nc):
+                y[i] = b[order[i]]
+            lu_apply(Fc, pivc, y, nc)
+            for a in range(nv):
+                acc = b[order[nc + a]]
+                for i in range(nc):
+                    acc -= Avc[a, i] * y[i]
+                rv[a] = acc
+            if not lu_factor(Sw, piv, nv):
+                return False
+            lu_apply(Sw, piv, rv, nv)
+            for a in range(nv):
+                un[order[nc + a]] = rv[a]
+            for i in range(nc):
+                acc = y[i]
+                for a in range(nv):
+                    acc -= Z[i, a] * rv[a]
+                un[order[i]] = acc
+        else:
+            if not lu_factor(A, piv, n):
+                return False
+            for i in range(n):
+                un[i] = b[i]
+            lu_apply(A, piv, un, n)
         un[n] = 0.0
         if nonlin == 0:
             for i in range(n + 1):
@@ -213,20 +327,18 @@ def rhs_batch(t, X, P, lay):
     return out
 
 
-# --- ROS34PW2 (Rang & Angermann 2005, BIT 45:761): 4 stages, order 3, embedded order 2,
-# L-stable, stiffly accurate Rosenbrock-W: consistent with an approximate (reused) Jacobian.
-# the tableau is the numpy batch integrator's (one copy; numba freezes these arrays as constants)
-from hemocircuit.batch_integrator import GAMMA, A as RA, G as RG, B_SOL as RB, B_EMB as _RB_EMB, C_T as RC, D_T as RD  # noqa: E402
-RE = RB - _RB_EMB  # error estimate: solution minus embedded solution
-JAC_REUSE = 6  # accepted steps per Jacobian (a W-method stays consistent with an old one)
+# --- Rosenbrock(-W) integrator.  The tableau is a run-time argument (``tab``, packed by
+# hemocircuit.kernels.tableaus: ROS34PW2 by default, ROS34PW3, RODAS4, RODAS5P), so choosing a
+# method never recompiles.
 FD_REL = 1e-7  # finite-difference step, relative to max(|x|, the state's scale): hemocircuit.derivatives' rule
 
 
 # inlined (numba IR) into integrate, its one caller: numba links a callee's machine code into
 # every caller and LLVM optimises it again there, so each call level costs compile time
 @njit(cache=True, nogil=True, inline="always")
-def jacobian_into(t, x, f0, P, lay, work, scales, J, ft, xt, ftmp):
-    """Forward-difference Jacobian J (nx, nx) and df/dt ft (nx,) at (t, x) with f0 = f(t, x).
+def jacobian_into(t, x, f0, P, lay, work, scales, J, ft, xt, ftmp, autonomous):
+    """Forward-difference Jacobian J (nx, nx) and df/dt ft (nx,) at (t, x) with f0 = f(t, x)
+    (ft = 0 without an evaluation when the circuit is autonomous).
     Returns the number of evaluations, or -1 if one failed (singular nodal system)."""
     nx = x.shape[0]
     for i in range(nx):
@@ -240,6 +352,8 @@ def jacobian_into(t, x, f0, P, lay, work, scales, J, ft, xt, ftmp):
         for i in range(nx):
             J[i, j] = (ftmp[i] - f0[i]) / hj
         xt[j] = x[j]
+    if autonomous:
+        return nx
     ht = FD_REL * max(abs(t), 1.0)
     if not rhs_into(t + ht, x, P, lay, work, ftmp):
         return -1
@@ -253,6 +367,12 @@ def lu_factor(W, piv, m):
     """In-place LU with partial pivoting of the leading m x m block of W; False if singular.
     (The nodal system uses it with m = n, leaving out the ground slot; the integrator's W
     matrix with m = nx.)"""
+    return lu_factor_at(W, piv, m) < 0
+
+
+@njit(cache=True, nogil=True)
+def lu_factor_at(W, piv, m):
+    """lu_factor, returning -1 on success or the column where no nonzero pivot was left."""
     for c in range(m):
         p = c
         best = abs(W[c, c])
@@ -262,7 +382,7 @@ def lu_factor(W, piv, m):
                 best, p = v, r
         piv[c] = p
         if best == 0.0:
-            return False
+            return c
         if p != c:
             for j in range(m):
                 tmp = W[c, j]
@@ -275,7 +395,7 @@ def lu_factor(W, piv, m):
             if f != 0.0:
                 for j in range(c + 1, m):
                     W[r, j] -= f * W[c, j]
-    return True
+    return -1
 
 
 @njit(cache=True, nogil=True)
@@ -327,18 +447,35 @@ def hermite_root(y0, d0, y1, d1):
 
 # inlined into integrate_batch, its one caller (see jacobian_into): one level less to compile
 @njit(cache=True, nogil=True, inline="always")
-def integrate(t_out, x0, P, lay, scales, lim_i, lim_b, lim_r, breaks, rtol, atol, h0, hmax, max_steps, out):
+def integrate(t_out, x0, P, lay, scales, lim_i, lim_b, lim_r, breaks, rtol, atol, h0, hmax, max_steps, tab, out):
     """Integrate from t_out[0] to t_out[-1], writing the states at every t_out into out (T, nx).
 
     Hard limits (lim_i, lim_b, lim_r): state lim_i[k] may not fall below lim_b[k]; at the
     crossing (located on the step's cubic Hermite interpolant) the state is put on the bound
-    and state lim_r[k] (if >= 0) is reset to max(., 0).  Steps end exactly on ``breaks``
-    (discontinuities of sources), where f is re-evaluated.
+    and state lim_r[k] (if >= 0) is reset to max(., 0); the next step starts from the size of
+    the step that hit the bound (tab[4] = 1), not from the shortened one.  Steps end exactly on
+    ``breaks`` (discontinuities of sources), where f is re-evaluated; where f does not jump
+    (a slope-only kink, e.g. of a pwl table) the Jacobian is kept (tab[5] = 1).
+    ``tab``: the method (hemocircuit.kernels.tableaus.packed).
     Returns (status, t reached, steps, rejected steps, f evaluations, limit events);
     status 0 done, -1 step size too small, -2 step limit, -3 non-finite state or singular system.
     """
     nx = x0.shape[0]
     T = t_out.shape[0]
+    ns = int(tab[0])
+    GAMMA = tab[1]
+    q = tab[2]
+    JAC_REUSE = int(tab[3])
+    ev_restart = tab[4] != 0.0
+    soft_kinks = tab[5] != 0.0
+    autonomous = tab[6] != 0.0  # no waveform or time-dependent element: df/dt = 0
+    oA = 8  # offsets of A, G (ns x ns, row major), b, e, c, d, reuse (ns) in tab
+    oG = oA + ns * ns
+    oB = oG + ns * ns
+    oE = oB + ns
+    oC = oE + ns
+    oD = oC + ns
+    oR = oD + ns
     work = make_work(lay)
     x = x0.copy()
     f = np.empty(nx)
@@ -347,7 +484,8 @@ def integrate(t_out, x0, P, lay, scales, lim_i, lim_b, lim_r, breaks, rtol, atol
     xs = np.empty(nx)
     gs = np.empty(nx)
     err = np.empty(nx)
-    K = np.empty((4, nx))
+    K = np.empty((ns, nx))
+    fr = np.empty(nx)
     J = np.zeros((nx, nx))
     ft = np.zeros(nx)
     W = np.empty((nx, nx))
@@ -383,7 +521,7 @@ def integrate(t_out, x0, P, lay, scales, lim_i, lim_b, lim_r, breaks, rtol, atol
         if ib < breaks.shape[0] and breaks[ib] < t_end:
             tb = breaks[ib]
         if age >= JAC_REUSE:
-            nj = jacobian_into(t, x, f, P, lay, work, scales, J, ft, xt, ftmp)
+            nj = jacobian_into(t, x, f, P, lay, work, scales, J, ft, xt, ftmp, autonomous)
             if nj < 0:
                 status = -3
                 break
@@ -420,37 +558,44 @@ def integrate(t_out, x0, P, lay, scales, lim_i, lim_b, lim_r, breaks, rtol, atol
                 break
             continue
         good = True
-        for s in range(4):
+        for s in range(ns):
             for i in range(nx):
                 xs[i] = x[i]
                 gs[i] = 0.0
             for j in range(s):
-                if RA[s, j] != 0.0:
+                a_sj = tab[oA + s * ns + j]
+                g_sj = tab[oG + s * ns + j]
+                if a_sj != 0.0:
                     for i in range(nx):
-                        xs[i] += RA[s, j] * K[j, i]
-                if RG[s, j] != 0.0:
+                        xs[i] += a_sj * K[j, i]
+                if g_sj != 0.0:
                     for i in range(nx):
-                        gs[i] += RG[s, j] * K[j, i]
+                        gs[i] += g_sj * K[j, i]
             if s == 0:
                 for i in range(nx):
                     fn[i] = f[i]
-            else:
+            elif tab[oR + s] == 0.0:  # else: same point as stage s-1, fn holds its f
                 nfev += 1
-                if not rhs_into(min(t + RC[s] * hh, tlim), xs, P, lay, work, fn):
+                if not rhs_into(min(t + tab[oC + s] * hh, tlim), xs, P, lay, work, fn):
                     good = False
                     break
+            d_s = tab[oD + s]
             for i in range(nx):
                 acc = 0.0
                 for j in range(nx):
                     acc += J[i, j] * gs[j]
-                K[s, i] = hh * fn[i] + hh * acc + hh * hh * RD[s] * ft[i]
+                K[s, i] = hh * fn[i] + hh * acc + hh * hh * d_s * ft[i]
             lu_apply(W, piv, K[s], nx)
         enorm = np.inf
         if good:
             enorm = 0.0
             for i in range(nx):
-                xn[i] = x[i] + RB[0] * K[0, i] + RB[1] * K[1, i] + RB[2] * K[2, i] + RB[3] * K[3, i]
-                e = RE[0] * K[0, i] + RE[1] * K[1, i] + RE[2] * K[2, i] + RE[3] * K[3, i]
+                xi = x[i]
+                e = 0.0
+                for s in range(ns):
+                    xi += tab[oB + s] * K[s, i]
+                    e += tab[oE + s] * K[s, i]
+                xn[i] = xi
                 sc = atol[i] + rtol * max(abs(x[i]), abs(xn[i]))
                 enorm += (e / sc) ** 2
             enorm = np.sqrt(enorm / nx)
@@ -460,7 +605,7 @@ def integrate(t_out, x0, P, lay, scales, lim_i, lim_b, lim_r, breaks, rtol, atol
         if enorm <= 1.0:
             # PI step-size control (Gustafsson): smoother steps, fewer rejections than I alone
             en = max(enorm, 1e-10)
-            fac = 0.9 * en ** (-0.7 / 3.0) * err_prev ** (0.4 / 3.0)
+            fac = 0.9 * en ** (-0.7 / q) * err_prev ** (0.4 / q)
             fac = min(5.0, max(0.2, fac))
             err_prev = max(en, 1e-4)
             tn = tb if at_break else t + hh
@@ -484,6 +629,7 @@ def integrate(t_out, x0, P, lay, scales, lim_i, lim_b, lim_r, breaks, rtol, atol
                     sk = hermite_root(x[li] - lim_b[k], f[li] * hh, xn[li] - lim_b[k], fn[li] * hh)
                     if sk < s_hit:
                         s_hit, k_hit = sk, k
+            h_full = hh
             if k_hit >= 0:
                 hermite(x, f, xn, fn, hh, s_hit, xh)
                 for i in range(nx):
@@ -516,20 +662,32 @@ def integrate(t_out, x0, P, lay, scales, lim_i, lim_b, lim_r, breaks, rtol, atol
             for i in range(nx):
                 x[i] = xn[i]
                 f[i] = fn[i]
-            if at_break and tb < t_end:  # the source jumps here: restart from its right limit
+            h = hh * fac if not at_break else max(h, hh * fac)
+            if k_hit >= 0 and ev_restart:
+                # restart after the reset from the step that reached the bound: the shortened
+                # step (s_hit x hh, often tiny) says nothing about the dynamics after the reset
+                h = max(h, h_full * fac)
+            if at_break and tb < t_end:  # the source may jump here: continue from its right limit
                 ib += 1
-                age = JAC_REUSE
                 nfev += 1
-                if not rhs_into(t, x, P, lay, work, f):
+                if not rhs_into(t, x, P, lay, work, fr):
                     status = -3
                     break
-            h = hh * fac if not at_break else max(h, hh * fac)
+                jump = not soft_kinks
+                for i in range(nx):
+                    # a jump of f that moves x by more than 1e-3 of its tolerance over the next
+                    # step is a value discontinuity (new Jacobian); less is a slope-only kink
+                    if abs(fr[i] - f[i]) * h > 1e-3 * (atol[i] + rtol * abs(x[i])):
+                        jump = True
+                    f[i] = fr[i]
+                if jump:
+                    age = JAC_REUSE
             age += 1
             nrej_run = 0
         else:
             nrej += 1
             if np.isfinite(enorm):
-                fac = 0.9 * enorm ** (-1.0 / 3.0)
+                fac = 0.9 * enorm ** (-1.0 / q)
                 h = hh * min(0.5, max(0.2, fac))
             else:
                 h = 0.25 * hh
@@ -546,7 +704,7 @@ def integrate(t_out, x0, P, lay, scales, lim_i, lim_b, lim_r, breaks, rtol, atol
 
 
 @njit(cache=True, nogil=True)
-def integrate_batch(t_out, X0, P, lay, scales, lim_i, lim_b, lim_r, breaks, rtol, atol, h0, hmax, max_steps):
+def integrate_batch(t_out, X0, P, lay, scales, lim_i, lim_b, lim_r, breaks, rtol, atol, h0, hmax, max_steps, tab):
     """integrate() for each member: t_out (B, T), X0 (B, nx), P (B, nP), hmax (B,) ->
     (out (B, T, nx), stats (B, 6) as integrate's return values)."""
     B = X0.shape[0]
@@ -554,7 +712,7 @@ def integrate_batch(t_out, X0, P, lay, scales, lim_i, lim_b, lim_r, breaks, rtol
     stats = np.zeros((B, 6))
     for m in range(B):
         status, t, steps, rej, nfev, nev = integrate(t_out[m], X0[m], P[m], lay, scales, lim_i, lim_b, lim_r,
-                                                     breaks, rtol, atol, h0, hmax[m], max_steps, out[m])
+                                                     breaks, rtol, atol, h0, hmax[m], max_steps, tab, out[m])
         stats[m, 0] = status
         stats[m, 1] = t
         stats[m, 2] = steps

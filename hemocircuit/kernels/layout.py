@@ -25,6 +25,7 @@ class Layout:
     kernels: list          # Kernel objects; index = type code
     slots: dict            # (element id, parameter) -> column of P
     n_params: int
+    autonomous: bool = False  # no waveform, no time-dependent element: f does not depend on t
 
 
 @functools.lru_cache(maxsize=1)
@@ -139,7 +140,8 @@ def build_layout(circuit) -> Layout | None:
     lay = (int(circuit.n), int(circuit.nx), i64(et), i64(L), i64(S), i64(ep), i64(ex), i64(eu), i64(ui),
            i64(eo), i64(io), i64(eb), i64(ws), i64(w0), f64(wd), i64(xs), i64(xc), i64(xk), i64(code),
            f64(const), i64(sorted(oe)), nonlin, i64(cm), i64(st))
-    return Layout(lay, kernels, slots, ep[-1])
+    autonomous = not ws and not any(g.comp.time_dependent for g in circuit.groups)
+    return Layout(lay, kernels, slots, ep[-1], autonomous)
 
 
 def param_matrix(circuit, layout: Layout) -> np.ndarray:

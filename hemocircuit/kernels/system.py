@@ -7,6 +7,7 @@ import numpy as np
 
 from .codegen import engine_module
 from .layout import build_layout, param_matrix
+from . import tableaus
 
 STATUS = {0: "done", -1: "step size too small", -2: "step limit reached",
           -3: "non-finite state or singular nodal system"}
@@ -49,21 +50,24 @@ class CompiledSystem:
         return self.mod.rhs_batch(float(t), np.ascontiguousarray(x), P, self.lay)
 
     def integrate(self, t_out, x0, P, rtol=1e-6, atol=None, breaks=(), h0=1e-3, hmax=np.inf,
-                  max_steps=10_000_000):
+                  max_steps=10_000_000, method=None, **tab_options):
         """States on the grid t_out (T,) from x0 at t_out[0] for one parameter row P (slots,).
+        ``method``: a Rosenbrock tableau of hemocircuit.kernels.tableaus (None: chosen by rtol,
+        tableaus.default_method;
+        ``tab_options`` go to its ``packed``).
 
         Returns (X (T, nx), stats dict).  Rows after a failure are NaN; stats['status'] < 0
         says why (see STATUS)."""
         # one member of the batch entry point: a process compiles one integrator, not two
         X, st = self.integrate_batch(np.asarray(t_out, dtype=float)[None], np.asarray(x0, dtype=float)[None],
                                      np.asarray(P, dtype=float)[None], rtol=rtol, atol=atol, breaks=breaks, h0=h0,
-                                     hmax=hmax, max_steps=max_steps)
+                                     hmax=hmax, max_steps=max_steps, method=method, **tab_options)
         status, t, steps, rej, nfev, nev = (st[0, k] for k in range(6))
         return X[0], {"status": int(status), "message": STATUS[int(status)], "t": float(t), "steps": int(steps),
                       "rejected": int(rej), "nfev": int(nfev), "limit_events": int(nev)}
 
     def integrate_batch(self, t_out, X0, P, rtol=1e-6, atol=None, breaks=(), h0=1e-3, hmax=np.inf,
-                        max_steps=10_000_000):
+                        max_steps=10_000_000, method=None, **tab_options):
         """integrate() for every member: t_out (T,) or (B, T), X0 (B, nx), P (B, slots), hmax
         scalar or (B,).
         Returns (X (B, T, nx), stats (B, 6): status, t, steps, rejected, nfev, limit events)."""
@@ -75,4 +79,10 @@ class CompiledSystem:
         hmax = np.ascontiguousarray(np.broadcast_to(np.asarray(hmax, dtype=float), (B,)))
         return self.mod.integrate_batch(t_out, X0, P, self.lay, self.scales, self.lim_i, self.lim_b, self.lim_r,
                                         np.asarray(sorted(breaks), dtype=float), float(rtol), atol_v, float(h0),
-                                        hmax, int(max_steps))
+                                        hmax, int(max_steps),
+                                        self.tableau(method or tableaus.default_method(rtol), **tab_options))
+
+    def tableau(self, method, **tab_options):
+        """The packed method for integrate_batch (hemocircuit.kernels.tableaus)."""
+        opts = {"autonomous": int(self.layout.autonomous), **tab_options}
+        return tableaus.packed(method, **opts)
