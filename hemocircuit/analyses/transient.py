@@ -283,7 +283,8 @@ def _simulate_compiled(system, c, x, t0, t_end, dt, events, rtol, atol, max_step
                               state=c.state_dict(bad), partial=_collect(c, ts, xs, segs))
         x = X[-1].copy()
     res = _collect(c, ts, xs, segs)
-    res.stats = {**stats, "method": "ROS34PW2 (compiled)"}
+    from ..kernels.tableaus import default_method
+    res.stats = {**stats, "method": f"{default_method(rtol).upper()} (compiled)"}
     return res
 
 
