@@ -7,13 +7,23 @@ its whole chunk.  Chunks go to worker processes (``concurrent.futures``) or to D
 not depend on which chunk or executor ran it (the batched integrator works member by member),
 so results are identical whichever executor ran them.  A failing member is recorded with its
 reason and does not lose the others.
+
+Failures and signals (the caller turns both into rows marked failed or not run):
+* ``failures='collect'``: a chunk whose function raises becomes a :class:`ChunkFailed` (its
+  reason) in the returned list; the other chunks finish.
+* SIGINT / SIGTERM (a KeyboardInterrupt; the CLI turns SIGTERM into one, see
+  :class:`hemocircuit.errors.Interrupted`): the worker processes are terminated and joined
+  (none is left running), and :class:`~hemocircuit.errors.Interrupted` is raised with
+  ``chunk_results`` (None for the chunks that had not finished).  Workers ignore SIGINT (a
+  Ctrl-C reaches the whole process group; the parent decides) and, on Linux, die with the
+  parent even if it is killed outright (``PR_SET_PDEATHSIG``).
 """
 from __future__ import annotations
 
 import os
 from concurrent.futures import ProcessPoolExecutor, as_completed
 
-from .errors import HemocircuitError
+from .errors import HemocircuitError, Interrupted
 
 
 def default_workers() -> int:
@@ -28,11 +38,14 @@ def split(items, n_chunks):
     return [items[bounds[k]:bounds[k + 1]] for k in range(n_chunks) if bounds[k + 1] > bounds[k]]
 
 
-def run_chunks(fn, chunks, scheduler=None, workers=None, progress=False, desc="runs"):
+def run_chunks(fn, chunks, scheduler=None, workers=None, progress=False, desc="runs", failures="raise"):
     """[fn(chunk) for chunk in chunks], in order, on the chosen executor.
 
     scheduler: None / 'processes' (local worker processes), 'serial' (this process), a Dask
     scheduler address 'tcp://HOST:PORT', or a dask.distributed Client.
+    failures: 'raise' (a chunk's exception propagates) or 'collect' (it becomes a
+    :class:`ChunkFailed` in the list; the other chunks finish).
+    An interruption raises :class:`~hemocircuit.errors.Interrupted` with the finished chunks.
     """
     workers = workers or default_workers()
     bar = _bar(progress, sum(len(c) if hasattr(c, "__len__") else 1 for c in chunks), desc)
@@ -46,21 +59,18 @@ def run_chunks(fn, chunks, scheduler=None, workers=None, progress=False, desc="r
     try:
         if scheduler == "serial" or (scheduler in (None, "processes") and (workers == 1 or len(chunks) == 1)):
             for i, c in enumerate(chunks):
-                done(i, fn(c))
+                done(i, _call(fn, c, failures))
         elif scheduler in (None, "processes"):
-            import multiprocessing as mp
-            ctx = mp.get_context("fork") if hasattr(os, "fork") else None
-            with ProcessPoolExecutor(max_workers=min(workers, len(chunks)), mp_context=ctx) as ex:
-                futs = {ex.submit(fn, c): i for i, c in enumerate(chunks)}
-                for f in as_completed(futs):
-                    done(futs[f], f.result())
+            _run_processes(fn, chunks, workers, done, failures)
         else:
             client = _dask_client(scheduler)
             futs = client.map(fn, chunks, pure=False)
             from dask.distributed import as_completed as das_completed
             index = {f.key: i for i, f in enumerate(futs)}
             for f in das_completed(futs):
-                done(index[f.key], f.result())
+                done(index[f.key], _outcome(f, failures))
+    except KeyboardInterrupt as exc:  # SIGINT, or SIGTERM through the CLI's handler
+        raise Interrupted.of(exc, chunk_results=list(results)) from None
     finally:
         if bar is not None:
             bar.close()
@@ -86,3 +96,92 @@ def _bar(progress, total, desc):
         return None
     from tqdm import tqdm
     return tqdm(total=total, desc=desc, unit="run")
+
+
+# ---------------------------------------------------------------- failures and signals ----
+class ChunkFailed:
+    """What :func:`run_chunks` (``failures='collect'``) gives for a chunk whose function
+    raised: ``reason`` (text naming the exception)."""
+
+    def __init__(self, reason):
+        self.reason = reason
+
+    def __repr__(self):
+        return f"ChunkFailed({self.reason!r})"
+
+
+def failure_reason(exc):
+    """An exception as a member's failure reason: a HemocircuitError's own message; anything
+    else with its type (an internal error, reported rather than losing the other members)."""
+    if isinstance(exc, HemocircuitError):
+        return str(exc)
+    from concurrent.futures.process import BrokenProcessPool
+    if isinstance(exc, BrokenProcessPool):
+        return f"a worker process died ({exc})"
+    return f"internal error ({type(exc).__name__}: {exc})"
+
+
+def _call(fn, chunk, failures):
+    if failures != "collect":
+        return fn(chunk)
+    try:
+        return fn(chunk)
+    except Exception as exc:  # noqa: BLE001 - reported per member; the others finish
+        return ChunkFailed(failure_reason(exc))
+
+
+def _outcome(future, failures):
+    if failures != "collect":
+        return future.result()
+    try:
+        return future.result()
+    except Exception as exc:  # noqa: BLE001
+        return ChunkFailed(failure_reason(exc))
+
+
+def _run_processes(fn, chunks, workers, done, failures):
+    """Chunks on local worker processes; on any interruption the workers are stopped first."""
+    import multiprocessing as mp
+    ctx = mp.get_context("fork") if hasattr(os, "fork") else None
+    ex = ProcessPoolExecutor(max_workers=min(workers, len(chunks)), mp_context=ctx, initializer=_worker_init,
+                             initargs=(os.getpid(),))
+    try:
+        futs = {ex.submit(fn, c): i for i, c in enumerate(chunks)}
+        for f in as_completed(futs):
+            done(futs[f], _outcome(f, failures))
+    except BaseException:
+        stop_workers(ex)
+        raise
+    ex.shutdown(wait=True)
+
+
+def stop_workers(executor, timeout=5.0):
+    """Terminate (SIGTERM, then SIGKILL after ``timeout`` s) and join every worker process of a
+    ProcessPoolExecutor, and drop its queued work: no worker outlives this call."""
+    procs = list((getattr(executor, "_processes", None) or {}).values())
+    executor.shutdown(wait=False, cancel_futures=True)
+    for p in procs:
+        if p.is_alive():
+            p.terminate()
+    for p in procs:
+        p.join(timeout)
+        if p.is_alive():
+            p.kill()
+            p.join(1.0)
+
+
+def _worker_init(parent_pid):
+    """In each worker: ignore SIGINT (the parent handles Ctrl-C and stops the workers),
+    default SIGTERM (how the parent stops them), and die with the parent (Linux)."""
+    import signal
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    try:
+        import ctypes
+        libc = ctypes.CDLL(None, use_errno=True)
+        PR_SET_PDEATHSIG = 1
+        libc.prctl(PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0)
+    except (OSError, AttributeError):  # not Linux: the parent's own cleanup still applies
+        pass
+    if os.getppid() != parent_pid:  # the parent died before prctl took effect
+        os._exit(1)
