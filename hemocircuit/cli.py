@@ -109,7 +109,7 @@ def record(args, res):
     netlists = getattr(args, "netlists", None) or [getattr(args, "netlist", None)]
     add_invocation(res.metadata, getattr(args, "argv", sys.argv[1:]), _sets(getattr(args, "set", None)),
                    getattr(args, "protocol", None), netlists=[n for n in netlists if n])
-    args.result = res  # main() reports its warnings and failed members (exit status)
+    args.computed_result = res  # main() reports its warnings and failed members (exit status)
     return res
 
 
@@ -368,7 +368,7 @@ def main(argv=None):
 
 def _report(args):
     """Warnings and failed members of the command's result on stderr; the exit status."""
-    res = getattr(args, "result", None)
+    res = getattr(args, "computed_result", None)
     if res is None:
         return 0
     for w in res.metadata.get("warnings", []) or []:

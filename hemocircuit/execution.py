@@ -185,3 +185,32 @@ def _worker_init(parent_pid):
         pass
     if os.getppid() != parent_pid:  # the parent died before prctl took effect
         os._exit(1)
+
+
+NOT_RUN = "not run (interrupted)"
+
+
+def member_results(n, where, results):
+    """Chunk results -> one entry per member: ``where[i]`` the member indices of chunk i and
+    ``results[i]`` its list of per-member results, a :class:`ChunkFailed` (every member of the
+    chunk gets ``{'error': reason}``) or None (not run: ``{'error': NOT_RUN}``)."""
+    out = [{"error": NOT_RUN} for _ in range(n)]
+    for chunk, r in zip(where, results):
+        for j, k in enumerate(chunk):
+            if r is None:
+                continue
+            out[k] = {"error": r.reason} if isinstance(r, ChunkFailed) else r[j]
+    return out
+
+
+def finish_batch(res, interrupted=None):
+    """Mark a batch result: status 'partial' when a member failed or did not run,
+    ``members_done``; with ``interrupted`` (an Interrupted) raise it carrying the result."""
+    failed = res.metadata.get("failed", [])
+    n_not_run = sum(1 for _, why in failed if why == NOT_RUN)
+    if failed:
+        res.metadata["status"] = "partial"
+    if interrupted is not None:
+        res.metadata["members_done"] = f"{res.n_rows - n_not_run} of {res.n_rows} members finished"
+        raise Interrupted.of(interrupted, partial=res) from None
+    return res

@@ -12,7 +12,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from ..errors import SolverError
+from .. import plausibility
+from ..errors import Interrupted, SolverError
 from ..protocol import Protocol
 from ..provenance import clock, stamp
 from ..results import Result
@@ -81,8 +82,10 @@ def simulate(circuit, t_end, dt=None, t0=0.0, x0=None, protocol=None, method="BD
         (solve_ivp with ``method``), or 'auto': compiled when every component type has a
         kernel and ``method`` is left at its default, scipy otherwise.
 
-    Returns a :class:`TransientResult`.  A solver failure raises SolverError whose ``partial``
-    is the result up to the failure, marked ``metadata['status'] = 'partial'``.
+    Returns a :class:`TransientResult`; implausible values (:mod:`hemocircuit.plausibility`)
+    are listed in ``metadata['warnings']``.  A solver failure (or a non-finite value) raises
+    SolverError, and SIGINT/SIGTERM :class:`~hemocircuit.errors.Interrupted`; the ``partial``
+    of either is the result up to that point, marked ``metadata['status'] = 'partial'``.
     """
     started = clock()
     settings = {"t_end": t_end, "dt": dt, "t0": t0, "method": method, "engine": engine, "rtol": rtol,
@@ -96,6 +99,19 @@ def simulate(circuit, t_end, dt=None, t0=0.0, x0=None, protocol=None, method="BD
             stamp(exc.partial, "tran", circuit, settings, started, status="partial")
             exc.partial.metadata["error"] = str(exc)
         raise
+    except KeyboardInterrupt as exc:  # SIGINT/SIGTERM: the series up to the last finished piece
+        part = getattr(exc, "partial", None)
+        if part is not None:
+            stamp(part, "tran", circuit, settings, started, status="partial")
+            part.metadata["members_done"] = (f"t = {part.t[0]:g} .. {part.t[-1]:g} s of {settings['t_end']} s "
+                                             f"computed" if part.n_rows else "nothing computed")
+        raise Interrupted.of(exc, partial=part) from None
+    findings = plausibility.check(circuit, res.columns, t=res.t)
+    bad = plausibility.errors(findings)
+    if bad:
+        raise SolverError("implausible solution: " + "; ".join(map(str, bad)),
+                          partial=stamp(res, "tran", circuit, settings, started, status="partial"))
+    plausibility.add_warnings(res, findings)
     return stamp(res, "tran", circuit, settings, started)
 
 
@@ -136,7 +152,7 @@ def _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step
     nfev = njev = nsteps = 0
     t_grid = None if dt is None else np.arange(t0, t_end + 0.5 * dt, dt)
 
-    def one_segment(t_a, t_b, x_a):
+    def one_segment(c, t_a, t_b, x_a):
         nonlocal nfev, njev, nsteps
         tpts = None
         if t_grid is not None:
@@ -169,6 +185,17 @@ def _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step
         return _collect(c, ts, xs, segs)
 
     bounds = [t0] + [e[0] for e in events] + [t_end]
+    try:
+        _scipy_segments(c, x, bounds, events, limits, one_segment, ts, xs, segs)
+    except KeyboardInterrupt as exc:
+        raise Interrupted.of(exc, partial=_partial()) from None
+    res = _collect(segs[-1] if segs else c, ts, xs, segs)
+    res.stats = {"nfev": nfev, "njev": njev, "nsteps": nsteps, "method": method}
+    return res
+
+
+def _scipy_segments(c, x, bounds, events, limits, one_segment, ts, xs, segs):
+    """Integrate the protocol segments (solve_ivp), appending to ts, xs, segs."""
     for k in range(len(bounds) - 1):
         t_a, t_b = bounds[k], bounds[k + 1]
         if k > 0:
@@ -178,7 +205,7 @@ def _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step
         for a, b in zip(cuts, cuts[1:]):
             cur = a
             while cur < b:
-                sol = one_segment(cur, b, x)
+                sol = one_segment(c, cur, b, x)
                 ts.append(sol.t)
                 xs.append(sol.y.T)
                 segs.append(c)
@@ -196,9 +223,6 @@ def _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step
                     segs.append(c)
                 else:
                     cur = b
-    res = _collect(c, ts, xs, segs)
-    res.stats = {"nfev": nfev, "njev": njev, "nsteps": nsteps, "method": method}
-    return res
 
 
 def _collect(c_last, ts, xs, segs):
@@ -252,11 +276,45 @@ def _simulate_compiled(system, c, x, t0, t_end, dt, events, rtol, atol, max_step
             continue
         tpts = t_grid[(t_grid > t_a) & (t_grid < t_b)]
         tpts = np.concatenate([[t_a], tpts, [t_b]])
-        X, st = system.integrate(tpts, x, system.params(c)[0], rtol=rtol, atol=atol,
-                                 breaks=c.breakpoints(t_a, t_b), h0=h0, hmax=max_step)
+        try:
+            x = _compiled_segment(system, c, tpts, x, rtol, atol, h0, max_step, stats, ts, xs, segs)
+        except KeyboardInterrupt as exc:
+            raise Interrupted.of(exc, partial=_collect(c, ts, xs, segs) if ts else None) from None
+    res = _collect(c, ts, xs, segs)
+    res.stats = {**stats, "method": "ROS34PW2 (compiled)"}
+    return res
+
+
+#: steps per call of the compiled integrator: Python regains control (a signal is handled, the
+#: series so far kept) at least this often; a run needing more steps continues from its last
+#: output point (the output grid's times are kept)
+PIECE_STEPS = 200_000
+MAX_STEPS = 10_000_000  # per protocol segment, as the compiled integrator's own limit
+
+
+def _compiled_segment(system, c, tpts, x, rtol, atol, h0, max_step, stats, ts, xs, segs):
+    """One protocol segment on the output times ``tpts`` in pieces of at most PIECE_STEPS
+    steps; appends to ts, xs, segs; returns the final state."""
+    P = system.params(c)[0]
+    breaks = c.breakpoints(tpts[0], tpts[-1])
+    used, budget = 0, PIECE_STEPS
+    while True:
+        X, st = system.integrate(tpts, x, P, rtol=rtol, atol=atol, breaks=breaks, h0=h0, hmax=max_step,
+                                 max_steps=min(budget, MAX_STEPS - used))
         for key in stats:
             stats[key] += st[key]
+        used += st["steps"]
         good = np.all(np.isfinite(X), axis=1)
+        if st["status"] == -2 and used < MAX_STEPS:  # the piece's budget ran out, not the run's
+            n_good = len(good) if good.all() else int(np.argmin(good))  # rows before the first NaN
+            if n_good > 1:  # keep the rows done, go on from the last one
+                ts.append(tpts[:n_good])
+                xs.append(X[:n_good])
+                segs.append(c)
+                tpts, x, budget = tpts[n_good - 1:], X[n_good - 1].copy(), PIECE_STEPS
+            else:  # one output interval needs more than a piece: give it the rest of the budget
+                budget = MAX_STEPS
+            continue
         ts.append(tpts[good])
         xs.append(X[good])
         segs.append(c)
@@ -264,7 +322,4 @@ def _simulate_compiled(system, c, x, t0, t_end, dt, events, rtol, atol, max_step
             bad = X[good][-1] if good.any() else x
             raise SolverError(f"compiled integrator failed: {st['message']}", time=st["t"],
                               state=c.state_dict(bad), partial=_collect(c, ts, xs, segs))
-        x = X[-1].copy()
-    res = _collect(c, ts, xs, segs)
-    res.stats = {**stats, "method": "ROS34PW2 (compiled)"}
-    return res
+        return X[-1].copy()
