@@ -345,7 +345,8 @@ def main(argv=None):
     parser = build_parser()
     args = parser.parse_args(argv)
     args.argv = argv
-    previous = _catch_signals()
+    from .execution import catch_signals, restore_signals
+    previous = catch_signals()
     try:
         _check_outputs(args)
         rc = args.func(args)
@@ -354,13 +355,13 @@ def main(argv=None):
     except HemocircuitError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_ERROR
-    except KeyboardInterrupt as exc:  # SIGINT, or SIGTERM (see _catch_signals)
+    except KeyboardInterrupt as exc:  # SIGINT, or SIGTERM (execution.catch_signals)
         return _interrupted(args, Interrupted.of(exc))
     except BrokenPipeError:  # output piped into a command that stopped reading (| head)
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
     finally:
-        _restore_signals(previous)
+        restore_signals(previous)
     if isinstance(rc, int) and rc:
         return rc
     return _report(args)
@@ -380,33 +381,6 @@ def _report(args):
               file=sys.stderr)
         return EXIT_FAILED_MEMBERS
     return 0
-
-
-def _catch_signals():
-    """SIGINT and SIGTERM raise :class:`Interrupted` in the main thread (once; a second signal
-    while stopping is ignored), so batches stop their workers and keep what finished."""
-    import signal
-    state = {"stopping": False}
-
-    def handler(signum, frame):
-        if state["stopping"]:
-            return
-        state["stopping"] = True
-        raise Interrupted(signum)
-
-    previous = {}
-    try:
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            previous[sig] = signal.signal(sig, handler)
-    except ValueError:  # not the main thread: leave the handlers alone
-        pass
-    return previous
-
-
-def _restore_signals(previous):
-    import signal
-    for sig, h in previous.items():
-        signal.signal(sig, h)
 
 
 def _interrupted(args, exc):

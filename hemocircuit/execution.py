@@ -214,3 +214,55 @@ def finish_batch(res, interrupted=None):
         res.metadata["members_done"] = f"{res.n_rows - n_not_run} of {res.n_rows} members finished"
         raise Interrupted.of(interrupted, partial=res) from None
     return res
+
+
+# ---------------------------------------------------------------- the front's signal handler ----
+_pending = []  # a signal that arrived inside compiled code, not yet raised
+
+
+def catch_signals():
+    """Make SIGINT and SIGTERM raise :class:`~hemocircuit.errors.Interrupted` in the main thread
+    (once: a second signal while stopping is ignored).  A signal that arrives while compiled
+    (numba) code has called back into Python must not raise there (numba turns it into a
+    SystemError or crashes): it is kept, raised by the next :func:`check_interrupted` (the
+    compiled integrators' pieces call it) or delivered again shortly.  Returns the previous
+    handlers for :func:`restore_signals`."""
+    import signal
+    state = {"stopping": False}
+
+    def handler(signum, frame):
+        if state["stopping"]:
+            return
+        if frame is not None and f"{os.sep}numba{os.sep}" in frame.f_code.co_filename:
+            _pending[:] = [signum]
+            import threading
+            again = threading.Timer(0.2, os.kill, (os.getpid(), signum))
+            again.daemon = True
+            again.start()
+            return
+        state["stopping"] = True
+        _pending.clear()
+        raise Interrupted(signum)
+
+    previous = {}
+    try:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            previous[sig] = signal.signal(sig, handler)
+    except ValueError:  # not the main thread: leave the handlers alone
+        pass
+    return previous
+
+
+def restore_signals(previous):
+    import signal
+    _pending.clear()
+    for sig, h in previous.items():
+        signal.signal(sig, h)
+
+
+def check_interrupted():
+    """Raise the Interrupted of a signal kept while compiled code ran (see catch_signals)."""
+    if _pending:
+        signum = _pending.pop()
+        _pending.clear()
+        raise Interrupted(signum)

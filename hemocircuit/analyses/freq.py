@@ -48,7 +48,13 @@ def _member_outputs(bc, k, t, X, outputs, inp_col):
 
 
 def _run_chunk(job):
-    """Worker: one vectorised batch.  job = (batch circuit, list of member descriptors, options)."""
+    """Worker: one vectorised batch.  job = (batch circuit, list of member descriptors, options).
+    Overflow in a member (values beyond floating-point range) is reported as its failure."""
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        return _run_chunk_members(job)
+
+
+def _run_chunk_members(job):
     bc, members, opt = job
     B = bc.B
     outputs, inp, drive = opt["outputs"], opt["input"], opt["drive"]

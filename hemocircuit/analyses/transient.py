@@ -297,8 +297,11 @@ def _compiled_segment(system, c, tpts, x, rtol, atol, h0, max_step, stats, ts, x
     steps; appends to ts, xs, segs; returns the final state."""
     P = system.params(c)[0]
     breaks = c.breakpoints(tpts[0], tpts[-1])
+    from ..execution import check_interrupted
+
     used, budget = 0, PIECE_STEPS
     while True:
+        check_interrupted()
         X, st = system.integrate(tpts, x, P, rtol=rtol, atol=atol, breaks=breaks, h0=h0, hmax=max_step,
                                  max_steps=min(budget, MAX_STEPS - used))
         for key in stats:
