@@ -38,6 +38,10 @@ class _Store(Component):
         return (Observable("V", "mL", "stored volume", state_only=True),
                 Observable("C", "mL/mmHg", "compliance dV/dP", state_only=True))
 
+    def physical_limits(self):
+        """A stored volume is not negative (mL)."""
+        return {"V": (0.0, None)}
+
     def dc_stamp(self, p, A_loc, b_loc, keep):
         """Open: the branch flows are 0 (except on the stores in ``keep``)."""
         opened = ~np.asarray(keep, dtype=bool)

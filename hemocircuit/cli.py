@@ -4,6 +4,11 @@ Every command gets its circuit from :func:`load_circuit` (netlist, ``--set``, ``
 
 Errors the user can cause (netlist, units, topology, solver) print one clear message and
 exit with status 2; they never show a traceback.
+
+Exit status (docs/analyses.md, "Exit status and partial outputs"): 0 done (warnings about
+implausible values, if any, on stderr); 2 error; 3 a batch finished but some members failed
+(each named on stderr and in the output's ``error`` column and ``metadata['failed']``);
+130 / 143 stopped by SIGINT / SIGTERM (what had finished written to NAME.partial.EXT).
 """
 from __future__ import annotations
 
@@ -11,7 +16,10 @@ import argparse
 import os
 import sys
 
-from .errors import HemocircuitError
+from .errors import HemocircuitError, Interrupted
+
+EXIT_ERROR = 2            # an error the user can fix (message on stderr)
+EXIT_FAILED_MEMBERS = 3   # a batch completed, but some members failed (each reported)
 
 
 def _assignments(items, flag="--set", form="ID.PARAM=VALUE", example="Pa.value=90mmHg"):
@@ -100,6 +108,7 @@ def record(args, res):
     netlists = getattr(args, "netlists", None) or [getattr(args, "netlist", None)]
     add_invocation(res.metadata, getattr(args, "argv", sys.argv[1:]), _sets(getattr(args, "set", None)),
                    getattr(args, "protocol", None), netlists=[n for n in netlists if n])
+    args.computed_result = res  # main() reports its warnings and failed members (exit status)
     return res
 
 
@@ -462,21 +471,65 @@ def main(argv=None):
     args.argv = argv
     from . import progress
     progress.enable(not getattr(args, "quiet", False))
+    from .execution import catch_signals, restore_signals
+    previous = catch_signals()
     try:
         _check_outputs(args)
         rc = args.func(args)
     except _Reported:
-        return 2
+        return EXIT_ERROR
     except HemocircuitError as exc:
         print(f"error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        return 130
+        return EXIT_ERROR
+    except KeyboardInterrupt as exc:  # SIGINT, or SIGTERM (execution.catch_signals)
+        return _interrupted(args, Interrupted.of(exc))
     except BrokenPipeError:  # output piped into a command that stopped reading (| head)
-        import os
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
-    return rc if isinstance(rc, int) else 0
+    finally:
+        restore_signals(previous)
+    if isinstance(rc, int) and rc:
+        return rc
+    return _report(args)
+
+
+def _report(args):
+    """Warnings and failed members of the command's result on stderr; the exit status."""
+    res = getattr(args, "computed_result", None)
+    if res is None:
+        return 0
+    for w in res.metadata.get("warnings", []) or []:
+        print(f"warning: {w}", file=sys.stderr)
+    failed = res.metadata.get("failed", []) or []
+    if failed:
+        print(f"{len(failed)} member(s) failed (listed above and in the result's 'failed' metadata"
+              + (" and 'error' column" if "error" in res else "") + f"); exit status {EXIT_FAILED_MEMBERS}",
+              file=sys.stderr)
+        return EXIT_FAILED_MEMBERS
+    return 0
+
+
+def _interrupted(args, exc):
+    """Write what finished (``exc.partial``) to NAME.partial.EXT when --out was given, say so,
+    and return 128 + the signal number (130 for SIGINT, 143 for SIGTERM)."""
+    part = exc.partial
+    msg = f"interrupted by {exc.signame}"
+    if part is not None:
+        part.metadata["status"] = "partial"
+        part.metadata["interrupted"] = exc.signame
+        done = part.metadata.get("members_done")
+        msg += f"; {done}" if done else ""
+        if getattr(args, "out", None) and part.n_rows:
+            try:
+                record(args, part)
+                path = part.save(partial_path(args.out))
+                msg += f"; what had finished is in {path}, marked partial"
+            except HemocircuitError as err:
+                msg += f"; could not write the partial result: {err}"
+        elif not getattr(args, "out", None):
+            msg += "; nothing written (no --out)"
+    print(msg, file=sys.stderr)
+    return 128 + exc.signum
 
 
 if __name__ == "__main__":

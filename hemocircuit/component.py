@@ -286,6 +286,13 @@ class Component:
             out[..., j] = x[..., j] <= bound + rtol * max(abs(bound), 1e-300)
         return out
 
+    def physical_limits(self) -> dict:
+        """``{observable or state name: (lower, upper)}``: the range a physical solution stays
+        in, in the quantity's declared unit (None: unbounded), e.g. a stored volume ``V >= 0``
+        (``{"V": (0.0, None)}``).  :mod:`hemocircuit.plausibility` warns, naming the element,
+        when an operating point or a run leaves it.  Default: none."""
+        return {}
+
     # --- defaults and reporting -----------------------------------------------------------
     def defaults(self) -> dict:
         """Parameter values that replace the declared defaults for these options (a preset):

@@ -58,3 +58,29 @@ class FitSpecError(NetlistError):
     def __init__(self, message: str, file=None, key=None):
         self.key = key
         super().__init__(f"{key}: {message}" if key else message, file=file)
+
+
+class Interrupted(KeyboardInterrupt):
+    """SIGINT or SIGTERM stopped a run.  A KeyboardInterrupt (so ``except KeyboardInterrupt``
+    still catches it, and ``except Exception`` / ``except HemocircuitError`` do not).
+
+    Attributes: ``signum`` (the signal), ``partial`` (the result of what had finished, marked
+    partial, or None), ``chunk_results`` (for :func:`hemocircuit.execution.run_chunks`: the
+    chunks' results, None where unfinished).  The CLI exits with 128 + signum (130, 143).
+    """
+
+    def __init__(self, signum=2, partial=None, chunk_results=None):
+        import signal
+        self.signum, self.partial, self.chunk_results = int(signum), partial, chunk_results
+        try:
+            self.signame = signal.Signals(self.signum).name
+        except ValueError:
+            self.signame = f"signal {self.signum}"
+        super().__init__(f"interrupted by {self.signame}")
+
+    @classmethod
+    def of(cls, exc, partial=None, chunk_results=None):
+        """``exc`` (a KeyboardInterrupt: SIGINT, or an Interrupted) as an Interrupted carrying
+        ``partial`` / ``chunk_results`` (the signal kept)."""
+        return cls(getattr(exc, "signum", 2), partial if partial is not None else getattr(exc, "partial", None),
+                   chunk_results)

@@ -65,7 +65,7 @@ def test_tran_and_ac_grids(write, tmp_path):
 def test_failed_member_is_kept_apart(write, tmp_path, capsys):
     out = tmp_path / "op.csv"
     # a negative compliance is refused for one member; the other still runs
-    assert main(["op", str(write(DIVIDER)), "--grid", "C1.C=0.5,-1mL/mmHg", "--quiet", "--out", str(out)]) == 0
+    assert main(["op", str(write(DIVIDER)), "--grid", "C1.C=0.5,-1mL/mmHg", "--quiet", "--out", str(out)]) == 3
     assert "failed: {'C1.C': '-1 mL/mmHg'}" in capsys.readouterr().err
     res = Result.load(out)
     assert res["error"][0] == "" and "not physical" in res["error"][1]

@@ -12,7 +12,7 @@ import sys
 import numpy as np
 
 from ..derived import derived_units, evaluate_derived
-from ..errors import HemocircuitError
+from ..errors import HemocircuitError, Interrupted
 from ..provenance import clock, stamp
 from ..results import Result
 
@@ -20,14 +20,35 @@ from ..results import Result
 def compare_sweep(circuits, param, values):
     """Steady states of every circuit over ``param`` = ``values`` -> :class:`CompareResult`."""
     started = clock()
-    parts = {}
+    parts, warnings, stopped = {}, [], None
     for c in circuits:
-        res = c.dc_sweep(param, values)
-        cols = res.columns
+        try:
+            res = c.dc_sweep(param, values)
+        except KeyboardInterrupt as exc:  # SIGINT/SIGTERM: the netlists done and this one's points
+            stopped, res = exc, getattr(exc, "partial", None)
+            if res is None:
+                break
+        cols = {k: v for k, v in res.columns.items() if k != "error"}
         d = evaluate_derived(c.netlist.derived, cols, c.file)
         units = {**res.units, **derived_units(c.netlist.derived)}
-        parts[_name(c, parts)] = (np.asarray(res[param]), {**d, **cols}, units, res.failed)
+        name = _name(c, parts)
+        parts[name] = (np.asarray(res[param]), {**d, **cols}, units, res.failed)
+        warnings += [f"{name}: {w}" for w in res.metadata.get("warnings", [])]
+        if stopped is not None:
+            break
+    if not parts:
+        raise Interrupted.of(stopped)
     res = CompareResult(parts, param, circuits[0].param_unit(param))
+    if warnings:
+        res.metadata["warnings"] = warnings
+    if stopped is not None:
+        res.metadata["status"] = "partial"
+        res.metadata["members_done"] = f"{len(parts)} of {len(circuits)} netlists (the last one in part)"
+        raise Interrupted.of(stopped, partial=stamp(res, "compare", circuits[0], {
+            "mode": "sweep", "param": param, "values": values if isinstance(values, str) else None,
+            "netlists": [c.file for c in circuits], "derived": _derived_names(circuits)}, started, status="partial"))
+    if res.metadata["failed"]:
+        res.metadata["status"] = "partial"
     return stamp(res, "compare", circuits[0], {"mode": "sweep", "param": param,
                                                "values": values if isinstance(values, str) else None,
                                                "netlists": [c.file for c in circuits],
@@ -54,10 +75,20 @@ def compare_transient(circuits, protocol, t_end=None, dt=None):
     started = clock()
     parts = {}
     for c in circuits:
-        r = c.simulate(t_end, dt=dt, protocol=protocol)
+        failed = []
+        try:
+            r = c.simulate(t_end, dt=dt, protocol=protocol)
+        except HemocircuitError as exc:  # this netlist only: its computed part (if any) is kept
+            r = getattr(exc, "partial", None)
+            failed = [(float(r.t[-1]) if r is not None and r.n_rows else float("nan"), str(exc))]
+            if r is None or not r.n_rows:
+                parts[_name(c, parts)] = (np.array([np.nan]), {}, {}, failed)
+                continue
         d = evaluate_derived(c.netlist.derived, r.columns, c.file)
-        parts[_name(c, parts)] = (r.t, {**d, **r.columns}, {**r.units, **derived_units(c.netlist.derived)}, [])
+        parts[_name(c, parts)] = (r.t, {**d, **r.columns}, {**r.units, **derived_units(c.netlist.derived)}, failed)
     res = CompareResult(parts, "time", "s")
+    if res.metadata["failed"]:
+        res.metadata["status"] = "partial"
     return stamp(res, "compare", circuits[0], {"mode": "tran", "protocol": protocol if isinstance(protocol, str)
                                                else getattr(protocol, "file", None), "t_end": t_end, "dt": dt,
                                                "netlists": [c.file for c in circuits],
@@ -85,6 +116,16 @@ class CompareResult(Result):
                                       for x, q, _, _ in parts.values()])
         super().__init__(cols, units, index=["netlist", xname])
         self.metadata["failed"] = [[n, v, why] for n, (_, _, _, failed) in parts.items() for v, why in failed]
+        if self.metadata["failed"]:  # a failed sweep point: its row; a failed run: its last row
+            err = []
+            for _, (x, _, _, failed) in parts.items():
+                e = np.array([""] * len(x), dtype=object)
+                for v, why in failed:
+                    hit = np.nonzero(np.asarray(x, dtype=float) == v)[0]
+                    e[hit[-1] if hit.size else -1] = why
+                err.append(e)
+            self.data["error"] = np.concatenate(err)
+            self.units["error"] = ""
 
     def shared_quantities(self):
         """Quantities every netlist has, sorted."""
@@ -137,7 +178,11 @@ def cmd_compare(args):
         [k for k in res.columns if _in_every_netlist(res, k)][:6]
     print(res.summary(show=shown, max_rows=24, where=args.out))
     for item in res.metadata.get("failed", []):
-        print(f"failed: {item}", file=sys.stderr)
+        if len(item) == 3:  # a netlist's point: [name, x, reason]
+            name, v, why = item
+            print(f"{name}: failed at {res.index[-1]}={v:g}: {why}", file=sys.stderr)
+        else:  # a --grid member: [{param: value}, reason]
+            print(f"failed: {item[0]}: {item[1]}", file=sys.stderr)
     apply_measures(args, res)
     record(args, res)
     if args.out:

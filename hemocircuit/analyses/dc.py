@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import NetlistError, SolverError
+from ..errors import HemocircuitError, Interrupted, NetlistError
 from ..provenance import clock, stamp
 from ..results import Result
 from ..units import UnitError, parse_quantity
@@ -46,40 +46,68 @@ def dc_sweep(circuit, param: str, values, progress=None):
     """Operating points for ``param`` (ID.PARAM) over ``values`` (array in the declared unit,
     or a range string like '20:200:5 mmHg').  Each point starts from the previous solution.
 
-    Returns a :class:`SweepResult` indexed by ``param``; points that fail are NaN rows and
-    listed in ``result.failed`` [(value, reason)] (``metadata['failed']``).
+    Returns a :class:`SweepResult` indexed by ``param``.  A point that fails, for any reason
+    (no operating point, a value outside the model's domain, a non-finite solution), is a NaN
+    row, listed in ``result.failed`` [(value, reason)] (``metadata['failed']``) and in an
+    ``error`` column; the sweep goes on.  Implausible values are ``metadata['warnings']``.
+    Interrupted (SIGINT/SIGTERM), it raises :class:`~hemocircuit.errors.Interrupted` whose
+    ``partial`` holds the points computed (the others: error 'not run (interrupted)').
     """
     from .op import operating_point
 
     started = clock()
     unit = circuit.param_unit(param)
     vals = parse_range(values, unit) if isinstance(values, str) else np.asarray(values, dtype=float)
-    rows, failed = [], []
+    rows, failed, warnings = [], [], []
     x_prev = None
     from ..progress import bar
-    with bar(len(vals), "dc sweep", unit="point", progress=progress) as b:
-        for v in vals:
-            b.update(1)
-            c = circuit.with_values({param: float(v)})
-            try:
-                op = operating_point(c, x0=None if x_prev is None else x_prev)
-            except SolverError:
-                try:  # continuation failed: retry from a fresh DC guess
-                    op = operating_point(c)
-                except SolverError as exc2:
-                    failed.append((float(v), str(exc2)))
+    try:
+        with bar(len(vals), "dc sweep", unit="point", progress=progress) as b:
+            for v in vals:
+                b.update(1)
+                try:
+                    c = circuit.with_values({param: float(v)})
+                    try:
+                        op = operating_point(c, x0=None if x_prev is None else x_prev)
+                    except HemocircuitError:  # continuation failed: retry from a fresh DC guess
+                        op = operating_point(c)
+                except HemocircuitError as exc:
+                    failed.append((float(v), str(exc)))
                     rows.append(None)
                     continue
-            x_prev = op.x
-            rows.append(op.values)
+                x_prev = op.x
+                rows.append(op.values)
+                warnings += [f"{param}={float(v):g}: {w}" for w in op.metadata.get("warnings", [])]
+    except KeyboardInterrupt as exc:
+        res = _sweep_result(circuit, param, unit, vals, rows, failed, warnings, values, started)
+        raise Interrupted.of(exc, partial=res) from None
+    return _sweep_result(circuit, param, unit, vals, rows, failed, warnings, values, started)
+
+
+def _sweep_result(circuit, param, unit, vals, rows, failed, warnings, values, started):
+    """The SweepResult of the rows computed (None: failed; missing at the end: not run)."""
+    n_run = len(rows)
+    rows = rows + [None] * (len(vals) - n_run)
     keys = next((list(r) for r in rows if r is not None), [])
+    if not keys:  # no point solved: the columns the circuit would have had
+        keys = list(circuit.column_units())
     out = {f"{param}": vals}
     for k in keys:
         out[k] = np.array([r[k] if r is not None else np.nan for r in rows])
+    reasons = dict((v, why) for v, why in failed)
+    if failed or n_run < len(vals):
+        out["error"] = np.array([reasons.get(float(v), "") if i < n_run else "not run (interrupted)"
+                                 for i, v in enumerate(vals)], dtype=object)
     units = {param: unit, **circuit.column_units()}
     res = SweepResult(out, units, failed, param)
+    if warnings:
+        res.metadata["warnings"] = warnings
+    if n_run < len(vals):
+        res.metadata["members_done"] = f"{n_run} of {len(vals)} points computed"
+    # partial: some point has no answer (failed or not run); the table still has every row
     return stamp(res, "dc", circuit, {"param": param, "values": values if isinstance(values, str) else None,
-                                      "continuation": True}, started)
+                                      "continuation": True}, started,
+                 status="partial" if failed or n_run < len(vals) else None)
 
 
 class SweepResult(Result):

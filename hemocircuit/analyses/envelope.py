@@ -19,7 +19,9 @@ import numpy as np
 
 from ..batch import build_batches, expand_grid, grid_columns, parse_grid_arg, resolve_values
 from ..batch_integrator import integrate
-from ..execution import run_chunks, split
+from .. import plausibility
+from ..errors import HemocircuitError
+from ..execution import finish_batch, member_results, run_chunks, split
 from ..derived import derived_units
 from ..io import pyplot, save_figure
 from ..provenance import clock, stamp
@@ -49,7 +51,10 @@ def _run_chunk(job):
     sub = bc.subset(gidx)
     r = integrate(sub, X0[gidx], grid, rtol=opt["rtol"], atol=opt["rtol"])
     for j, k in enumerate(gidx):
-        out[k] = _summary(sub, j, r, grid, opv, k, opt)
+        try:
+            out[k] = _summary(sub, j, r, grid, opv, k, opt)
+        except HemocircuitError as exc:  # this member only
+            out[k] = {"error": str(exc)}
     return out
 
 
@@ -59,7 +64,11 @@ def _summary(bc, k, r, grid, opv, kk, opt):
         n_win = max(int(len(grid) * opt["window"]), 4)
         if not r.ok[k]:
             return {"error": r.message[k]}
-        cols = bc.subset([k]).outputs(grid[-n_win:], r.x[k, -n_win:])
+        cols = bc.subset([k]).outputs(grid, r.x[k])
+        findings = plausibility.check(bc, cols, t=grid)
+        if plausibility.errors(findings):
+            return {"error": "; ".join(map(str, plausibility.errors(findings)))}
+        cols = {name: v[-n_win:] for name, v in cols.items()}
         tw = grid[-n_win:]
         osc = {}
         for o in opt["outputs"]:
@@ -78,6 +87,7 @@ def _summary(bc, k, r, grid, opv, kk, opt):
                         f"{o} steady": float(opv[o][kk])})
         row["oscillating"] = bool(any(osc.values()))
         row["period [s]"] = _period(tw, y0) if row["oscillating"] else float("nan")
+        row["warnings"] = [str(f) for f in plausibility.warnings(findings)]
         if opt.get("keep_series"):
             row["series"] = {o: cols[o] for o in opt["keep_series"] if o in cols}
             row["t"] = tw
@@ -118,12 +128,13 @@ def envelope(circuit, sweep, grid=None, outputs=None, t_end=1000.0, dt=0.1, wind
         for chunk in split(list(range(len(idx))), n):
             jobs.append((bc.subset(chunk), opt))  # pickles without caches
             where.append([idx[j] for j in chunk])
-    results = run_chunks(_run_chunk, jobs, scheduler=scheduler, workers=workers, progress=progress, desc="envelope",
-                         sizes=[len(w) for w in where])
-    by_member = [None] * len(assignments)
-    for chunk, res in zip(where, results):
-        for k, r in zip(chunk, res):
-            by_member[k] = r
+    stopped = None
+    try:
+        results = run_chunks(_run_chunk, jobs, scheduler=scheduler, workers=workers, progress=progress,
+                             desc="envelope", sizes=[len(w) for w in where], failures="collect")
+    except KeyboardInterrupt as exc:  # SIGINT/SIGTERM: keep the finished chunks
+        stopped, results = exc, getattr(exc, "chunk_results", None) or [None] * len(jobs)
+    by_member = member_results(len(assignments), where, results)
     paths = ([p for p, _ in grids] if members is None
              else list(dict.fromkeys(k for m in assignments for k in m)))
     res = EnvelopeResult(circuit, paths, assignments, by_member, outputs)
@@ -131,7 +142,8 @@ def envelope(circuit, sweep, grid=None, outputs=None, t_end=1000.0, dt=0.1, wind
                     grid={p: [str(v) for v in vals] for p, vals in grids[1 if sweep else 0:]}, outputs=outputs,
                     t_end=float(t_end), dt=float(dt), window=float(window), kick=kick, osc_tol=osc_tol, rtol=rtol,
                     atol=rtol)
-    return stamp(res, "envelope", circuit, settings, started)
+    stamp(res, "envelope", circuit, settings, started)
+    return finish_batch(res, stopped)
 
 
 class EnvelopeResult(Result):
@@ -167,6 +179,10 @@ class EnvelopeResult(Result):
         super().__init__(cols, units, index=list(paths))
         self.metadata["failed"] = [[{p: str(a[p]) for p in paths}, r["error"]]
                                    for a, r in zip(assignments, by_member) if "error" in r]
+        warnings = [f"{', '.join(f'{p}={a[p]}' for p in paths)}: {w}" for a, r in zip(assignments, by_member)
+                    for w in r.get("warnings", [])]
+        if warnings:
+            self.metadata["warnings"] = warnings
 
 
 def plot_result(res, path, select=None, title=None):

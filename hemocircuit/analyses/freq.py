@@ -23,8 +23,9 @@ import numpy as np
 
 from ..batch import build_batches, expand_grid, grid_columns, parse_grid_arg, resolve_values
 from ..batch_integrator import integrate
+from .. import plausibility
 from ..errors import HemocircuitError
-from ..execution import run_chunks, split
+from ..execution import finish_batch, member_results, run_chunks, split
 from ..derived import derived_units
 from ..io import pyplot, save_figure
 from ..progress import advance
@@ -44,11 +45,17 @@ def _dft(y, n_per, k):
 def _member_outputs(bc, k, t, X, outputs, inp_col):
     m = bc.subset([k])  # a view of member k (member() deep-copies the circuit: ~10 ms a call)
     cols = m.outputs(t, X)
-    return np.array([cols[o] for o in outputs]), cols[inp_col]
+    return np.array([cols[o] for o in outputs]), cols[inp_col], cols
 
 
 def _run_chunk(job):
-    """Worker: one vectorised batch.  job = (batch circuit, list of member descriptors, options)."""
+    """Worker: one vectorised batch.  job = (batch circuit, list of member descriptors, options).
+    Overflow in a member (values beyond floating-point range) is reported as its failure."""
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        return _run_chunk_members(job)
+
+
+def _run_chunk_members(job):
     bc, members, opt = job
     B = bc.B
     outputs, inp, drive = opt["outputs"], opt["input"], opt["drive"]
@@ -92,7 +99,19 @@ def _run_chunk(job):
                 advance()
                 continue
             tt = grid[j]
-            Y, X_in = _member_outputs(sub, j, tt, r.x[j], outputs, inp_node_col)
+            try:
+                Y, X_in, cols = _member_outputs(sub, j, tt, r.x[j], outputs, inp_node_col)
+            except HemocircuitError as exc:  # this member only
+                failed[m] = True
+                res[m] = {"error": str(exc)}
+                advance()
+                continue
+            findings = plausibility.check(bc, cols)
+            if plausibility.errors(findings):
+                failed[m] = True
+                res[m] = {"error": "; ".join(map(str, plausibility.errors(findings)))}
+                advance()
+                continue
             # fundamental of each of the last two periods of this block
             a1 = _dft(Y[:, -SAMPLES:], SAMPLES, 1)
             a0 = _dft(Y[:, -2 * SAMPLES:-SAMPLES], SAMPLES, 1)
@@ -116,7 +135,15 @@ def _run_chunk(job):
                     "Y1": Y1, "X1": X1, "y0": y0[m], "P0": P0[m], "mean": yw.mean(axis=1),
                     "thd": np.sqrt(np.sum(np.abs(harm) ** 2, axis=0)) / np.abs(Y1),
                     "periods": int(total_periods[m]), "settled": bool(np.all(rel < opt["settle_tol"])),
+                    "warnings": [str(f) for f in plausibility.warnings(findings)],
                 }
+                overflow = [f"{name}({o})" for name in ("thd", "mean") for o, v in zip(outputs, res[m][name])
+                            if not np.isfinite(v)] + [f"fundamental of {o}" for o, v in zip(outputs, Y1)
+                                                      if not np.isfinite(v)]
+                if overflow or not np.isfinite(X1):
+                    res[m] = {"error": f"the response is not finite ({', '.join(overflow or ['input fundamental'])}"
+                                       f"): values beyond floating-point range"
+                                       + "".join(f"; {w}" for w in res[m]["warnings"])}
                 advance()
             t[m] = tt[-1]
             x[m] = r.x[j, -1]
@@ -162,12 +189,13 @@ def frequency_response(circuit, freqs, outputs=None, input=None, step=0.1, ampli
             sub = bc.subset([idx.index(k) for k in chunk])  # pickles without caches
             jobs.append((sub, [descr[k] for k in chunk], opt))
             where.append(chunk)
-    results = run_chunks(_run_chunk, jobs, scheduler=scheduler, workers=workers, progress=progress,
-                         desc="frequency response", sizes=[len(w) for w in where])
-    by_member = [None] * len(descr)
-    for chunk, res in zip(where, results):
-        for k, r in zip(chunk, res):
-            by_member[k] = r
+    stopped = None
+    try:
+        results = run_chunks(_run_chunk, jobs, scheduler=scheduler, workers=workers, progress=progress,
+                             desc="frequency response", sizes=[len(w) for w in where], failures="collect")
+    except KeyboardInterrupt as exc:  # SIGINT/SIGTERM: keep the finished chunks
+        stopped, results = exc, getattr(exc, "chunk_results", None) or [None] * len(jobs)
+    by_member = member_results(len(descr), where, results)
     inp_path = f"{input}.{drive.value}"
     paths = [p for p, _ in grid] if members is None else list(dict.fromkeys(k for m in members for k in m))
     res = FreqResult(circuit, paths, assignments, descr, by_member, outputs, inp_path)
@@ -175,7 +203,8 @@ def frequency_response(circuit, freqs, outputs=None, input=None, step=0.1, ampli
                     grid={p: [str(v) for v in vals] for p, vals in grid}, step=step, amplitude=amplitude,
                     settle_tol=settle_tol, n_periods=n_periods, block_periods=block_periods,
                     max_periods=max_periods, rtol=rtol, atol=rtol, samples_per_period=SAMPLES)
-    return stamp(res, "freq", circuit, settings, started)
+    stamp(res, "freq", circuit, settings, started)
+    return finish_batch(res, stopped)
 
 
 class FreqResult(Result):
@@ -223,6 +252,14 @@ class FreqResult(Result):
         super().__init__(cols, units, index=list(paths) + ["frequency"])
         self.metadata["failed"] = [[{p: str(a[p]) for p in paths} | {"frequency": d["frequency"]}, r["error"]]
                                    for a, d, r in zip(assignments, descr, by_member) if "error" in r]
+        warnings = [f"{_label(paths, a, d)}: {w}" for a, d, r in zip(assignments, descr, by_member)
+                    for w in r.get("warnings", [])]
+        if warnings:
+            self.metadata["warnings"] = warnings
+
+
+def _label(paths, a, d):
+    return ", ".join([f"{p}={a[p]}" for p in paths] + [f"frequency={d['frequency']:g} Hz"])
 
 
 def plot_result(res, path, select=None, title=None):

@@ -284,7 +284,21 @@ def operating_point(circuit, t: float = 0.0, x0=None) -> OperatingPoint:
     """Steady state of the circuit (every parameter set of a batch at once)."""
     started = clock()
     op = _operating_point(circuit, t, x0)
+    _check_plausible(op, circuit)
     return stamp(op, "op", circuit, {"t": t, "x0": None if x0 is None else "given", "tol": 1e-10}, started)
+
+
+def _check_plausible(op, circuit):
+    """hemocircuit.plausibility on the operating point: a non-finite value raises SolverError
+    naming the column; implausible values are recorded in ``metadata['warnings']``."""
+    from .. import plausibility
+
+    findings = plausibility.check(circuit, op.values, members=circuit.B > 1)
+    bad = plausibility.errors(findings)
+    if bad:
+        raise SolverError("implausible operating point: " + "; ".join(map(str, bad)),
+                          where="computing the operating point")
+    plausibility.add_warnings(op, findings)
 
 
 def _operating_point(circuit, t, x0):
@@ -297,7 +311,12 @@ def _operating_point(circuit, t, x0):
         X2, ok, res = _solve_with_fallbacks(circuit, X0, totals, t)
         X, method = X2, "fallback"
     if not ok:
-        F = residual(circuit, t, X, totals)
+        try:
+            F = residual(circuit, t, X, totals)
+        except HemocircuitError as exc:  # the last iterate left the model's domain
+            raise SolverError(f"no operating point found (Newton, pseudo-transient continuation and source "
+                              f"stepping failed; the last iterate is outside the model's domain: {exc})",
+                              where="computing the operating point") from None
         scaled = np.abs(F) / circuit.state_scales
         b, j = np.unravel_index(np.nanargmax(np.where(np.isfinite(scaled), scaled, np.inf)), scaled.shape)
         raise SolverError(f"no operating point found (Newton, pseudo-transient continuation and source "

@@ -188,6 +188,7 @@ class StabilityResult(Result):
         ``max_re(lambda)`` (spectral abscissa), ``n_complex_pairs``, the least-damped pair
         (``re(pair)``, ``im(pair)``, ``zeta(pair)``, ``frequency(pair)``), ``at_limit``, and
         every eigenvalue ``re(lambdaK)``, ``im(lambdaK)`` (largest real part first)."""
+        reasons = dict(self.failed)
         cols = {self.param: self.values, "classification": np.array(self.classification, dtype=object),
                 "n_unstable": self.n_unstable, "max_re(lambda)": self.abscissa, "n_complex_pairs": self.n_pairs,
                 "re(pair)": self.pair.real, "im(pair)": self.pair.imag, "zeta(pair)": self.pair_zeta,
@@ -199,6 +200,9 @@ class StabilityResult(Result):
             cols[f"re(lambda{k + 1})"] = self.eigenvalues[:, k].real
             cols[f"im(lambda{k + 1})"] = self.eigenvalues[:, k].imag
             units[f"re(lambda{k + 1})"], units[f"im(lambda{k + 1})"] = "1/s", "rad/s"
+        if self.failed:
+            cols["error"] = np.array([reasons.get(float(v), "") if p is None else ""
+                                      for v, p in zip(self.values, self.points)], dtype=object)
         return cols, units
 
     def summary(self, max_cols=6, max_rows=12, show=None, where=None):
@@ -273,27 +277,36 @@ def stability_sweep(circuit, param=None, values=None, t=0.0, locate=True, xtol=N
     points, failed = [], []
     x_prev = None
     from ..progress import bar
-    with bar(len(vals), "stability", unit="point", progress=progress) as b:
-        for v in vals:
-            b.update(1)
-            try:
-                c = circuit.with_values({param: float(v)})
-                x = equilibrium(c, x_prev, t)
-                pt = analyse_point(c, x, t)
-            except HemocircuitError as exc:
-                failed.append((float(v), str(exc)))
-                points.append(None)
-                continue
-            x_prev = x
-            points.append(pt)
+    stopped = None
+    try:
+        with bar(len(vals), "stability", unit="point", progress=progress) as b:
+            for v in vals:
+                b.update(1)
+                try:
+                    c = circuit.with_values({param: float(v)})
+                    x = equilibrium(c, x_prev, t)
+                    pt = analyse_point(c, x, t)
+                except HemocircuitError as exc:  # this point only; the sweep goes on
+                    failed.append((float(v), str(exc)))
+                    points.append(None)
+                    continue
+                x_prev = x
+                points.append(pt)
+    except KeyboardInterrupt as exc:  # SIGINT/SIGTERM: keep the points done
+        from ..execution import NOT_RUN
+        stopped = exc
+        failed += [(float(v), NOT_RUN) for v in vals[len(points):]]
+        points += [None] * (len(vals) - len(points))
     events = []
-    if locate and len(vals) > 1:
+    if locate and len(vals) > 1 and stopped is None:
         step = float(np.min(np.abs(np.diff(vals)))) if len(vals) > 1 else 1.0
         events = _locate_events(circuit, param, vals, points, t, xtol or 1e-6 * step, 1e-3 * step)
     res = StabilityResult(param, unit, vals, points, events, failed, list(circuit.state_names))
-    return stamp(res, "stability", circuit, {"param": param, "values": values if isinstance(values, str) else None,
-                                             "t": t, "locate": locate, "xtol": xtol, "re_tol": RE_TOL,
-                                             "im_tol": IM_TOL}, started)
+    stamp(res, "stability", circuit, {"param": param, "values": values if isinstance(values, str) else None,
+                                      "t": t, "locate": locate, "xtol": xtol, "re_tol": RE_TOL,
+                                      "im_tol": IM_TOL}, started)
+    from ..execution import finish_batch
+    return finish_batch(res, stopped)
 
 
 def _locate_events(circuit, param, vals, points, t, xtol, xtol_onset):

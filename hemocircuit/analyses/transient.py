@@ -12,7 +12,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from ..errors import SolverError
+from .. import plausibility
+from ..errors import Interrupted, SolverError
 from ..protocol import Protocol
 from ..provenance import clock, stamp
 from ..results import Result
@@ -83,8 +84,10 @@ def simulate(circuit, t_end, dt=None, t0=0.0, x0=None, protocol=None, method="BD
     progress: a bar of the simulated time on stderr (default: :mod:`hemocircuit.progress`'s
         setting, on for the command line unless --quiet).
 
-    Returns a :class:`TransientResult`.  A solver failure raises SolverError whose ``partial``
-    is the result up to the failure, marked ``metadata['status'] = 'partial'``.
+    Returns a :class:`TransientResult`; implausible values (:mod:`hemocircuit.plausibility`)
+    are listed in ``metadata['warnings']``.  A solver failure (or a non-finite value) raises
+    SolverError, and SIGINT/SIGTERM :class:`~hemocircuit.errors.Interrupted`; the ``partial``
+    of either is the result up to that point, marked ``metadata['status'] = 'partial'``.
     """
     started = clock()
     settings = {"t_end": t_end, "dt": dt, "t0": t0, "method": method, "engine": engine, "rtol": rtol,
@@ -99,6 +102,19 @@ def simulate(circuit, t_end, dt=None, t0=0.0, x0=None, protocol=None, method="BD
             stamp(exc.partial, "tran", circuit, settings, started, status="partial")
             exc.partial.metadata["error"] = str(exc)
         raise
+    except KeyboardInterrupt as exc:  # SIGINT/SIGTERM: the series up to the last finished piece
+        part = getattr(exc, "partial", None)
+        if part is not None:
+            stamp(part, "tran", circuit, settings, started, status="partial")
+            part.metadata["members_done"] = (f"t = {part.t[0]:g} .. {part.t[-1]:g} s of {settings['t_end']} s "
+                                             f"computed" if part.n_rows else "nothing computed")
+        raise Interrupted.of(exc, partial=part) from None
+    findings = plausibility.check(circuit, res.columns, t=res.t)
+    bad = plausibility.errors(findings)
+    if bad:
+        raise SolverError("implausible solution: " + "; ".join(map(str, bad)),
+                          partial=stamp(res, "tran", circuit, settings, started, status="partial"))
+    plausibility.add_warnings(res, findings)
     return stamp(res, "tran", circuit, settings, started)
 
 
@@ -144,7 +160,7 @@ def _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step
     t_grid = None if dt is None else np.arange(t0, t_end + 0.5 * dt, dt)
     pbar = bar(t_end - t0, "tran (simulated time)", unit="s", progress=progress).__enter__()
 
-    def one_segment(t_a, t_b, x_a):
+    def one_segment(c, t_a, t_b, x_a):
         nonlocal nfev, njev, nsteps
         tpts = None
         if t_grid is not None:
@@ -183,38 +199,45 @@ def _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step
 
     bounds = [t0] + [e[0] for e in events] + [t_end]
     try:
-        for k in range(len(bounds) - 1):
-            t_a, t_b = bounds[k], bounds[k + 1]
-            if k > 0:
-                c = events[k - 1][1].apply(c)
-            # restart at waveform breakpoints inside the segment
-            cuts = [t_a] + c.breakpoints(t_a, t_b) + [t_b]
-            for a, b in zip(cuts, cuts[1:]):
-                cur = a
-                while cur < b:
-                    sol = one_segment(cur, b, x)
-                    ts.append(sol.t)
-                    xs.append(sol.y.T)
-                    segs.append(c)
-                    x = sol.y[:, -1].copy() if sol.y.size else x
-                    if sol.status == 1:  # a hard limit was reached: put the state on it, reset its rate
-                        k_ev = min((j for j, e in enumerate(sol.t_events) if len(e)), key=lambda j: sol.t_events[j][0])
-                        cur = float(sol.t_events[k_ev][0])
-                        x = sol.y_events[k_ev][0].copy()
-                        idx, bound, reset = limits[k_ev]
-                        x[idx] = bound
-                        if reset is not None:
-                            x[reset] = max(x[reset], 0.0)
-                        ts.append(np.array([cur]))
-                        xs.append(x[None, :])
-                        segs.append(c)
-                    else:
-                        cur = b
+        _scipy_segments(c, x, bounds, events, limits, one_segment, ts, xs, segs)
+    except KeyboardInterrupt as exc:
+        raise Interrupted.of(exc, partial=_partial()) from None
     finally:
         pbar.close()
-    res = _collect(c, ts, xs, segs)
+    res = _collect(segs[-1] if segs else c, ts, xs, segs)
     res.stats = {"nfev": nfev, "njev": njev, "nsteps": nsteps, "method": method}
     return res
+
+
+def _scipy_segments(c, x, bounds, events, limits, one_segment, ts, xs, segs):
+    """Integrate the protocol segments (solve_ivp), appending to ts, xs, segs."""
+    for k in range(len(bounds) - 1):
+        t_a, t_b = bounds[k], bounds[k + 1]
+        if k > 0:
+            c = events[k - 1][1].apply(c)
+        # restart at waveform breakpoints inside the segment
+        cuts = [t_a] + c.breakpoints(t_a, t_b) + [t_b]
+        for a, b in zip(cuts, cuts[1:]):
+            cur = a
+            while cur < b:
+                sol = one_segment(c, cur, b, x)
+                ts.append(sol.t)
+                xs.append(sol.y.T)
+                segs.append(c)
+                x = sol.y[:, -1].copy() if sol.y.size else x
+                if sol.status == 1:  # a hard limit was reached: put the state on it, reset its rate
+                    k_ev = min((j for j, e in enumerate(sol.t_events) if len(e)), key=lambda j: sol.t_events[j][0])
+                    cur = float(sol.t_events[k_ev][0])
+                    x = sol.y_events[k_ev][0].copy()
+                    idx, bound, reset = limits[k_ev]
+                    x[idx] = bound
+                    if reset is not None:
+                        x[reset] = max(x[reset], 0.0)
+                    ts.append(np.array([cur]))
+                    xs.append(x[None, :])
+                    segs.append(c)
+                else:
+                    cur = b
 
 
 def _collect(c_last, ts, xs, segs):
@@ -239,10 +262,9 @@ def _collect(c_last, ts, xs, segs):
 
 
 def _simulate_compiled(system, c, x, t0, t_end, dt, events, rtol, atol, max_step, first_step, bar=None):
-    """simulate() on the compiled engine: one kernel call per protocol segment (hard limits and
-    source breakpoints are handled inside the kernel); with a progress ``bar`` shown, a segment
-    is integrated in about 50 pieces so that the bar moves (each piece starts with the mean
-    step of the piece before)."""
+    """simulate() on the compiled engine: kernel calls per protocol segment (hard limits and
+    source breakpoints are handled inside the kernel), in pieces (:func:`_compiled_segment`):
+    at most PIECE_STEPS steps each and, with a progress ``bar`` shown, about 50 per segment."""
     from ..kernels.system import CompiledSystem
 
     if dt is None:
@@ -270,10 +292,68 @@ def _simulate_compiled(system, c, x, t0, t_end, dt, events, rtol, atol, max_step
             continue
         tpts = t_grid[(t_grid > t_a) & (t_grid < t_b)]
         tpts = np.concatenate([[t_a], tpts, [t_b]])
-        X, st = _integrate_pieces(system, c, tpts, x, rtol, atol, h0, max_step, bar, t0)
+        try:
+            x = _compiled_segment(system, c, tpts, x, rtol, atol, h0, max_step, stats, ts, xs, segs, bar, t0)
+        except KeyboardInterrupt as exc:
+            raise Interrupted.of(exc, partial=_collect(c, ts, xs, segs) if ts else None) from None
+    res = _collect(c, ts, xs, segs)
+    from ..kernels.tableaus import default_method
+    res.stats = {**stats, "method": f"{default_method(rtol).upper()} (compiled)"}
+    return res
+
+
+#: steps per call of the compiled integrator: Python regains control (a signal is handled, the
+#: series so far kept) at least this often; a run needing more steps continues from its last
+#: output point (the output grid's times are kept)
+PIECE_STEPS = 200_000
+MAX_STEPS = 10_000_000  # per protocol segment, as the compiled integrator's own limit
+
+
+def _compiled_segment(system, c, tpts, x, rtol, atol, h0, max_step, stats, ts, xs, segs, bar=None, t0=0.0):
+    """One protocol segment on the output times ``tpts``; appends to ts, xs, segs; returns the
+    final state.  The compiled integrator returns to Python at least every PIECE_STEPS steps
+    and, with a progress ``bar`` shown, after each of ~50 consecutive ranges of output times
+    (each starting with the mean step of the range before) so that the bar moves."""
+    P = system.params(c)[0]
+    shown = bar is not None and getattr(bar, "_t", None) is not None
+    n_ranges = min(50, (len(tpts) - 1) // 20) if shown else 1  # ranges of >= 20 output points
+    cuts = np.unique(np.linspace(0, len(tpts) - 1, max(n_ranges, 1) + 1).round().astype(int))
+    used = 0
+    for a, b in zip(cuts[:-1], cuts[1:]):
+        before = used
+        x, used = _compiled_range(system, c, P, tpts[a:b + 1], x, rtol, atol, h0, max_step, stats, ts, xs, segs,
+                                  used)
+        if bar is not None:
+            bar.update_to(tpts[b] - t0)
+        h0 = (tpts[b] - tpts[a]) / max(used - before, 1)
+    return x
+
+
+def _compiled_range(system, c, P, tpts, x, rtol, atol, h0, max_step, stats, ts, xs, segs, used):
+    """The output times ``tpts`` in calls of at most PIECE_STEPS steps (``used``: the steps the
+    segment took so far, at most MAX_STEPS); appends to ts, xs, segs; returns (final state, used)."""
+    from ..execution import check_interrupted
+
+    breaks = c.breakpoints(tpts[0], tpts[-1])
+    budget = PIECE_STEPS
+    while True:
+        check_interrupted()
+        X, st = system.integrate(tpts, x, P, rtol=rtol, atol=atol, breaks=breaks, h0=h0, hmax=max_step,
+                                 max_steps=min(budget, MAX_STEPS - used))
         for key in stats:
             stats[key] += st[key]
+        used += st["steps"]
         good = np.all(np.isfinite(X), axis=1)
+        if st["status"] == -2 and used < MAX_STEPS:  # the piece's budget ran out, not the run's
+            n_good = len(good) if good.all() else int(np.argmin(good))  # rows before the first NaN
+            if n_good > 1:  # keep the rows done, go on from the last one
+                ts.append(tpts[:n_good])
+                xs.append(X[:n_good])
+                segs.append(c)
+                tpts, x, budget = tpts[n_good - 1:], X[n_good - 1].copy(), PIECE_STEPS
+            else:  # one output interval needs more than a piece: give it the rest of the budget
+                budget = MAX_STEPS
+            continue
         ts.append(tpts[good])
         xs.append(X[good])
         segs.append(c)
@@ -281,37 +361,4 @@ def _simulate_compiled(system, c, x, t0, t_end, dt, events, rtol, atol, max_step
             bad = X[good][-1] if good.any() else x
             raise SolverError(f"compiled integrator failed: {st['message']}", time=st["t"],
                               state=c.state_dict(bad), partial=_collect(c, ts, xs, segs))
-        x = X[-1].copy()
-    res = _collect(c, ts, xs, segs)
-    from ..kernels.tableaus import default_method
-    res.stats = {**stats, "method": f"{default_method(rtol).upper()} (compiled)"}
-    return res
-
-
-def _integrate_pieces(system, c, tpts, x, rtol, atol, h0, max_step, bar, t0):
-    """One kernel call over ``tpts``; with a shown ``bar``, ~50 calls over consecutive pieces."""
-    shown = bar is not None and getattr(bar, "_t", None) is not None
-    n_pieces = min(50, (len(tpts) - 1) // 20) if shown else 1  # pieces of >= 20 output points
-    if n_pieces <= 1:
-        out = system.integrate(tpts, x, system.params(c)[0], rtol=rtol, atol=atol,
-                               breaks=c.breakpoints(tpts[0], tpts[-1]), h0=h0, hmax=max_step)
-        if bar is not None:
-            bar.update_to(tpts[-1] - t0)
-        return out
-    cuts = np.unique(np.linspace(0, len(tpts) - 1, n_pieces + 1).round().astype(int))
-    Xs, stats = [x[None, :]], None
-    for a, b in zip(cuts[:-1], cuts[1:]):
-        X, st = system.integrate(tpts[a:b + 1], x, system.params(c)[0], rtol=rtol, atol=atol,
-                                 breaks=c.breakpoints(tpts[a], tpts[b]), h0=h0, hmax=max_step)
-        Xs.append(X[1:])
-        stats = dict(st) if stats is None else {**st, **{k: stats[k] + st[k] for k in
-                                                       ("steps", "rejected", "nfev", "limit_events") if k in st}}
-        bar.update_to(tpts[b] - t0)
-        if st["status"] < 0:
-            break
-        x = X[-1].copy()
-        h0 = (tpts[b] - tpts[a]) / max(st["steps"], 1)
-    X = np.concatenate(Xs)
-    if len(X) < len(tpts):  # stopped by a failure: the rest is NaN, as for one call
-        X = np.vstack([X, np.full((len(tpts) - len(X), X.shape[1]), np.nan)])
-    return X, stats
+        return X[-1].copy(), used
