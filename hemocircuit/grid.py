@@ -12,7 +12,8 @@ followed by the command's own index.  ``freq`` and ``envelope`` take ``--grid`` 
 their members in the vectorised integrator instead (same columns, same order).
 
 A member that fails is a row of NaN with its reason in the ``error`` column (and in
-``metadata['failed']``); the others are kept.
+``metadata['failed']``); the others are kept (the CLI exits with status 3).  An interrupted
+grid (SIGINT/SIGTERM) keeps the finished members (written to NAME.partial.EXT, exit 130/143).
 """
 from __future__ import annotations
 
@@ -76,19 +77,37 @@ def _member(job):
 
 def run(compute, args, circuit, base_sets, workers=None, scheduler=None, progress=None):
     """Run ``compute(args, sets)`` (a module-level function returning a Result) for every member
-    of ``args.grid`` on ``circuit``'s netlist and stack the results (:func:`stack`)."""
-    from .execution import run_chunks
+    of ``args.grid`` on ``circuit``'s netlist and stack the results (:func:`stack`).
 
+    A member that raises is a failed row (``error`` column, ``metadata['failed']``; the CLI
+    exits with status 3).  Interrupted (SIGINT/SIGTERM), it raises
+    :class:`~hemocircuit.errors.Interrupted` whose ``partial`` stacks the finished members (the
+    others: error 'not run (interrupted)'), or None when none had finished."""
     from .batch import grid_columns
+    from .errors import Interrupted
+    from .execution import NOT_RUN, ChunkFailed, run_chunks
 
     paths, assignments = parse(circuit, args.grid)
     grid_columns(circuit, paths, assignments)  # values and units checked before anything runs
     jobs = [(compute, args, {**base_sets, **{p: _as_set(v) for p, v in a.items()}}) for a in assignments]
     started = time.perf_counter()
-    parts = run_chunks(_member, jobs, scheduler=scheduler, workers=workers, progress=progress,
-                       desc=f"{args.command} grid")
+    stopped = None
+    try:
+        parts = run_chunks(_member, jobs, scheduler=scheduler, workers=workers, progress=progress,
+                           desc=f"{args.command} grid", failures="collect")
+    except KeyboardInterrupt as exc:  # SIGINT/SIGTERM: keep the finished members
+        stopped, parts = exc, getattr(exc, "chunk_results", None) or [None] * len(jobs)
+    n_run = sum(r is not None for r in parts)
+    parts = [{"error": NOT_RUN} if r is None else {"error": r.reason} if isinstance(r, ChunkFailed) else r
+             for r in parts]
+    if stopped is not None and all(isinstance(r, dict) for r in parts):
+        raise Interrupted.of(stopped) from None  # nothing finished: nothing to keep
     res = stack(parts, circuit, paths, assignments)
     res.metadata.setdefault("provenance", {})["wall_time_s"] = round(time.perf_counter() - started, 6)
+    if stopped is not None:
+        res.metadata["status"] = "partial"
+        res.metadata["members_done"] = f"{n_run} of {len(jobs)} grid members finished"
+        raise Interrupted.of(stopped, partial=res) from None
     return res
 
 
@@ -107,7 +126,7 @@ def stack(parts, circuit, paths, assignments):
     names, units = [], {}
     for r in ok:
         for k in r.data:
-            if k not in names and k not in gcols:
+            if k not in names and k not in gcols and k != "error":
                 names.append(k)
                 units.setdefault(k, r.units.get(k, ""))
     failed = any(isinstance(r, dict) for r in parts)
@@ -125,9 +144,10 @@ def stack(parts, circuit, paths, assignments):
         cols[name] = np.concatenate(chunks)
         if proto.dtype.kind == "b" and not failed:
             cols[name] = cols[name].astype(bool)
-    if failed:
-        cols["error"] = np.concatenate([np.array([r["error"] if isinstance(r, dict) else ""] * n, dtype=object)
-                                        for r, n in zip(parts, n_rows)])
+    if failed or any("error" in r.data for r in ok):  # a failed member's reason, or a member's own
+        cols["error"] = np.concatenate([np.array([r["error"]] * n, dtype=object) if isinstance(r, dict)
+                                        else r.data["error"].astype(object) if "error" in r.data
+                                        else np.array([""] * n, dtype=object) for r, n in zip(parts, n_rows)])
     md = dict(first.metadata)
     md["settings"] = {**md.get("settings", {}), "grid": {p: [_as_set(a[p]) for a in assignments] for p in paths}}
     md["grid"] = list(paths)
@@ -138,8 +158,16 @@ def stack(parts, circuit, paths, assignments):
     else:
         md.pop("measures", None)
     md["failed"] = [[_where(a), r["error"]] for a, r in zip(assignments, parts) if isinstance(r, dict)]
-    if failed:
-        md["status"] = "partial"
+    # a member's own failed points (a dc sweep's, a comparison's) and warnings, named by member
+    md["failed"] += [[_where(a), _point(r, item)] for a, r in zip(assignments, parts) if not isinstance(r, dict)
+                     for item in r.metadata.get("failed") or []]
+    warnings = [f"{_label(a)}: {w}" for a, r in zip(assignments, parts) if not isinstance(r, dict)
+                for w in r.metadata.get("warnings") or []]
+    md.pop("warnings", None)
+    md.pop("members_done", None)
+    if warnings:
+        md["warnings"] = warnings
+    md["status"] = "partial" if md["failed"] else "complete"
     res = Result(cols, {**gunits, **units}, index=list(paths) + [i for i in first.index if i not in paths],
                  metadata=md)
     return res
@@ -147,6 +175,17 @@ def stack(parts, circuit, paths, assignments):
 
 def _where(a):
     return {p: _as_set(v) for p, v in a.items()}
+
+
+def _label(a):
+    return ", ".join(f"{p}={v}" for p, v in _where(a).items())
+
+
+def _point(r, item):
+    """A member's failed entry [index values..., reason] as 'at PARAM=V: reason'."""
+    *at, why = item
+    names = r.index if len(r.index) == len(at) else [""] * len(at)
+    return f"at {', '.join(f'{n}={_fmt(v)}' if n else _fmt(v) for n, v in zip(names, at))}: {why}"
 
 
 def members(res, columns=None):

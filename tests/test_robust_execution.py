@@ -120,6 +120,43 @@ def test_stability_failing_member(tmp_path, capsys):
     assert res["error"][1] == "" and res["classification"][1].startswith(("stable", "unstable"))
 
 
+def test_grid_member_without_an_operating_point_is_a_failed_row(tmp_path, capsys):
+    """op --grid on two worker processes: the member with the log compliance's P0 = 1e300 mmHg
+    has no operating point -- a failed row (error column, metadata, stderr, exit 3); the other
+    member is the netlist's own operating point."""
+    out = tmp_path / "grid.csv"
+    rc = main(["op", str(PAYNE_PASSIVE), "--grid", "Cv.P0=-2.25,1e300 mmHg", "--workers", "2", "--quiet",
+               "--out", str(out)])
+    err = capsys.readouterr().err
+    assert rc == EXIT_FAILED_MEMBERS
+    assert "failed: {'Cv.P0': '1e300 mmHg'}" in err and "no operating point found" in err
+    res = _csv(out)
+    assert res.status == "partial" and len(res.metadata["failed"]) == 1
+    assert res["error"][0] == "" and "no operating point found" in res["error"][1]
+    assert np.isnan(res["Q(Rla)"][1])
+    import hemocircuit as hc
+    op = hc.load(str(PAYNE_PASSIVE)).operating_point()
+    assert res["Q(Rla)"][0] == pytest.approx(op["Q(Rla)"], rel=1e-8)
+
+
+def test_grid_keeps_the_failed_points_of_its_members(tmp_path, capsys):
+    """dc --grid: a member's own failed sweep point stays in the stacked error column and in
+    metadata['failed'] (named by member and point), and the exit status is 3."""
+    out = tmp_path / "dcgrid.csv"
+    rc = main(["dc", str(PAYNE_PASSIVE), "--sweep", "Cv.P0=-2.25mmHg,1e300 mmHg", "--grid", "Pv.value=6,8 mmHg",
+               "--quiet", "--out", str(out)])
+    err = capsys.readouterr().err
+    assert rc == EXIT_FAILED_MEMBERS
+    res = _csv(out)
+    assert res.n_rows == 4 and res.status == "partial" and len(res.metadata["failed"]) == 2
+    assert [bool(e) for e in res["error"]] == [False, True, False, True]
+    assert all("no operating point found" in e for e in res["error"][1::2])
+    assert "at Cv.P0=1e+300: no operating point found" in err
+    # each member's good point: the divider Pa -> Rla+Rsa+Rsv -> v -> Rlv -> Pv at steady state
+    # (no flow into Cv): Q = (Pa - Pv) / (Rla + Rsa + Rsv + Rlv)
+    np.testing.assert_allclose(res["Q(Rla)"][0::2], [(80 - 6) / 22.28, (80 - 8) / 22.28], rtol=1e-8)
+
+
 def test_compare_failing_member(tmp_path, write, capsys):
     variant = write(f"""
         name: payne06-stiffer-veins
