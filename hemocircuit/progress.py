@@ -119,7 +119,9 @@ class Tracker:
     def __exit__(self, *exc):
         global _active, _channel
         if self._queue is not None:
-            self._queue.put(None)
+            # no sentinel through the queue: a worker terminated while writing to it (an
+            # interrupted batch) may have left its lock held, and a put would then block forever
+            self._stop.set()
             self._thread.join(timeout=5)
             _channel = None
         if self._t is not None:
@@ -147,14 +149,15 @@ class Tracker:
         if self._t is None or ctx is None:
             return
         self._queue = ctx.SimpleQueue()
+        self._stop = threading.Event()
         _channel = self._queue
 
         def read():
-            while True:
-                item = self._queue.get()
-                if item is None:
-                    return
-                self.report(*item)
+            while not self._stop.is_set():
+                if self._queue.empty():
+                    self._stop.wait(0.05)
+                    continue
+                self.report(*self._queue.get())
 
         self._thread = threading.Thread(target=read, daemon=True)
         self._thread.start()
