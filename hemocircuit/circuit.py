@@ -1085,9 +1085,10 @@ def assemble(netlist: Netlist) -> Circuit:
     return c
 
 
-def load(path: str, set_params: dict | None = None) -> Circuit:
-    """Load, validate and assemble a netlist file; optionally apply {ID.PARAM: value}."""
-    c = assemble(load_netlist(path))
+def load(path: str, set_params: dict | None = None, allow_paths=None) -> Circuit:
+    """Load, validate and assemble a netlist file; optionally apply {ID.PARAM: value}.
+    ``allow_paths``: more folders its files may read (see hemocircuit.access)."""
+    c = assemble(load_netlist(path, allow_paths))
     if set_params:
         c.set_params(set_params)
     return c
