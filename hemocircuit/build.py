@@ -208,3 +208,21 @@ def parse_netlist(netlist: Netlist) -> list[ElementData]:
     compile_expressions(elements, netlist)
     check_expression_values(elements)
     return elements
+
+
+def path_problem(circuit, path, options=True) -> str | None:
+    """What is wrong with the parameter path ``path`` (ID.PARAM, or ID.OPTION when ``options``)
+    of ``circuit``, with the close matches ("did you mean 'art.tau_Ca'?"), or None if it is fine."""
+    if not isinstance(path, str) or "." not in path:
+        return f"{excerpt(path, 60)} is not an ID.PARAM path (e.g. Pa.value)"
+    eid, _, name = path.partition(".")
+    e = circuit.elements.get(eid)
+    if e is None:
+        return f"no element {excerpt(eid, 40)}{did_you_mean(eid, circuit.elements)}"
+    names = list(e.cls.parameters) + (list(e.cls.options) if options else [])
+    if name not in names:
+        full = [f"{eid}.{n}" for n in names]
+        opts = f" and options {sorted(e.cls.options)}" if options and e.cls.options else ""
+        return (f"element '{eid}' ({e.cls.type_name}) has no parameter {excerpt(name, 40)}"
+                f"{did_you_mean(path, full)}; its parameters: {sorted(e.cls.parameters)}{opts}")
+    return None

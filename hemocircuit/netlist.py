@@ -88,7 +88,7 @@ _FastUniqueKeyLoader = (type("_FastUniqueKeyLoader", (_UniqueKeys, yaml.CSafeLoa
                         if getattr(yaml, "__with_libyaml__", False) else None)
 
 
-def _absolutize(value, base_dir, access, where):
+def resolve_files(value, base_dir, access, where):
     """Make ``{file: relative/path}`` entries (waveform tables) absolute against ``base_dir``,
     so a value keeps pointing at its own netlist's folder when another netlist extends it;
     a path outside the allowed folders is refused here, before anything reads it."""
@@ -98,11 +98,11 @@ def _absolutize(value, base_dir, access, where):
             if k == "file" and isinstance(v, str) and v and "${" not in v:
                 v = access.resolve(v, base_dir, "table file", where)
             else:
-                v = _absolutize(v, base_dir, access, where)
+                v = resolve_files(v, base_dir, access, where)
             out[k] = v
         return out
     if isinstance(value, list):
-        return [_absolutize(v, base_dir, access, where) for v in value]
+        return [resolve_files(v, base_dir, access, where) for v in value]
     return value
 
 
@@ -196,7 +196,7 @@ def _element_list(items, path, access, what="elements"):
         if not isinstance(nodes, list) or not all(isinstance(n, (str, int)) and not isinstance(n, bool)
                                                   for n in nodes):
             raise NetlistError("'nodes' must be a list of node names", file=path, element=eid)
-        values = {str(k): _absolutize(v, os.path.dirname(path), access, {"file": path, "element": eid})
+        values = {str(k): resolve_files(v, os.path.dirname(path), access, {"file": path, "element": eid})
                   for k, v in item.items() if k not in ELEMENT_KEYS}
         out.append(ElementSpec(eid, etype, [str(n) for n in nodes], values, path))
     return out
@@ -256,7 +256,7 @@ def _load_raw(path, chain, access):
                         raise NetlistError("'nodes' must be a list of node names", file=path, element=cid)
                     match[0].nodes = [str(n) for n in v]
                 else:
-                    match[0].values[str(k)] = _absolutize(v, base_dir, access, {"file": path, "element": cid})
+                    match[0].values[str(k)] = resolve_files(v, base_dir, access, {"file": path, "element": cid})
                 match[0].file = path
         elements += _element_list(data.get("add"), path, access, "add")
         name = data.get("name", base["name"])
@@ -400,7 +400,7 @@ def load_netlist(path: str, allow_paths=None) -> Netlist:
         if any(_refs(v) for v in e.values.values()):
             e.values = _substitute(e.values, params, where)
             # table file names that came from ${} parameters: resolved and checked now
-            e.values = _absolutize(e.values, os.path.dirname(e.file), access, where)
+            e.values = resolve_files(e.values, os.path.dirname(e.file), access, where)
     return Netlist(name=str(raw["name"]), description=str(raw["description"] or ""), elements=raw["elements"],
                    parameters=params, constraints=raw["constraints"], file=os.path.abspath(path),
                    base_dir=raw["base_dir"], outputs=dict(raw["outputs"] or {}), derived=dict(raw["derived"]),

@@ -98,7 +98,7 @@ def cmd_compare(args):
 
     circuits, proto = [], None
     for path in args.netlists:
-        c, proto = load_circuit(path, _sets(args.set), args.protocol)
+        c, proto = load_circuit(path, _sets(args.set), args.protocol, args.allow_path)
         circuits.append(c)
     if args.tran:
         if not args.protocol:
