@@ -198,7 +198,9 @@ def classify(output: str, status: str, secret_token: str) -> list[str]:
     return kinds
 
 
-def run(cases, seed, folder, jobs, timeout, mem_gib, quiet=False):
+def run(cases, seed, folder, jobs, timeout, mem_gib, quiet=False, commands=("check", "op"), budget_s=None):
+    """Run ``cases`` mutated netlists (``commands`` on each until one fails); stop launching
+    new cases after ``budget_s`` seconds.  Returns the report (also written to report.json)."""
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     rnd = random.Random(seed)
@@ -216,6 +218,11 @@ def run(cases, seed, folder, jobs, timeout, mem_gib, quiet=False):
     import hemocircuit.circuit  # noqa: F401 - imported once in the parent, inherited by every child
     import hemocircuit.cli  # noqa: F401
     import hemocircuit.analyses.op  # noqa: F401
+    from hemocircuit.units import registry
+
+    registry()  # pint's registry and the component types, built once, not in every child
+    for f in bundled_netlists():
+        hemocircuit.circuit.load(os.path.join(BUNDLED, f))
     with open("/proc/self/status") as fh:
         vm = int(re.search(r"VmSize:\s+(\d+)", fh.read()).group(1)) * 1024
     mem_bytes = vm + int(mem_gib * 2 ** 30)
@@ -250,6 +257,8 @@ def run(cases, seed, folder, jobs, timeout, mem_gib, quiet=False):
             print(f"{done}/{cases} in {time.time() - t0:.0f} s: {counts}", flush=True)
 
     for n in range(cases):
+        if budget_s is not None and time.time() - t0 > budget_s:
+            break
         base = rnd.choice(sorted(texts))
         text = mutations(rnd, texts[base], secret)
         path = os.path.join(corpus, f"case_{n:05d}_{os.path.splitext(base)[0]}.yaml")
@@ -260,11 +269,11 @@ def run(cases, seed, folder, jobs, timeout, mem_gib, quiet=False):
             _wait(running, timeout, reap)
         pid = os.fork()
         if pid == 0:
-            _child([["check", path], ["op", path]], out, mem_bytes)
+            _child([[cmd, path] for cmd in commands], out, mem_bytes)
         running[pid] = (n, time.time(), out, path)
     while running:
         _wait(running, timeout, reap)
-    report = {"cases": cases, "seed": seed, "seconds": round(time.time() - t0, 1), "counts": counts,
+    report = {"cases": done, "seed": seed, "seconds": round(time.time() - t0, 1), "counts": counts,
               "limits": {"timeout_s": timeout, "memory_gib": mem_gib}, "examples": examples}
     with open(os.path.join(folder, "report.json"), "w") as fh:
         json.dump(report, fh, indent=1)

@@ -214,6 +214,8 @@ def _load_raw(path, chain, access):
     constraints = data.get("constraints") or []
     if not isinstance(constraints, list):
         raise NetlistError("'constraints' must be a list", file=path)
+    constraints = resolve_files(constraints, base_dir, access, {"file": path})  # tables in 'when:'
+    params = resolve_files(params, base_dir, access, {"file": path})
     if "extends" in data:
         parent = data["extends"]
         if not isinstance(parent, str):
