@@ -116,6 +116,18 @@ _REF_SAFE = re.compile(r"\$\(([A-Za-z_][A-Za-z0-9_]*)\)")
 _ALIAS = re.compile(r"(?:^|[\s\[{,:])\*[^\s*]", re.M)  # a YAML alias (*name), or the odd false alarm
 
 
+def _may_nest_deeper(text, limit) -> bool:
+    """A cheap upper bound on the YAML nesting: flow brackets open at once plus the widest
+    indentation (each block level takes at least one column); True if it could exceed ``limit``."""
+    import numpy as np
+
+    br = np.frombuffer(re.sub(r"[^\[\]{}]", "", text).encode(), dtype=np.uint8)
+    if br.size and np.cumsum(np.where((br == ord("[")) | (br == ord("{")), 1, -1)).max() > limit // 2:
+        return True
+    indent = max((len(m.group(0)) for m in re.finditer(r"^[ \t?:-]+", text, re.M)), default=0)
+    return indent > limit // 2
+
+
 def _restore_refs(value, path, depth=0):
     """``$(name)`` back to ``${name}``, checking the nesting depth and the length of strings."""
     if depth > limits.limit("YAML_DEPTH"):
@@ -144,7 +156,9 @@ def read_yaml_file(path, what="netlist"):
         with open(path, encoding="utf-8") as fh:
             text = _REF_TEXT.sub(lambda m: "$(" + m.group(1) + ")", fh.read())
         loader = _FastUniqueKeyLoader or UniqueKeyLoader
-        if _ALIAS.search(text):  # aliases can multiply the document: count its expanded size first
+        if _ALIAS.search(text) or _may_nest_deeper(text, limits.limit("YAML_DEPTH")):
+            # aliases can multiply the document, and libyaml's composer recurses (a crash, not
+            # an error, at tens of thousands of levels): scan the event stream first
             limits.check_yaml(text, path, loader)
         try:
             data = yaml.load(text, Loader=loader)
@@ -214,6 +228,10 @@ def _load_raw(path, chain, access):
     constraints = data.get("constraints") or []
     if not isinstance(constraints, list):
         raise NetlistError("'constraints' must be a list", file=path)
+    for c in constraints:
+        if not isinstance(c, dict) or not isinstance(c.get("node"), (str, int)) or isinstance(c.get("node"), bool):
+            raise NetlistError(f"each constraint is a mapping {{node: NAME, volume: ...}} or {{node: NAME, pressure: "
+                               f"..., when: {{...}}}}; got {excerpt(c)}", file=path)
     constraints = resolve_files(constraints, base_dir, access, {"file": path})  # tables in 'when:'
     params = resolve_files(params, base_dir, access, {"file": path})
     if "extends" in data:

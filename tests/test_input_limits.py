@@ -30,7 +30,7 @@ def _error(path, **kw):
 
 
 # ------------------------------------------------------------------- input limits ----------
-@pytest.mark.parametrize("doc", ["elements: " + "[" * 5000 + "]" * 5000 + "\n",
+@pytest.mark.parametrize("doc", ["elements: " + "[" * 50000 + "]" * 50000 + "\n",
                                  "elements:\n" + "".join("  " * i + "- \n" for i in range(300))])
 def test_deeply_nested_yaml_is_refused(write, doc):
     p = write(doc)
@@ -295,3 +295,9 @@ def test_table_file_in_a_constraint_is_checked(write, outside):
               "proj/net.yaml")
     e = _error(p)
     assert "outside the allowed folders" in str(e) and "TOP-SECRET" not in str(e)
+
+
+def test_malformed_constraint_is_a_netlist_error(write):
+    base = (NETLISTS / "bad" / "store_only_node.yaml").read_text()
+    p = write(base + "constraints:\n  - {node: {pwl: [[0 s, 1 mmHg]]}, volume: 3 mL}\n")
+    assert "each constraint is a mapping" in str(_error(p))
