@@ -10,6 +10,8 @@ factor per name, computed once), so the hot path is plain numpy.
 from __future__ import annotations
 
 import ast
+import contextlib
+import sys
 from dataclasses import dataclass
 
 import numpy as np
@@ -61,6 +63,19 @@ def parse_bounded(text: str, allowed: tuple, what: str, where: dict, funcs=()) -
     return tree
 
 
+@contextlib.contextmanager
+def _deep_enough():
+    """Python's recursion limit raised for the tree walks of an expression within the
+    EXPR_DEPTH limit (ast.unparse takes about three frames per level)."""
+    old = sys.getrecursionlimit()
+    sys.setrecursionlimit(max(old, 8 * limits.limit("EXPR_DEPTH")
+                              + 1000))
+    try:
+        yield
+    finally:
+        sys.setrecursionlimit(old)
+
+
 def is_expression(value) -> bool:
     return isinstance(value, str) and value.lstrip().startswith("=")
 
@@ -84,10 +99,11 @@ class Expression:
         self.refs: dict[str, Reference] = {}
         self._tree = tree
         self._key = {}
-        self._collect(tree.body, resolve)
-        renamed = ast.fix_missing_locations(_Rename(self._key).visit(tree))
-        self._source = ast.unparse(renamed)  # kept so the compiled code can be rebuilt after pickling
-        code = compile(self._source, "<expr>", "eval")
+        with _deep_enough():
+            self._collect(tree.body, resolve)
+            renamed = ast.fix_missing_locations(_Rename(self._key).visit(tree))
+            self._source = ast.unparse(renamed)  # kept so the compiled code can be rebuilt after pickling
+            code = compile(self._source, "<expr>", "eval")
         self._code = code
         # dimension check and output factor, evaluated once with pint
         env = {"pi": np.pi, **_FUNCS}
