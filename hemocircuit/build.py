@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import limits
 from .errors import NetlistError, did_you_mean, excerpt
 from .expressions import Expression, Reference, constant_reference, is_expression
 from .netlist import Netlist
@@ -120,6 +121,9 @@ def parse_element(spec, netlist_file=None) -> ElementData:
         if isinstance(raw, (int, float)) and not isinstance(raw, bool) and name in defaults and name not in spec.values:
             data.values[name] = float(raw)  # preset values are already numbers in the declared unit
             continue
+        if isinstance(raw, str) and len(raw) > limits.limit("QUANTITY_CHARS"):
+            raise NetlistError(f"parameter '{name}': a quantity of {len(raw):,} characters "
+                               f"{limits.how_to_raise('QUANTITY_CHARS')}", **where)
         try:
             data.values[name] = parse_quantity(raw, par.unit, f"parameter '{name}'")
         except UnitError as exc:

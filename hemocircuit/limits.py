@@ -23,6 +23,7 @@ DEFAULTS = {
     "YAML_ALIASES": 100,      # YAML aliases (*name) in one file
     "YAML_NODES": 5_000_000,  # YAML nodes of one file, with every alias expanded
     "VALUE_CHARS": 10_000,    # characters of one value (also after ${} substitution)
+    "QUANTITY_CHARS": 1_000,  # characters of one quantity with its unit (not an expression)
     "EXPR_NODES": 10_000,     # syntax-tree nodes of one expression
     "EXPR_DEPTH": 250,        # nesting depth of one expression (a sum of N terms is N deep)
     "TABLE_ROWS": 1_000_000,  # rows of one waveform table

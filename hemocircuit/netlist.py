@@ -128,18 +128,30 @@ def _may_nest_deeper(text, limit) -> bool:
     return indent > limit // 2
 
 
-def _restore_refs(value, path, depth=0):
-    """``$(name)`` back to ``${name}``, checking the nesting depth and the length of strings."""
-    if depth > limits.limit("YAML_DEPTH"):
+def _restore_refs(value, path, depth=0, memo=None, lim=None):
+    """``$(name)`` back to ``${name}``, checking the nesting depth and the length of strings.
+    A node shared through a YAML alias is converted once and stays shared (an alias bomb is
+    not expanded here)."""
+    if lim is None:
+        lim, memo = (limits.limit("YAML_DEPTH"), limits.limit("VALUE_CHARS")), {}
+    if depth > lim[0]:
         raise NetlistError(f"YAML nested more than {depth - 1} levels deep {limits.how_to_raise('YAML_DEPTH')}",
                            file=path)
     if isinstance(value, str):
-        limits.check_value_length(value, {"file": path}, f"the value {excerpt(value, 40)}")
-        return _REF_SAFE.sub(lambda m: "${" + m.group(1) + "}", value)
-    if isinstance(value, list):
-        return [_restore_refs(v, path, depth + 1) for v in value]
-    if isinstance(value, dict):
-        return {_restore_refs(k, path, depth + 1): _restore_refs(v, path, depth + 1) for k, v in value.items()}
+        if len(value) > lim[1]:
+            limits.check_value_length(value, {"file": path}, f"the value {excerpt(value, 40)}")
+        return _REF_SAFE.sub(lambda m: "${" + m.group(1) + "}", value) if "$(" in value else value
+    if isinstance(value, (list, dict)):
+        key = id(value)
+        if key in memo:
+            return memo[key][1]
+        if isinstance(value, list):
+            out = [_restore_refs(v, path, depth + 1, memo, lim) for v in value]
+        else:
+            out = {_restore_refs(k, path, depth + 1, memo, lim): _restore_refs(v, path, depth + 1, memo, lim)
+                   for k, v in value.items()}
+        memo[key] = (value, out)  # the original is kept alive, so its id is not reused
+        return out
     return value
 
 

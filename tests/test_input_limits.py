@@ -301,3 +301,18 @@ def test_malformed_constraint_is_a_netlist_error(write):
     base = (NETLISTS / "bad" / "store_only_node.yaml").read_text()
     p = write(base + "constraints:\n  - {node: {pwl: [[0 s, 1 mmHg]]}, volume: 3 mL}\n")
     assert "each constraint is a mapping" in str(_error(p))
+
+
+def test_alias_bomb_within_the_node_limit_is_not_expanded(write):
+    lines = ['a0: &a0 ["lol", "lol", "lol", "lol", "lol", "lol", "lol", "lol", "lol"]']
+    lines += [f"a{i}: &a{i} [" + ", ".join([f"*a{i - 1}"] * 9) + "]" for i in range(1, 6)]
+    p = write("\n".join(lines) + "\nelements: *a5\n")  # 9**6 = 531,441 values when expanded
+    t = time.perf_counter()
+    assert "unknown top-level key" in str(_error(p))
+    assert time.perf_counter() - t < 3
+
+
+def test_very_long_quantity_is_refused(write):
+    p = write(RC.replace("R: 1 mmHg*s/mL", "R: " + "1" * 5000 + " mmHg*s/mL"))
+    e = _error(p)
+    assert e.element == "R1" and "HEMOCIRCUIT_MAX_QUANTITY_CHARS" in str(e)
