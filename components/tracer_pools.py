@@ -95,7 +95,8 @@ class _Pool(Component):
     options = {
         "units_reading": Option("consistent", choices=_READINGS,
                                 doc="'consistent' (SI, default) or 'thesis' (its numbers; MODEL_NOTES)"),
-        "scale": Option(1e-12, kind=(float, int, str), doc="natural size of C [M] (solver tolerances)"),
+        "scale": Option(1e-12, kind=float, lower=0.0, lower_open=True, upper=1e3, unit="M",
+                        doc="natural size of C [M] (solver tolerances); a number, 0 < scale <= 1e3"),
     }
 
     def __init__(self, opts=None):

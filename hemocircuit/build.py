@@ -10,7 +10,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import NetlistError
+from . import limits
+from .errors import NetlistError, did_you_mean, excerpt
 from .expressions import Expression, Reference, constant_reference, is_expression
 from .netlist import Netlist
 from .registry import component_types
@@ -41,22 +42,35 @@ class ElementData:
 
 
 def _option_value(cls, name, raw, where):
+    """An option's value checked against its declaration (kind, choices, bounds)."""
     opt = cls.options[name]
     val = raw
-    if opt.kind is bool and not isinstance(raw, bool):
+    kinds = opt.kind if isinstance(opt.kind, tuple) else (opt.kind,)
+    if bool in kinds and not isinstance(raw, bool):
         if isinstance(raw, str) and raw.lower() in ("true", "false", "yes", "no"):
             val = raw.lower() in ("true", "yes")
         else:
-            raise NetlistError(f"option '{name}' must be true or false, got {raw!r}", **where)
-    elif opt.kind is int and not isinstance(raw, bool):
+            raise NetlistError(f"option '{name}' must be true or false, got {excerpt(raw, 40)}", **where)
+    elif int in kinds and float not in kinds and not isinstance(raw, bool):
         try:
             val = int(raw)
             if val != raw and str(val) != str(raw):
                 raise ValueError
-        except (TypeError, ValueError):
-            raise NetlistError(f"option '{name}' must be an integer, got {raw!r}", **where) from None
+        except (TypeError, ValueError, OverflowError):
+            raise NetlistError(f"option '{name}' must be an integer, got {excerpt(raw, 40)}", **where) from None
+    elif float in kinds:
+        try:  # YAML 1.1 reads 1e-20 (no dot) as a string
+            if isinstance(raw, bool) or not isinstance(raw, (int, float, str)):
+                raise ValueError
+            val = float(raw)
+        except (TypeError, ValueError, OverflowError):
+            raise NetlistError(f"option '{name}' must be a number{f' [{opt.unit}]' if opt.unit else ''}, got "
+                               f"{excerpt(raw, 40)}", **where) from None
     if opt.choices is not None and val not in opt.choices:
-        raise NetlistError(f"option '{name}' must be one of {list(opt.choices)}, got {raw!r}", **where)
+        raise NetlistError(f"option '{name}' must be one of {list(opt.choices)}, got {excerpt(raw, 40)}"
+                           f"{did_you_mean(raw, opt.choices) if isinstance(raw, str) else ''}", **where)
+    if isinstance(val, (int, float)) and not isinstance(val, bool) and opt.violates(np.array([float(val)])).any():
+        raise NetlistError(f"option '{name}' = {val!r} is out of range: need {opt.bounds_text()}", **where)
     return val
 
 
@@ -65,7 +79,8 @@ def parse_element(spec, netlist_file=None) -> ElementData:
     types = component_types()
     cls = types.get(spec.type)
     if cls is None:
-        raise NetlistError(f"unknown component type '{spec.type}'; known types: {sorted(types)}", **where)
+        raise NetlistError(f"unknown component type {excerpt(spec.type, 40)}{did_you_mean(spec.type, types)}; "
+                           f"known types: {sorted(types)}", **where)
     if len(spec.nodes) != len(cls.terminals):
         raise NetlistError(f"type '{spec.type}' has {len(cls.terminals)} terminals {list(cls.terminals)}, "
                            f"got {len(spec.nodes)} node(s) {spec.nodes}", **where)
@@ -75,10 +90,15 @@ def parse_element(spec, netlist_file=None) -> ElementData:
             opts[name] = _option_value(cls, name, raw, where)
     unknown = [k for k in spec.values if k not in cls.options and k not in cls.parameters]
     if unknown:
-        raise NetlistError(f"unknown parameter(s) {unknown} for type '{spec.type}'; it takes "
+        raise NetlistError(f"unknown parameter(s) {[k[:40] for k in unknown[:5]]}"
+                           f"{did_you_mean(unknown[0], list(cls.parameters) + list(cls.options))} for type "
+                           f"'{spec.type}'; it takes "
                            f"{sorted(cls.parameters)}" + (f" and options {sorted(cls.options)}" if cls.options else ""),
                            **where)
-    comp = cls(opts)
+    try:
+        comp = cls(opts)
+    except (ValueError, TypeError) as exc:  # a component's own check of its options
+        raise NetlistError(f"options {opts}: {exc}", **where) from None
     defaults = comp.defaults()
     data = ElementData(spec.id, cls, list(spec.nodes), comp.opts, {}, where["file"], raw=dict(spec.values))
     base_dir = os.path.dirname(where["file"]) if where["file"] else None
@@ -101,6 +121,9 @@ def parse_element(spec, netlist_file=None) -> ElementData:
         if isinstance(raw, (int, float)) and not isinstance(raw, bool) and name in defaults and name not in spec.values:
             data.values[name] = float(raw)  # preset values are already numbers in the declared unit
             continue
+        if isinstance(raw, str) and len(raw) > limits.limit("QUANTITY_CHARS"):
+            raise NetlistError(f"parameter '{name}': a quantity of {len(raw):,} characters "
+                               f"{limits.how_to_raise('QUANTITY_CHARS')}", **where)
         try:
             data.values[name] = parse_quantity(raw, par.unit, f"parameter '{name}'")
         except UnitError as exc:
@@ -189,3 +212,21 @@ def parse_netlist(netlist: Netlist) -> list[ElementData]:
     compile_expressions(elements, netlist)
     check_expression_values(elements)
     return elements
+
+
+def path_problem(circuit, path, options=True) -> str | None:
+    """What is wrong with the parameter path ``path`` (ID.PARAM, or ID.OPTION when ``options``)
+    of ``circuit``, with the close matches ("did you mean 'art.tau_Ca'?"), or None if it is fine."""
+    if not isinstance(path, str) or "." not in path:
+        return f"{excerpt(path, 60)} is not an ID.PARAM path (e.g. Pa.value)"
+    eid, _, name = path.partition(".")
+    e = circuit.elements.get(eid)
+    if e is None:
+        return f"no element {excerpt(eid, 40)}{did_you_mean(eid, circuit.elements)}"
+    names = list(e.cls.parameters) + (list(e.cls.options) if options else [])
+    if name not in names:
+        full = [f"{eid}.{n}" for n in names]
+        opts = f" and options {sorted(e.cls.options)}" if options and e.cls.options else ""
+        return (f"element '{eid}' ({e.cls.type_name}) has no parameter {excerpt(name, 40)}"
+                f"{did_you_mean(path, full)}; its parameters: {sorted(e.cls.parameters)}{opts}")
+    return None

@@ -1144,9 +1144,10 @@ def assemble(netlist: Netlist) -> Circuit:
     return c
 
 
-def load(path: str, values: dict | None = None) -> Circuit:
-    """Load, validate and assemble a netlist file; optionally apply {ID.PARAM: value}."""
-    return assemble(load_netlist(path)).with_values(values or {})
+def load(path: str, values: dict | None = None, allow_paths=None) -> Circuit:
+    """Load, validate and assemble a netlist file; optionally apply {ID.PARAM: value}.
+    ``allow_paths``: more folders its files may read (see hemocircuit.access)."""
+    return assemble(load_netlist(path, allow_paths)).with_values(values or {})
 
 
 # the common analyses as methods (c.simulate(), c.operating_point(), ...)

@@ -38,32 +38,55 @@ def _sets(items):
 
 
 def _unit_spacing(v):
-    """Accept '90mmHg' as well as '90 mmHg'."""
+    """Accept '90mmHg' as well as '90 mmHg' (an exponent, '1e8', is part of the number)."""
     import re
-    m = re.match(r"^([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([A-Za-z].*)$", v)
+    m = re.match(r"^([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)(?![eE][-+]?\d)\s*([A-Za-z].*)$", v)
     return f"{m.group(1)} {m.group(2)}" if m else v
 
 
-def load_circuit(netlist, sets=None, protocol=None):
+def load_circuit(netlist, sets=None, protocol=None, allow_paths=None):
     """The one way every command gets its circuit: netlist, then ``--set``, then ``--protocol``.
 
     ``sets``: {ID.NAME: value} (``--set``): structural options (``art.ca_order``, values as YAML
     literals) re-assemble the circuit first, keeping every numeric value; then numeric
     parameters are set (strings with units).  ``protocol``: path of a protocol YAML (or None),
-    checked against the circuit; its ``initial`` settings are applied last (they win over
-    ``--set``, as they would in ``simulate``).  Returns (circuit, protocol or None).  The
-    protocol's timed events are left to the commands that run them (tran, compare --tran),
-    which pass it on stripped of ``initial`` (see :func:`events_only`).
+    checked against the circuit; its ``initial`` settings and its events at t = 0 are applied
+    last (they win over ``--set``, as they would in ``simulate``).  ``allow_paths``: more
+    folders the netlist may read files from (``--allow-path``, see hemocircuit.access).
+    Returns (circuit, protocol or None).  The protocol's timed events are left to the commands
+    that run them (tran, compare --tran), which pass it on stripped of ``initial`` (see
+    :func:`events_only`).  Errors in ``--set`` name the ``--set`` option, with close matches.
     """
+    import os
+
+    from .build import path_problem
     from .circuit import load
+    from .errors import NetlistError
     from .protocol import Protocol
 
-    c = load(str(netlist))
+    try:
+        c = load(str(netlist), allow_paths=allow_paths)
+    except NetlistError as exc:
+        given = os.path.abspath(str(netlist))
+        if exc.file and os.path.abspath(str(exc.file)) != given:  # an error in a base netlist: say which
+            exc.args = (f"{exc} (in the extends chain of {given})",)
+        raise
     sets = dict(sets or {})
+    for k, v in sets.items():
+        problem = path_problem(c, k)
+        if problem:
+            raise HemocircuitError(f"--set {k}={v}: {problem}")
     opts = {k: v for k, v in sets.items() if _is_option(c, k)}
-    if opts:
-        c = c.with_options({k: _option_literal(v) for k, v in opts.items()})
-    c = c.with_values({k: v for k, v in sets.items() if k not in opts})
+    params = {k: v for k, v in sets.items() if k not in opts}
+    try:
+        if opts:
+            c = c.with_options({k: _option_literal(v) for k, v in opts.items()})
+        c = c.with_values(params)
+    except NetlistError as exc:
+        mine = [f"{k}={v}" for k, v in sets.items() if k.partition(".")[0] == exc.element] or \
+            [f"{k}={v}" for k, v in sets.items()]
+        raise HemocircuitError(f"--set {', --set '.join(mine)}: "
+                               + (f"element '{exc.element}': " if exc.element else "") + exc.bare_message) from None
     proto = None
     if protocol:
         proto = Protocol.load(str(protocol), c)
@@ -83,12 +106,31 @@ def _is_option(c, path):
 
 
 def _load(args, uses_events=False):
-    """load_circuit() from the parsed arguments (netlist, --set, --protocol) of any command."""
-    c, proto = load_circuit(args.netlist, _sets(getattr(args, "set", None)), getattr(args, "protocol", None))
-    if proto is not None and proto.events and not uses_events:
-        print(f"note: {args.command} applies the protocol's 'initial' settings; its {len(proto.events)} timed "
-              "event(s) are used by tran only", file=sys.stderr)
+    """load_circuit() from the parsed arguments (netlist, --set, --protocol, --allow-path) of any
+    command; ``--show`` names are checked against the circuit's columns."""
+    c, proto = load_circuit(args.netlist, _sets(getattr(args, "set", None)), getattr(args, "protocol", None),
+                            getattr(args, "allow_path", None))
+    later = [ev for ev in proto.events if ev.at > 0] if proto is not None else []
+    if later and not uses_events:
+        print(f"note: {args.command} applies the protocol's 'initial' settings and its events at t = 0; its "
+              f"{len(later)} later event(s) are used by tran only", file=sys.stderr)
+    _check_show(c, getattr(args, "show", None))
     return c, proto
+
+
+def _check_show(c, show):
+    """Every ``--show`` name must be a column of the circuit (with close matches if not)."""
+    from .errors import did_you_mean
+
+    if not show:
+        return
+    columns = [col.name for col in c.columns()]
+    known = set(columns)
+    for name in show:
+        if name not in known:
+            derived = " (a derived quantity: compare shows those)" if name in (c.netlist.derived or {}) else ""
+            raise HemocircuitError(f"--show {name!r}: no such column{derived}{did_you_mean(name, columns)}; "
+                                   f"columns: {columns[:40]}{' ...' if len(columns) > 40 else ''}")
 
 
 def _option_literal(v):
@@ -144,7 +186,7 @@ def computed(args, compute):
         return compute(args, sets)
     from . import grid
     first = getattr(args, "netlist", None) or args.netlists[0]
-    circuit, _ = load_circuit(first, sets, getattr(args, "protocol", None))
+    circuit, _ = load_circuit(first, sets, getattr(args, "protocol", None), getattr(args, "allow_path", None))
     return grid.run(compute, args, circuit, sets, workers=getattr(args, "workers", None))
 
 
@@ -167,7 +209,7 @@ def partial_path(path):
 
 def compute_op(args, sets):
     """One --grid member (:func:`computed`)."""
-    c, _ = load_circuit(args.netlist, sets, args.protocol)
+    c, _ = load_circuit(args.netlist, sets, args.protocol, getattr(args, "allow_path", None))
     return c.operating_point()
 
 
@@ -189,7 +231,7 @@ def _dc(args, c):
 
 def compute_dc(args, sets):
     """One --grid member (:func:`computed`)."""
-    return _dc(args, load_circuit(args.netlist, sets, args.protocol)[0])
+    return _dc(args, load_circuit(args.netlist, sets, args.protocol, getattr(args, "allow_path", None))[0])
 
 
 def cmd_dc(args):
@@ -208,13 +250,14 @@ def cmd_dc(args):
 
 
 def _range_spacing(r):
+    """'20:200:5mmHg' -> '20:200:5 mmHg'; exponents ('1e8') stay part of their number."""
     import re
-    return re.sub(r"(\d)([A-Za-z])", r"\1 \2", r, count=1)
+    return re.sub(r"(\d)(?![eE][-+]?\d)([A-Za-z])", r"\1 \2", r, count=1)
 
 
 def compute_tran(args, sets):
     """One run (a --grid member, :func:`computed`)."""
-    c, proto = load_circuit(args.netlist, sets, args.protocol)
+    c, proto = load_circuit(args.netlist, sets, args.protocol, getattr(args, "allow_path", None))
     t_end = float(_unit_to(args.t_end, "s")) if args.t_end else None
     dt = float(_unit_to(args.dt, "s")) if args.dt else None
     ic = _assignments(args.ic, "--ic", "ID.STATE=VALUE", "Cv.V=20mL")
@@ -333,8 +376,11 @@ def build_parser(command=None):
         sp.add_argument("--set", action="append", metavar="ID.PARAM=VALUE",
                         help="set a parameter (units allowed, e.g. Pa.value=90mmHg) or a structural option "
                              "(e.g. art.ca_order=2); repeatable")
-        sp.add_argument("--protocol", help="protocol YAML: its 'initial' settings apply to every command, "
-                                           "its timed events to tran")
+        sp.add_argument("--protocol", help="protocol YAML: its 'initial' settings (and events at t = 0) apply "
+                                           "to every command, its later events to tran")
+        sp.add_argument("--allow-path", action="append", metavar="DIR",
+                        help="let the netlist read files (extends, tables) in DIR too; by default only its "
+                             "project folder and the bundled netlists (repeatable)")
         sp.add_argument("--quiet", action="store_true", help="no progress bars (and, for ac, no table)")
         if grid:
             sp.add_argument("--grid", action="append", metavar="ID.PARAM=V1,V2,...",

@@ -30,8 +30,26 @@ from typing import Any
 import numpy as np
 
 
+class _Bounded:
+    """Bounds shared by parameters and numeric options: ``lower``/``upper`` in ``unit``,
+    ``lower_open``/``upper_open`` make them strict (R > 0); non-finite values always violate."""
+
+    def violates(self, value: np.ndarray) -> np.ndarray:
+        bad = ~np.isfinite(value)
+        if self.lower is not None:
+            bad |= (value <= self.lower) if self.lower_open else (value < self.lower)
+        if self.upper is not None:
+            bad |= (value >= self.upper) if self.upper_open else (value > self.upper)
+        return bad
+
+    def bounds_text(self) -> str:
+        lo = "" if self.lower is None else f"{self.lower:g} {'<' if self.lower_open else '<='} "
+        hi = "" if self.upper is None else f" {'<' if self.upper_open else '<='} {self.upper:g}"
+        return f"{lo}value{hi}" + (f" [{self.unit}]" if self.unit else "") + ", finite"
+
+
 @dataclass(frozen=True)
-class Param:
+class Param(_Bounded):
     """A numeric parameter: unit, default (a string with unit, or None = required), bounds.
 
     Bounds are in ``unit``; ``lower_open``/``upper_open`` make them strict (R > 0).
@@ -45,31 +63,26 @@ class Param:
     upper_open: bool = False
     doc: str = ""
 
-    def violates(self, value: np.ndarray) -> np.ndarray:
-        bad = ~np.isfinite(value)
-        if self.lower is not None:
-            bad |= (value <= self.lower) if self.lower_open else (value < self.lower)
-        if self.upper is not None:
-            bad |= (value >= self.upper) if self.upper_open else (value > self.upper)
-        return bad
-
-    def bounds_text(self) -> str:
-        lo = "" if self.lower is None else f"{self.lower:g} {'<' if self.lower_open else '<='} "
-        hi = "" if self.upper is None else f" {'<' if self.upper_open else '<='} {self.upper:g}"
-        return f"{lo}value{hi} [{self.unit}]"
-
 
 @dataclass(frozen=True)
-class Option:
+class Option(_Bounded):
     """A structural, non-numeric setting (changes the equations or the state list).
 
-    Options are fixed when the circuit is assembled; changing one re-assembles.
+    Options are fixed when the circuit is assembled; changing one re-assembles.  ``kind``
+    bool, int or float is checked at load (a float option written as a YAML string such as
+    ``1e-20`` is read as a number); numeric options also have bounds like parameters (in
+    ``unit``, which is the option's fixed unit: options take plain numbers).
     """
 
     default: Any
     choices: tuple | None = None
     kind: type | tuple = object
     doc: str = ""
+    lower: float | None = None
+    upper: float | None = None
+    lower_open: bool = False
+    upper_open: bool = False
+    unit: str = ""
 
 
 @dataclass(frozen=True)

@@ -17,6 +17,7 @@ import re
 import numpy as np
 
 from .errors import NetlistError
+from .expressions import parse_bounded
 
 _FUNCS = {"abs": np.abs, "exp": np.exp, "log": np.log, "sqrt": np.sqrt, "min": np.minimum, "max": np.maximum}
 _ALLOWED = (ast.Expression, ast.BinOp, ast.UnaryOp, ast.Constant, ast.Name, ast.Load, ast.Call, ast.Add, ast.Sub,
@@ -36,19 +37,25 @@ def evaluate_derived(derived: dict, columns: dict, file=None) -> dict:
                 var = f"_c{k}"
                 expr = re.sub(r"(?<![\w.])" + re.escape(col) + r"(?![\w(])", var, expr)
                 env[var] = np.asarray(columns[col], dtype=float)
-        try:
-            tree = ast.parse(expr, mode="eval")
-        except SyntaxError:
-            raise NetlistError(f"derived quantity '{name}': cannot parse {text!r}", file=file) from None
+        tree = parse_bounded(expr, _ALLOWED, f"derived quantity '{name}'", {"file": file}, tuple(_FUNCS))
         for node in ast.walk(tree):
-            if not isinstance(node, _ALLOWED):
-                raise NetlistError(f"derived quantity '{name}': {type(node).__name__} not allowed in {text!r}", file=file)
             if isinstance(node, ast.Name) and node.id not in env and node.id not in _FUNCS and node.id != "pi":
                 raise NetlistError(f"derived quantity '{name}': unknown column or name '{node.id}' in {text!r} "
                                    f"(columns: {sorted(columns)[:20]}...)", file=file)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            out[name] = eval(compile(tree, "<derived>", "eval"), {"__builtins__": {}}, {**env, **_FUNCS, "pi": np.pi})
+        try:
+            with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+                out[name] = eval(compile(tree, "<derived>", "eval"), {"__builtins__": {}},
+                                 {**env, **_FUNCS, "pi": np.pi})
+        except (ArithmeticError, ValueError, TypeError, RecursionError) as exc:
+            raise NetlistError(f"derived quantity '{name}': cannot evaluate {text[:60]!r}: {exc}", file=file) from None
     return out
+
+
+def check_derived(derived: dict, columns: list, file=None):
+    """Check every derived expression against the circuit's column names at load (parse,
+    names, limits, constant overflow such as 9**9**9**9) by evaluating it on columns of ones."""
+    if derived:
+        evaluate_derived(derived, {c: np.ones(1) for c in columns}, file)
 
 
 def derived_units(derived: dict) -> dict:

@@ -84,3 +84,21 @@ class Interrupted(KeyboardInterrupt):
         ``partial`` / ``chunk_results`` (the signal kept)."""
         return cls(getattr(exc, "signum", 2), partial if partial is not None else getattr(exc, "partial", None),
                    chunk_results)
+
+
+def did_you_mean(word, choices, n=3) -> str:
+    """' (did you mean 'x' or 'y'?)' for the close matches of ``word`` among ``choices`` (or '')."""
+    import difflib
+
+    near = difflib.get_close_matches(str(word), [str(c) for c in choices], n=n, cutoff=0.6)
+    if not near:
+        return ""
+    return " (did you mean " + " or ".join(repr(x) for x in near) + "?)"
+
+
+def excerpt(text, limit=60) -> str:
+    """A short, escaped excerpt of ``text`` for an error message (file contents are never
+    quoted at length: a misnamed file may hold anything)."""
+    text = str(text)
+    short = text[:limit]
+    return repr(short) + ("..." if len(text) > limit else "")

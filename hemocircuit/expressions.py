@@ -10,16 +10,70 @@ factor per name, computed once), so the hot path is plain numpy.
 from __future__ import annotations
 
 import ast
+import contextlib
+import sys
 from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import NetlistError
+from . import limits
+from .errors import NetlistError, did_you_mean, excerpt
 from .units import Q_, parse_with_unit, si_factor
 
 _FUNCS = {"exp": np.exp, "log": np.log, "sqrt": np.sqrt}
 _ALLOWED = (ast.Expression, ast.BinOp, ast.UnaryOp, ast.Constant, ast.Name, ast.Attribute, ast.Load, ast.Call,
             ast.Add, ast.Sub, ast.Mult, ast.Div, ast.Pow, ast.USub, ast.UAdd)
+
+
+def parse_bounded(text: str, allowed: tuple, what: str, where: dict, funcs=()) -> ast.Expression:
+    """Parse ``text`` as a Python expression within the input limits (length, syntax-tree size
+    and depth: compiling and evaluating a deeper tree recurses without bound), allowing only the
+    node types ``allowed`` and calls of the names ``funcs``.  Integer literals become floats: Python integer powers
+    (``9**9**9**9``) can take unbounded time and memory, float powers overflow at once."""
+    limits.check_value_length(text, where, what)
+    try:
+        tree = ast.parse(text, mode="eval")
+    except SyntaxError as exc:
+        raise NetlistError(f"cannot parse {what} {excerpt(text)}: {exc.msg}", **where) from None
+    except (RecursionError, MemoryError, ValueError):
+        raise NetlistError(f"{what}: {excerpt(text)} is nested too deeply {limits.how_to_raise('EXPR_DEPTH')}",
+                           **where) from None
+    max_nodes, max_depth = limits.limit("EXPR_NODES"), limits.limit("EXPR_DEPTH")
+    count, stack = 0, [(tree, 0)]
+    while stack:  # iterative: the tree may be thousands deep
+        node, depth = stack.pop()
+        count += 1
+        if count > max_nodes:
+            raise NetlistError(f"{what}: {excerpt(text)} has more than {max_nodes} terms "
+                               f"{limits.how_to_raise('EXPR_NODES')}", **where)
+        if depth > max_depth:
+            raise NetlistError(f"{what}: {excerpt(text)} is nested more than {max_depth} levels deep "
+                               f"{limits.how_to_raise('EXPR_DEPTH')}", **where)
+        if not isinstance(node, allowed):
+            raise NetlistError(f"{what}: {type(node).__name__} is not allowed in {excerpt(text)} "
+                               "(use + - * / **, numbers, names and the listed functions)", **where)
+        if isinstance(node, ast.Call) and not (isinstance(node.func, ast.Name) and node.func.id in funcs):
+            raise NetlistError(f"{what}: {excerpt(text)}: only {', '.join(funcs)} may be called", **where)
+        if isinstance(node, ast.Constant):
+            if type(node.value) is int:
+                node.value = float(node.value)
+            elif type(node.value) is not float:
+                raise NetlistError(f"{what}: {excerpt(text)}: only numbers are allowed as constants", **where)
+        stack.extend((child, depth + 1) for child in ast.iter_child_nodes(node))
+    return tree
+
+
+@contextlib.contextmanager
+def _deep_enough():
+    """Python's recursion limit raised for the tree walks of an expression within the
+    EXPR_DEPTH limit (ast.unparse takes about three frames per level)."""
+    old = sys.getrecursionlimit()
+    sys.setrecursionlimit(max(old, 8 * limits.limit("EXPR_DEPTH")
+                              + 1000))
+    try:
+        yield
+    finally:
+        sys.setrecursionlimit(old)
 
 
 def is_expression(value) -> bool:
@@ -41,28 +95,15 @@ class Expression:
     def __init__(self, text, target_unit, resolve, where):
         self.text = text.lstrip()[1:].strip()
         self.where = where
-        try:
-            tree = ast.parse(self.text, mode="eval")
-        except SyntaxError as exc:
-            raise NetlistError(f"cannot parse expression {self.text!r}: {exc.msg}", **where) from None
+        tree = parse_bounded(self.text, _ALLOWED, "expression", where, tuple(_FUNCS))
         self.refs: dict[str, Reference] = {}
-        for node in ast.walk(tree):
-            if not isinstance(node, _ALLOWED):
-                raise NetlistError(f"expression {self.text!r}: {type(node).__name__} is not allowed "
-                                   "(use + - * / **, numbers, names, exp/log/sqrt)", **where)
-            if isinstance(node, ast.Call) and not (isinstance(node.func, ast.Name) and node.func.id in _FUNCS):
-                raise NetlistError(f"expression {self.text!r}: only exp, log, sqrt may be called", **where)
-        # integer literals become floats: Python integer powers (10**10**10) can take unbounded
-        # time and memory, float powers overflow at once (reported as an error below)
-        for node in ast.walk(tree):
-            if isinstance(node, ast.Constant) and type(node.value) is int:
-                node.value = float(node.value)
         self._tree = tree
         self._key = {}
-        self._collect(tree.body, resolve)
-        renamed = ast.fix_missing_locations(_Rename(self._key).visit(tree))
-        self._source = ast.unparse(renamed)  # kept so the compiled code can be rebuilt after pickling
-        code = compile(self._source, "<expr>", "eval")
+        with _deep_enough():
+            self._collect(tree.body, resolve)
+            renamed = ast.fix_missing_locations(_Rename(self._key).visit(tree))
+            self._source = ast.unparse(renamed)  # kept so the compiled code can be rebuilt after pickling
+            code = compile(self._source, "<expr>", "eval")
         self._code = code
         # dimension check and output factor, evaluated once with pint
         env = {"pi": np.pi, **_FUNCS}
@@ -73,7 +114,7 @@ class Expression:
             sample = sample if hasattr(sample, "to") else Q_(sample, "dimensionless")
             sample.to(target_unit)
         except Exception as exc:
-            raise NetlistError(f"expression {self.text!r} does not give a quantity in {target_unit}: {exc}",
+            raise NetlistError(f"expression {excerpt(self.text)} does not give a quantity in {target_unit}: {exc}",
                                **where) from None
         self.out_factor = 1.0 / si_factor(target_unit)
         self.si = {k: (si_factor(r.unit) if r.kind != "constant" else None) for k, r in self._named().items()}
@@ -100,7 +141,7 @@ class Expression:
                 self._key[key] = f"_r{len(self._key)}"
             return
         if isinstance(node, ast.Attribute):
-            raise NetlistError(f"expression {self.text!r}: write references as ELEMENT.NAME", **self.where)
+            raise NetlistError(f"expression {excerpt(self.text)}: write references as ELEMENT.NAME", **self.where)
         if isinstance(node, ast.Name):
             if node.id in _FUNCS or node.id == "pi":
                 return

@@ -43,6 +43,9 @@ def available(circuit) -> list[str]:
 def check(circuit):
     """Check the netlist's ``outputs:`` and ``input:`` against the assembled circuit."""
     nl = circuit.netlist
+    if nl.derived:
+        from .derived import check_derived
+        check_derived(nl.derived, [c.name for c in circuit.columns()], circuit.file)
     if nl.outputs:
         known = set(available(circuit))
         inherited = nl.outputs_file and circuit.file and nl.outputs_file != circuit.file

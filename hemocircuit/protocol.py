@@ -8,16 +8,21 @@
       - {at: 239 s, set: {art.tau_Ca: 1 s}}
 
 Paths are ID.PARAM (the same namespace as --set and sweeps).  Structural options (such as
-``art.ca_order``) may only be set in ``initial``: they change the state vector.
+``art.ca_order``) may only be set in ``initial``: they change the state vector.  Events at
+``at: 0 s`` (or earlier than the start) apply before the start, after ``initial``: the
+starting operating point is computed with them.  Table files named in a protocol are read
+relative to the protocol's folder, inside the allowed folders (hemocircuit.access).
 """
 from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
 
-import yaml
+import numpy as np
 
-from .errors import NetlistError
+from .access import Access
+from .build import path_problem
+from .errors import NetlistError, excerpt
 from .units import UnitError, parse_quantity
 
 
@@ -41,14 +46,10 @@ class Protocol:
 
     @classmethod
     def load(cls, path, circuit=None):
-        if not os.path.exists(path):
-            raise NetlistError(f"protocol file not found: {path}")
-        try:
-            with open(path) as fh:
-                data = yaml.safe_load(fh)
-        except yaml.YAMLError as exc:
-            raise NetlistError(f"protocol is not valid YAML: {exc}", file=path) from None
-        return cls.from_dict(data, path, circuit)
+        from .netlist import read_yaml_file
+
+        data = read_yaml_file(str(path), "protocol")
+        return cls.from_dict(data, str(path), circuit)
 
     @classmethod
     def from_dict(cls, data, path=None, circuit=None):
@@ -68,14 +69,31 @@ class Protocol:
         events = []
         if not isinstance(data.get("events") or [], list):
             raise NetlistError("'events' must be a list of {at: <time>, set: {ID.PARAM: value}}", **where)
+        if t_end is not None and not (np.isfinite(t_end) and t_end > 0):
+            raise NetlistError(f"t_end = {t_end:g} s: must be finite and > 0", **where)
         for i, ev in enumerate(data.get("events") or []):
             if not isinstance(ev, dict) or "at" not in ev or not isinstance(ev.get("set"), dict):
                 raise NetlistError(f"event {i} must be {{at: <time>, set: {{ID.PARAM: value}}}}", **where)
+            unknown = set(map(str, ev)) - {"at", "set"}
+            if unknown:
+                raise NetlistError(f"event {i}: unknown key(s) {excerpt(sorted(unknown))} (an event has 'at' and "
+                                   "'set')", **where)
             try:
                 at = parse_quantity(ev["at"], "s", f"event {i} time")
             except UnitError as exc:
                 raise NetlistError(str(exc), **where) from None
+            if not (np.isfinite(at) and at >= 0):
+                raise NetlistError(f"event {i} time = {at:g} s: must be finite and >= 0", **where)
             events.append(Event(at, dict(ev["set"])))
+        if circuit is not None or path is not None:
+            # table files: relative to the protocol's folder, inside the allowed folders
+            folders = list(getattr(getattr(circuit, "netlist", None), "allowed", None) or [])
+            base = os.path.dirname(os.path.abspath(path)) if path else os.getcwd()
+            access = Access(folders + [base])
+            from .netlist import resolve_files
+            initial = resolve_files(dict(initial), base, access, where)
+            for ev in events:
+                ev.set = resolve_files(ev.set, base, access, where)
         proto = cls(t_end, dict(initial), sorted(events, key=lambda e: e.at), str(data.get("description", "")), path)
         if circuit is not None:
             proto.check(circuit)
@@ -85,7 +103,19 @@ class Protocol:
         """Validate every path and value against the circuit (before any simulation)."""
         for what, mapping in [("initial", self.initial)] + [(f"event at {ev.at:g} s", ev.set) for ev in self.events]:
             _reject_bare_numbers(circuit, mapping, what, self.file)
-        c = self.apply_initial(circuit)
+        for what, mapping in [("initial", self.initial)] + [(f"event at {ev.at:g} s", ev.set) for ev in self.events]:
+            for path in mapping:
+                problem = path_problem(circuit, path)
+                if problem:
+                    raise NetlistError(f"{what}: {problem}", file=self.file,
+                                       element=path.partition(".")[0] if isinstance(path, str) else None)
+        for ev in self.events:
+            for path in ev.set:
+                eid, _, name = path.partition(".")
+                if eid in circuit.elements and name in circuit.elements[eid].cls.options:
+                    raise NetlistError(f"event at {ev.at:g} s sets the structural option '{path}'; options may only "
+                                       "be set in 'initial'", file=self.file, element=eid)
+        c = self.apply_initial(circuit, t0=-np.inf)
         for ev in self.events:
             for path in ev.set:
                 eid, _, name = path.partition(".")
@@ -95,13 +125,30 @@ class Protocol:
             try:
                 c = ev.apply(c)
             except NetlistError as exc:
-                raise NetlistError(f"event at {ev.at:g} s: {exc}", file=self.file) from None
+                raise NetlistError(f"event at {ev.at:g} s: {exc.bare_message}", file=self.file,
+                                   element=exc.element) from None
         return True
 
-    def apply_initial(self, circuit):
+    def apply_initial(self, circuit, t0=0.0):
+        """A copy of ``circuit`` with the ``initial`` settings, then the events at or before
+        ``t0`` (the start: they hold from the start, so the starting operating point uses them)."""
         opts = {k: v for k, v in self.initial.items() if _is_option(circuit, k)}
         c = circuit.with_options(opts) if opts else circuit
-        return c.with_values({k: v for k, v in self.initial.items() if k not in opts})
+        try:
+            c = c.with_values({k: v for k, v in self.initial.items() if k not in opts})
+        except NetlistError as exc:
+            raise NetlistError(f"initial: {exc.bare_message}", file=self.file, element=exc.element) from None
+        for ev in self.events_before(t0):
+            try:
+                c = ev.apply(c)
+            except NetlistError as exc:
+                raise NetlistError(f"event at {ev.at:g} s: {exc.bare_message}", file=self.file,
+                                   element=exc.element) from None
+        return c
+
+    def events_before(self, t0=0.0):
+        """The events at or before ``t0`` (applied before the start)."""
+        return [ev for ev in self.events if ev.at <= t0]
 
 
 def _reject_bare_numbers(circuit, mapping, what, file):

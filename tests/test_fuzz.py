@@ -146,3 +146,28 @@ def test_mutated_valid_netlist(pos, cut, insert):
 def test_the_unmutated_netlist_is_valid():
     c = _load_text(VALID)
     assert c.operating_point()["P(a)"] == 80.0
+
+
+# ------------------------------------------------ seeded mutation corpus (issue 9) ----------
+def test_mutated_bundled_netlists(tmp_path_factory):
+    """A seeded sample of benchmarks/fuzz_netlists.py's mutations of the bundled netlists
+    (hostile values, options, paths outside the project, alias bombs, deep nesting, doubling
+    parameters, huge files), each checked in a forked child with a 20 s / 2 GiB limit: only
+    clean errors or acceptance; no traceback, run over the limits, or quoted outside file.
+    The full run (thousands of cases, with op) is the benchmark script itself."""
+    import sys
+
+    from paths import ROOT
+
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    try:
+        import fuzz_netlists
+    finally:
+        sys.path.pop(0)
+    folder = tmp_path_factory.mktemp("fuzz-corpus")
+    report = fuzz_netlists.run(400, seed=9, folder=str(folder), jobs=1, timeout=20, mem_gib=2, quiet=True,
+                               commands=("check",), budget_s=45)
+    counts = report["counts"]
+    assert report["cases"] >= 20, report
+    assert counts["accepted"] + counts["clean_error"] == report["cases"], report["examples"]
+    assert counts["clean_error"] > 0 and counts["accepted"] > 0  # the corpus exercises both

@@ -20,7 +20,9 @@ MMHG, CMH2O = 133.322387415, 98.0665
 # ----------------------------------------------------------------------- extends ----------
 @pytest.fixture
 def chain(write):
-    """A (lib/A.yaml) <- B (lib/variants/B.yaml) <- C (C.yaml)."""
+    """A (lib/A.yaml) <- B (lib/variants/B.yaml) <- C (C.yaml), in a project folder (B reads
+    ../A.yaml: files are read inside the project, see hemocircuit.access)."""
+    write("[project]\nname = 'chain'\n", "pyproject.toml")
     write("""
         time [s],value [mL/s]
         0,0
@@ -128,7 +130,7 @@ def test_extends_with_base_rc(write):
           C1: {{type: log_compliance, k: 0.2 1/mL, P0: 0 mmHg, Vn: 10 mL, C: null}}
         """)
     with pytest.raises(NetlistError, match=r"unknown parameter\(s\) \['C'\]"):
-        hc.load(str(v))
+        hc.load(str(v), allow_paths=[NETLISTS])
     v = write(f"""
         extends: {NETLISTS / 'base_rc.yaml'}
         parameters: {{Pin: 30 mmHg}}
@@ -136,7 +138,7 @@ def test_extends_with_base_rc(write):
         add:
           - {{id: C1, type: log_compliance, nodes: [a, ground], k: 0.2 1/mL, P0: 0 mmHg, Vn: 10 mL}}
         """)
-    op = hc.load(str(v)).operating_point()
+    op = hc.load(str(v), allow_paths=[NETLISTS]).operating_point()
     assert op["V(C1)"] == pytest.approx(10 + math.log(30) / 0.2, rel=1e-10)
 
 

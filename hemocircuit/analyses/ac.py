@@ -226,7 +226,7 @@ def _ac(args, c):
 def compute_ac(args, sets):
     """One --grid member (:func:`hemocircuit.cli.computed`)."""
     from ..cli import load_circuit
-    return _ac(args, load_circuit(args.netlist, sets, args.protocol)[0])
+    return _ac(args, load_circuit(args.netlist, sets, args.protocol, getattr(args, "allow_path", None))[0])
 
 
 def cmd_ac(args):

@@ -155,7 +155,7 @@ def compute_compare(args, sets):
 
     circuits, proto = [], None
     for path in args.netlists:
-        c, proto = load_circuit(path, sets, args.protocol)
+        c, proto = load_circuit(path, sets, args.protocol, args.allow_path)
         circuits.append(c)
     if args.tran:
         t_end = float(_unit_to(args.t_end, "s")) if args.t_end else None

@@ -1,6 +1,8 @@
 """DC sweep: the operating point along a parameter range, continued from point to point."""
 from __future__ import annotations
 
+import re
+
 import numpy as np
 
 from ..errors import HemocircuitError, Interrupted, NetlistError
@@ -9,12 +11,15 @@ from ..results import Result
 from ..units import UnitError, parse_quantity
 
 
+MAX_POINTS = 1_000_000  # points of one sweep
+_BARE_NUMBER = re.compile(r"^[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$")
+
+
 def parse_range(spec: str, unit: str) -> np.ndarray:
     """'20:200:5 mmHg' (start:stop:step, stop included) or '1,2,5 s' -> values in ``unit``."""
     text = spec.strip()
     parts = text.split()
     body, u = (parts[0], " ".join(parts[1:])) if len(parts) > 1 else (text, "")
-    import re
     m = re.match(r"^([-+0-9.eE]+):([-+0-9.eE]+):([-+0-9.eE]+)([A-Za-z].*)?$", body)
     try:
         if m:
@@ -23,23 +28,34 @@ def parse_range(spec: str, unit: str) -> np.ndarray:
                        for i in (1, 2, 3))
             if not u and unit not in ("dimensionless", "", "1"):
                 raise NetlistError(f"sweep range {spec!r} needs a unit (in {unit})")
+            if not np.all(np.isfinite([a, b, s])):
+                raise NetlistError(f"sweep range {spec!r}: start, stop and step must be finite")
             if s == 0 or (b - a) / s < 0:
                 raise NetlistError(f"sweep range {spec!r}: the step must move from start towards stop")
-            n = int(np.floor((b - a) / s + 1e-9)) + 1
-            return a + s * np.arange(n)
+            n = (b - a) / s
+            if not n < MAX_POINTS:
+                raise NetlistError(f"sweep range {spec!r} has {n:.3g} points, more than {MAX_POINTS:,}")
+            return a + s * np.arange(int(np.floor(n + 1e-9)) + 1)
         items = [x for x in re.split(r",", text) if x.strip()]
+        if not items:
+            raise NetlistError(f"sweep {spec!r}: no values (write START:STOP:STEP UNIT or V1,V2,... UNIT)")
+        if len(items) > MAX_POINTS:
+            raise NetlistError(f"sweep {spec[:60]!r}: more than {MAX_POINTS:,} values")
         # a unit written once at the end applies to every item: '1,2,5 s'
         last = items[-1].strip().split()
         tail = " ".join(last[1:]) if len(last) > 1 else ""
         vals = []
         for it in items:
             it = it.strip()
-            if tail and len(it.split()) == 1 and not re.search(r"[A-Za-z]", it):
+            if tail and _BARE_NUMBER.match(it):  # '1e8' is a number, not '1' with a unit 'e8'
                 it = f"{it} {tail}"
             vals.append(parse_quantity(it, unit, "sweep value"))
-        return np.array(vals)
-    except UnitError as exc:
-        raise NetlistError(f"sweep {spec!r}: {exc}") from None
+        vals = np.array(vals)
+        if not np.all(np.isfinite(vals)):
+            raise NetlistError(f"sweep {spec[:60]!r}: every value must be finite")
+        return vals
+    except (UnitError, ValueError) as exc:
+        raise NetlistError(f"sweep {spec[:60]!r}: {exc}") from None
 
 
 def dc_sweep(circuit, param: str, values, progress=None):

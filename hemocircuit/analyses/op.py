@@ -118,10 +118,15 @@ def newton(circuit, X, law_totals, t=0.0, tol=1e-10, max_iter=50, ptc=False):
                 M = np.eye(nx)[None] / dt[:, None, None] - J
             else:
                 M = J
+            if not np.all(np.isfinite(M)):  # extreme parameter values: the Jacobian overflowed
+                return X, False, norm
             try:
                 dX = np.linalg.solve(M, -F[..., None])[..., 0]
             except np.linalg.LinAlgError:
-                dX = np.linalg.lstsq(M[0], -F[0], rcond=None)[0][None] if B == 1 else np.zeros_like(X)
+                try:
+                    dX = np.linalg.lstsq(M[0], -F[0], rcond=None)[0][None] if B == 1 else np.zeros_like(X)
+                except np.linalg.LinAlgError:  # SVD did not converge: no step from here
+                    return X, False, norm
         step_small = np.max(np.abs(dX) / (np.abs(X) + scales), axis=1) < tol
         # line search on the scaled residual
         lam = np.ones(B)

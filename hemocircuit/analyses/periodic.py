@@ -225,7 +225,7 @@ def _periodic(args, c):
 def compute_periodic(args, sets):
     """One --grid member (:func:`hemocircuit.cli.computed`)."""
     from ..cli import load_circuit
-    return _periodic(args, load_circuit(args.netlist, sets, args.protocol)[0])[0]
+    return _periodic(args, load_circuit(args.netlist, sets, args.protocol, getattr(args, "allow_path", None))[0])[0]
 
 
 def cmd_periodic(args):

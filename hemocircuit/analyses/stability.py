@@ -443,7 +443,7 @@ def _stability(args, c):
 def compute_stability(args, sets):
     """One --grid member (:func:`hemocircuit.cli.computed`)."""
     from ..cli import load_circuit
-    return _stability(args, load_circuit(args.netlist, sets, args.protocol)[0])
+    return _stability(args, load_circuit(args.netlist, sets, args.protocol, getattr(args, "allow_path", None))[0])
 
 
 def cmd_stability(args):
