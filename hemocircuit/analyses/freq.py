@@ -152,10 +152,10 @@ def frequency_response(circuit, freqs, outputs=None, input=None, step=0.1, ampli
                max_periods=max_periods, rtol=rtol)
     started = clock()
     jobs, where = [], []
-    for bc, members in build_batches(circuit, assignments):
+    for bc, in_batch in build_batches(circuit, assignments):  # (not 'members': the argument is read below)
         # chunks of one batch keep contiguous members (similar frequencies) together
-        for chunk in split(list(members), (workers or 2) if scheduler != "serial" else 1):
-            sub = bc.subset([members.index(k) for k in chunk])  # pickles without caches
+        for chunk in split(list(in_batch), (workers or 2) if scheduler != "serial" else 1):
+            sub = bc.subset([in_batch.index(k) for k in chunk])  # pickles without caches
             jobs.append((sub, [descr[k] for k in chunk], opt))
             where.append(chunk)
     results = run_chunks(_run_chunk, jobs, scheduler=scheduler, workers=workers, progress=progress,
