@@ -72,6 +72,7 @@ def _spellings(v):
     m, e = f"{v:.3e}".split("e")
     e = int(e)
     out = {f"{v:g}", f"{v:.2g}", f"{v:.1f}", f"{v:.0f}"}
+    out |= {1 / 3: {"1:3", "one third"}, 2.0: {"twice"}}.get(v, set())  # the thesis's words
     for digits in (1, 2, 3):
         mant = f"{float(m):.{digits - 1}f}" if digits > 1 else f"{float(m):.0f}"
         out.add(f"{mant}\\e{{{e}}}")

@@ -111,6 +111,16 @@ class Context:
         from ..results import Result
         return self.save(name, Result(columns, units, index=index), circuit, settings)
 
+    def rows(self, name, rows, columns, circuit=None, settings=None):
+        """Write a list of row dicts with ``columns`` {key: unit} as a Result CSV."""
+        cols = {}
+        for k in columns:
+            vals = [r.get(k) for r in rows]
+            numeric = all(isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
+                          for v in vals)
+            cols[k] = np.array(vals, dtype=float if numeric else object)
+        return self.table(name, cols, {k: u for k, u in columns.items()}, circuit=circuit, settings=settings)
+
     def value(self, sid, value, reading="as implemented"):
         """The value computed now for statement ``sid`` (in the statement's unit).  A statement
         with two readings (MODEL_NOTES) gets one call per reading."""

@@ -6,6 +6,17 @@ import importlib
 
 SECTIONS = [
     "ch4_steady",
+    "ch4_lee97",
+    "ch4_fits",
+    "ch4_kuo91",
+    "ch4_sensitivity",
+    "ch5_payne06",
+    "ch5_phase",
+    "ch5_downstream_no",
+    "ch5_artcomp",
+    "ch6_stability",
+    "ch6_second_order",
+    "ch6_vasomotion",
 ]
 
 
