@@ -40,8 +40,7 @@ def bench_freq(loop_sample=6):
     t0 = time.perf_counter()
     rows = []
     for case in cases:
-        cc = c.copy()
-        cc.set_params(case)
+        cc = c.with_values(case)
         rows += frequency_response(cc, freqs, workers=workers)
     wall = time.perf_counter() - t0
     n = len(cases) * len(freqs)
@@ -50,8 +49,7 @@ def bench_freq(loop_sample=6):
     t1 = time.perf_counter()
     for f in sample:
         for case in cases:
-            cc = c.copy()
-            cc.set_params(case)
+            cc = c.with_values(case)
             frequency_response(cc, [f], scheduler="serial")
     loop = (time.perf_counter() - t1) / (len(sample) * len(cases)) * n
     res = {"runs": n, "wall_s": wall, "workers": workers, "runs_per_s_per_core": n / wall / workers,

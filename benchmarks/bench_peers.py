@@ -310,8 +310,8 @@ def bench_artcomp(a, hc_kw):
     t_op = time.perf_counter() - t0
     # the forcing as the pressure source's parameters (components/sources.py):
     # value + amplitude sin(2 pi frequency (t - start) + phase) for t >= start
-    c.set_params({"Pa.value": Pa0 * (1 + s), "Pa.amplitude": Pa0 * amp, "Pa.frequency": f,
-                  "Pa.phase": 0.0, "Pa.start": 0.0})
+    c = c.with_values({"Pa.value": Pa0 * (1 + s), "Pa.amplitude": Pa0 * amp, "Pa.frequency": f,
+                       "Pa.phase": 0.0, "Pa.start": 0.0})
     res.update(hemocircuit_load_s=t_load, hemocircuit_op_s=t_op)
     kw, ignored = api_kwargs(c.simulate, hc_kw)
     res["hemocircuit_api_kwargs"], res["ignored_kwargs"] = {k: str(v) for k, v in kw.items()}, list(ignored)
@@ -437,8 +437,7 @@ def bench_envelope(a, hc_kw):
     free = [j for j in range(c.nx) if j not in law_states(c)]
     starts = {}
     for pa in pas:
-        cc = c.copy()
-        cc.set_params({"Pa.value": pa})
+        cc = c.with_values({"Pa.value": pa})
         x = np.asarray(operating_point(cc).x, float).copy()
         x[free] += kick * cc.state_scales[free]
         st = {rrn: float(x[c.state_names.index(hn)]) for hn, rrn in HC2RR_VASO.items()}

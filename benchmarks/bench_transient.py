@@ -17,7 +17,7 @@ NET = os.path.join(HERE, "..", "netlists")
 
 def main():
     c = hc.load(os.path.join(NET, "payne06_passive.yaml"))
-    c.set_params({"Pa.amplitude": "8 mmHg", "Pa.frequency": "0.1 Hz"})
+    c = c.with_values({"Pa.amplitude": "8 mmHg", "Pa.frequency": "0.1 Hz"})
     t0 = time.perf_counter()
     r = c.simulate(1000.0, dt=0.1)
     print(f"payne06_passive, 1000 s, 0.1 Hz sine, BDF: {time.perf_counter() - t0:.3f} s  {r.stats}")
@@ -27,7 +27,7 @@ def main():
     r = c.simulate(None, dt=1.0, protocol=os.path.join(HERE, "..", "examples", "protocols", "kuo91_A.yaml"))
     print(f"isolated arteriole, Kuo91 protocol A (450 s), BDF: {time.perf_counter() - t0:.3f} s  {r.stats}")
     c = hc.load(os.path.join(NET, "isolated_arteriole.yaml"))
-    c.set_params({"Pup.amplitude": "5 cmH2O", "Pup.frequency": "0.05 Hz"})
+    c = c.with_values({"Pup.amplitude": "5 cmH2O", "Pup.frequency": "0.05 Hz"})
     t0 = time.perf_counter()
     r = c.simulate(1000.0, dt=1.0)
     print(f"isolated arteriole, 1000 s with a 0.05 Hz sine, BDF: {time.perf_counter() - t0:.3f} s  {r.stats}")

@@ -106,6 +106,22 @@ class LinearCompliance(_Store):
     def compliance(self, p, V):
         return p["C"] + 0.0 * V
 
+    def state_partials(self, p, x, u, t, src=None):
+        """Branch P_node - P_ref = (V - V0)/C: d b_loc[branch]/dV = 1/C; dV/dt = q (the branch
+        flow, local unknown 2), held at 0 by the clamp where V <= 0 and q < 0."""
+        V = x[..., 0]
+        shape = V.shape
+        dA = np.zeros(shape + (3, 3, 1))
+        db = np.zeros(shape + (3, 1))
+        db[..., 2, 0] = 1.0 / p["C"]
+        df_dx = np.zeros(shape + (1, 1))
+        df_du = np.zeros(shape + (1, 3))
+        flowing = np.ones(shape)
+        if self.opts["clamp_at_zero"]:
+            flowing = np.where((V <= 0.0) & (u[..., 2] < 0.0), 0.0, 1.0)
+        df_du[..., 0, 2] = flowing
+        return {"dA": dA, "db": db, "df_dx": df_dx, "df_du": df_du}
+
 
 class LogCompliance(_Store):
     """Payne06 logarithmic compliance: V = Vn + ln(dP - P0)/k, k [1/mL] > 0."""

@@ -3,7 +3,7 @@
 Steady states over Pa = 20..200 mmHg for payne06, arterial_compliance, icp, inertia and
 two_generations (a passive first arteriolar generation before the active bed, added with
 netlist edits only), then the thesis's 10 % step (80 -> 72 mmHg) and the 0.1 Hz sine protocol
-on arterial_compliance vs two_generations.  Writes tidy CSVs and overlay PNGs under
+on arterial_compliance vs two_generations.  Writes result CSVs and overlay PNGs under
 examples/output/compare/.   Run:  python examples/compare_variants.py   (about a minute)
 Same as the CLI:
     hemocircuit compare netlists/payne06.yaml netlists/arterial_compliance.yaml ... \
@@ -12,7 +12,7 @@ Same as the CLI:
 import os
 
 import hemocircuit as hc
-from hemocircuit.analyses.compare import compare_sweep, compare_transient, plot_overlays, write_tidy
+from hemocircuit.analyses.compare import compare_sweep, compare_transient, plot_overlays
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 NET = os.path.join(HERE, "..", "netlists")
@@ -24,17 +24,17 @@ def main():
     names = ["payne06", "arterial_compliance", "icp", "inertia", "two_generations"]
     circuits = [hc.load(os.path.join(NET, f"{n}.yaml")) for n in names]
     res = compare_sweep(circuits, "Pa.value", "20:200:2 mmHg")
-    write_tidy(os.path.join(OUT, "steady.csv"), res, "Pa.value", "mmHg")
+    res.save(os.path.join(OUT, "steady.csv"))
     files = plot_overlays(os.path.join(OUT, "steady"), res, ["flow", "bed_radius", "V_a", "V_v", "Va_over_Vv", "P_ic"],
                           "Pa [mmHg]")
-    i80 = int(abs(res["payne06"][0] - 80).argmin())
+    i80 = int(abs(res.parts["payne06"][0] - 80).argmin())
     print(f"{'netlist':>22} {'flow':>8} {'radius':>8} {'Va/Vv':>7}   at Pa = 80 mmHg")
-    for name, (x, q, units, failed) in res.items():
+    for name, (x, q, units, failed) in res.parts.items():
         print(f"{name:>22} {q['flow'][i80]:8.4f} {q['bed_radius'][i80]:8.3f} {q['Va_over_Vv'][i80]:7.4f}")
     pair = [hc.load(os.path.join(NET, f"{n}.yaml")) for n in ("arterial_compliance", "two_generations")]
     for proto in ("step_80_72", "sine_0p1Hz"):
         tr = compare_transient(pair, os.path.join(HERE, "protocols", f"{proto}.yaml"), dt=0.05)
-        write_tidy(os.path.join(OUT, f"{proto}.csv"), tr, "time", "s")
+        tr.save(os.path.join(OUT, f"{proto}.csv"))
         files += plot_overlays(os.path.join(OUT, proto), tr, ["Q(Rla)", "Q(Rsv)", "bed_radius"], "time [s]")
     print("wrote", len(files), "figures to", OUT)
 

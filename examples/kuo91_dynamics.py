@@ -230,8 +230,8 @@ def main():
     t_start = time.perf_counter()
     os.makedirs(OUT, exist_ok=True)
     circuit = hc.load(NETLIST)
-    NO_U = float(circuit.get_param("art.NO_U")[0])
-    NO_L = float(circuit.get_param("art.NO_L")[0])
+    NO_U = float(circuit.parameters.values["art.NO_U"][0])
+    NO_L = float(circuit.parameters.values["art.NO_L"][0])
     runs, protos, walls = {}, {}, {}
     for exp in EXPERIMENTS:
         for order in (1, 2):

@@ -13,7 +13,7 @@ the flow leads.  The script reports, for each case and flow, where the phase rev
 to lag (linear interpolation of the phase in log tau_Ca between the bracketing grid values);
 the thesis puts the reversal near tau_Ca = 2.5 s when the volume flow is neglected.
 
-Writes examples/output/payne06_phase_vs_tau.csv (tidy rows of the frequency response) and
+Writes examples/output/payne06_phase_vs_tau.csv (the frequency response, one row per run) and
 examples/output/payne06_phase_vs_tau.png.
 
 Run:  python examples/payne06_phase_vs_tau.py [--workers N] [--scheduler serial|processes|tcp://...]
@@ -28,7 +28,7 @@ import time
 import numpy as np
 
 import hemocircuit as hc
-from hemocircuit.analyses.freq import frequency_response, write_rows
+from hemocircuit.analyses.freq import frequency_response
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
@@ -63,29 +63,29 @@ def main(argv=None):
     args = ap.parse_args(argv)
 
     c = hc.load(NETLIST)
-    P0 = float(c.get_param("Pa.value")[0])
+    P0 = float(c.parameters.values["Pa.value"][0])
     taus = np.logspace(np.log10(0.5), np.log10(20.0), args.n_tau)
     grid = [("art.volume_flow", [vf for vf, _ in CASES]), ("art.tau_Ca", list(taus))]
     print(f"payne06: Pa = {P0:g} + {STEP * P0:g} + {AMPLITUDE * P0:g} sin(2 pi {FREQ:g} t) mmHg; "
           f"{len(CASES)} cases x {len(taus)} tau_Ca values ({taus[0]:.3g}..{taus[-1]:.3g} s)")
     t0 = time.perf_counter()
-    rows = frequency_response(c, [FREQ], outputs=OUTPUTS, input="Pa", step=STEP, amplitude=AMPLITUDE, grid=grid,
-                              scheduler=args.scheduler, workers=args.workers)
+    res = frequency_response(c, [FREQ], outputs=OUTPUTS, input="Pa", step=STEP, amplitude=AMPLITUDE, grid=grid,
+                             scheduler=args.scheduler, workers=args.workers)
     wall = time.perf_counter() - t0
-    print(f"{len(rows) // len(OUTPUTS)} runs in {wall:.1f} s")
+    print(f"{res.n_rows} runs in {wall:.1f} s")
+    rows = res.rows()  # one per run: grid values, frequency, per output phase(o/Pa.value), ...
 
-    failed = [r for r in rows if r.get("error")]
-    for r in failed:
-        print(f"FAILED: volume_flow={r['art.volume_flow']} tau_Ca={r['art.tau_Ca']:.4g} s {r['output']}: "
-              f"{r['error']}")
+    for r in rows:
+        if r["error"]:
+            print(f"FAILED: volume_flow={r['art.volume_flow']} tau_Ca={r['art.tau_Ca']:.4g} s: {r['error']}")
 
     table = {}  # (volume_flow, output) -> (tau, phase, rel_amplitude, periods, settled)
     for vf, _ in CASES:
         for o in OUTPUTS:
-            rs = sorted((r for r in rows if r["art.volume_flow"] == vf and r["output"] == o and not r.get("error")),
+            rs = sorted((r for r in rows if r["art.volume_flow"] == vf and not r["error"]),
                         key=lambda r: r["art.tau_Ca"])
             table[vf, o] = tuple(np.array([r[k] for r in rs]) for k in
-                                 ("art.tau_Ca", "phase [deg]", "rel_amplitude", "periods", "settled"))
+                                 ("art.tau_Ca", f"phase({o}/Pa.value)", f"rel_amplitude({o})", "periods", "settled"))
 
     print()
     hdr = f"{'tau_Ca [s]':>10}"
@@ -118,11 +118,11 @@ def main(argv=None):
 
     os.makedirs(args.out_dir, exist_ok=True)
     csv_path = os.path.join(args.out_dir, "payne06_phase_vs_tau.csv")
-    write_rows(csv_path, rows)
+    res.save(csv_path)
     png_path = os.path.join(args.out_dir, "payne06_phase_vs_tau.png")
     _plot(png_path, table, summary)
     print(f"wrote {csv_path}\nwrote {png_path}\ntotal {time.perf_counter() - t0:.1f} s")
-    return rows, summary, wall
+    return res, summary, wall
 
 
 def _plot(path, table, summary):

@@ -46,8 +46,8 @@ def curve(base, preset, options, dP, P=P_CMH2O):
 
     Returns {observable: (len(P),) array} with the element's observables (art.r in um, ...)."""
     c = base.with_options({"art.preset": preset, **options}).batch(len(P))
-    c.set_param("Pup.value", (P + dP / 2) * MMHG_PER_CMH2O)    # declared unit: mmHg
-    c.set_param("Pdown.value", (P - dP / 2) * MMHG_PER_CMH2O)
+    c = c.with_values({"Pup.value": (P + dP / 2) * MMHG_PER_CMH2O})  # declared unit: mmHg
+    c = c.with_values({"Pdown.value": (P - dP / 2) * MMHG_PER_CMH2O})
     op = c.operating_point()
     return {k: np.asarray(op[f"art.{k}"], dtype=float) for k in COLUMNS}, op.units
 
@@ -151,9 +151,8 @@ def main():
         shift = data[(preset, "active_flow")]["r"] - data[(preset, "active_no_flow")]["r"]
         print(f"  {preset:9s} flow shift (flow - no flow): min {shift.min():.1f} um, max {shift.max():.1f} um")
     # the set point: kuo91, active, no flow, 60 mmHg
-    c = base.copy()
-    c.set_param("Pup.value", "60 mmHg")
-    c.set_param("Pdown.value", "60 mmHg")
+    c = base.with_values({"Pup.value": "60 mmHg"})
+    c = c.with_values({"Pdown.value": "60 mmHg"})
     print(f"kuo91 active, no flow, P = 60 mmHg: r = {c.operating_point()['art.r']:.2f} um (thesis: 60)")
     print(f"wrote {csv_path} and PNGs in {OUT} ({time.perf_counter() - t0:.1f} s)")
 

@@ -5,6 +5,7 @@
     op = c.operating_point()          # steady state
     sw = c.dc_sweep("Pa.value", "20:200:5 mmHg")
     tr = c.simulate(t_end=100)        # transient
+    tr.save("run.csv"); hc.Result.load("run.csv")   # results: columns with units, provenance
 
 Circuit units: pressure mmHg, flow mL/s, volume mL, time s (see hemocircuit.units).
 """
@@ -22,4 +23,8 @@ def __getattr__(name):
         from . import circuit  # (it attaches the analysis methods to Circuit)
 
         return getattr(circuit, name)
+    if name == "Result":  # every analysis's result; Result.load(path) reads a result file
+        from .results import Result
+
+        return Result
     raise AttributeError(f"module 'hemocircuit' has no attribute {name!r}")

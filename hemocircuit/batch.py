@@ -79,19 +79,43 @@ def build_batches(circuit, assignments):
         base = circuit.with_options(group_opts[key]) if key else circuit
         b = base.batch(len(members))
         params = sorted({p for k in members for p in assignments[k] if not _is_option(circuit, p)})
+        columns = {}
         for p in params:
             unit = b.param_unit(p)
             vals = []
             for k in members:
                 v = assignments[k].get(p, None)
                 if v is None:
-                    vals.append(float(base.get_param(p)[0]))
+                    vals.append(float(base.parameters.values[p][0]))
                 else:
                     try:
                         vals.append(float(v) if isinstance(v, (int, float, np.floating)) else parse_quantity(v, unit, p))
                     except UnitError as exc:
                         raise NetlistError(str(exc)) from None
-            b.set_param(p, np.array(vals), prepare=False)
-        b.prepare()
-        out.append((b, members))
+            columns[p] = np.array(vals)
+        out.append((b.with_values(columns), members))
     return out
+
+
+def grid_columns(circuit, paths, assignments):
+    """Result columns for the grid values of each member: numeric parameters as numbers in the
+    parameter's declared unit ('1 s' -> 1.0, unit 's'), structural options as they are (no unit).
+    Returns ({path: array}, {path: unit})."""
+    cols, units = {}, {}
+    for p in paths:
+        vals = [a.get(p) for a in assignments]
+        if _is_option(circuit, p):
+            cols[p] = np.array([yaml.safe_load(v) if isinstance(v, str) else v for v in vals], dtype=object)
+            if all(isinstance(v, (bool, np.bool_)) for v in cols[p]):
+                cols[p] = cols[p].astype(bool)
+            units[p] = ""
+            continue
+        unit = circuit.param_unit(p)
+        out = []
+        for v in vals:
+            try:
+                out.append(float(v) if isinstance(v, (int, float, np.floating)) else parse_quantity(v, unit, p))
+            except UnitError as exc:
+                raise NetlistError(str(exc)) from None
+        cols[p], units[p] = np.array(out, dtype=float), unit
+    return cols, units

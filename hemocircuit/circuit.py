@@ -10,8 +10,16 @@ Parts that cannot change are kept apart (svZeroDSolver style): the matrix of gro
 stamps do not depend on states or time is built once per parameter set; when every group is
 like that, the inverse of A is cached and each evaluation is one matrix-vector product.
 
+A Circuit is immutable: a :class:`CircuitStructure` (netlist, elements, groups, numbering,
+conservation laws, constraints; made once, shared by every value variant) plus a
+:class:`~hemocircuit.parameters.ParameterSet` (the values, batched).  Values change only by
+making a new circuit: ``c.with_values({ID.PARAM: value})``, ``c.with_parameters(ps)``,
+``c.batch(B)``, ``c.member(k)``, ``c.subset(members)``, ``c.with_options(...)``.  What a circuit
+derives from its values (the constant nodal matrix, its inverse or factorisations, Jacobian
+patterns, subset views) is cached privately on the object and dies with it.
 Parameters are addressed as ``ID.PARAM`` everywhere (``--set``, sweeps, protocols, fitting).
-A Circuit is plain data plus numpy arrays, so it pickles cheaply to worker processes.
+A Circuit is plain data plus numpy arrays, so it pickles cheaply to worker processes (the
+caches are dropped).
 """
 from __future__ import annotations
 
@@ -21,13 +29,14 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from .build import ElementData, check_values, parse_netlist
+from .build import ElementData, parse_netlist
 from .component import Component
 from .errors import HemocircuitError, NetlistError, SolverError, TopologyError
 from .graph import check_topology, local_node_map
 from .linalg import solve_batched
 from . import sparse as sparse_la
 from .netlist import GROUND, Netlist, load_netlist
+from .parameters import ParameterSchema, ParameterSet
 from .units import UnitError, parse_quantity
 
 
@@ -51,7 +60,7 @@ def _bincount_scatter(uidx, b_loc, Bx, N1):
 class Group:
     """All elements of one component type with the same options."""
 
-    def __init__(self, comp: Component, elements: list[ElementData]):
+    def __init__(self, comp: Component, elements: list[ElementData], index: int = 0):
         self.comp = comp
         self.elements = elements
         self.ids = [e.id for e in elements]
@@ -63,20 +72,30 @@ class Group:
         self.K, self.M = len(self.local_nodes), len(self.branches)
         self.L = self.K + self.M
         self.observables = comp.observables()
-        self.waves = [(i, name, wf) for i, e in enumerate(elements) for name, wf in e.waveforms.items()]
         self.exprs = [(i, name, ex) for i, e in enumerate(elements) for name, ex in e.expressions.items()]
         self.constant = comp.constant_matrix and not self.exprs and comp.linear_in_pressure
-        self.time_dependent = comp.time_dependent or bool(self.waves)
+        self.index = index  # position in the structure's groups
+        self.base = self  # the structural group (a bound group points at it; lazy scatters live there)
+
+    def bound(self, p: dict, waves) -> "Group":
+        """This group with values: ``p`` {name: (1 or B, E)} and ``waves`` [(i, name, waveform)]
+        (a shallow copy: the structure is shared)."""
+        g = copy.copy(self)
+        g.p = dict(p)
+        g.waves = list(waves)
+        g.time_dependent = self.comp.time_dependent or bool(g.waves)
+        return g
 
     @property
     def ST_A(self):
         """Scatter of local matrix stamps into the flattened dense (n+1)^2 system (dense path
         only; built on first use: its row pointer alone has (n+1)^2 entries)."""
-        st = self.__dict__.get("_ST_A")
+        base = self.base
+        st = base.__dict__.get("_ST_A")
         if st is None:
-            nA = self.flat.size
-            st = sp.csr_matrix((np.ones(nA), (self.flat, np.arange(nA))), shape=(self.N1 * self.N1, nA))
-            self._ST_A = st
+            nA = base.flat.size
+            st = sp.csr_matrix((np.ones(nA), (base.flat, np.arange(nA))), shape=(base.N1 * base.N1, nA))
+            base._ST_A = st
         return st
 
     def source_values(self, t, B):
@@ -96,8 +115,12 @@ class Column:
     unit: str
 
 
-class Circuit:
-    """An assembled, validated circuit.  Build with :func:`assemble` or ``hemocircuit.load``."""
+class CircuitStructure:
+    """What a netlist fixes and parameter values cannot change (made once, then shared by
+    every value variant of a circuit): the elements, groups and their topology, the
+    numbering of nodes, branch flows and states, the conservation laws and constraints, and
+    structural caches (the sparse nodal pattern, the incidence matrices).  Never mutated
+    after construction except to fill those caches."""
 
     def __init__(self, netlist: Netlist, elements: list[ElementData]):
         self.netlist = netlist
@@ -118,7 +141,7 @@ class Circuit:
         for e, c in zip(elements, comps):
             key = (e.cls, tuple(sorted((k, repr(v)) for k, v in e.opts.items())))
             keyed.setdefault(key, (c, []))[1].append(e)
-        self.groups = [Group(c, es) for c, es in keyed.values()]
+        self.groups = [Group(c, es, k) for k, (c, es) in enumerate(keyed.values())]
         n_branch = 0
         self.branch_names = []
         for g in self.groups:
@@ -160,30 +183,239 @@ class Circuit:
         self.state_scales = np.array(scales, dtype=float)
         self.nx = len(names)
         self._locate = {e.id: (g, i) for g in self.groups for i, e in enumerate(g.elements)}
-        self.B = 1
-        self._load_params()
+        self.schema = ParameterSchema(self.file, self.elements, [g.ids for g in self.groups])
         self._bind_constraints()
+        self._steady = None
+        self._memo = {}
+
+    def __getstate__(self):
+        return {**self.__dict__, "_memo": {}}
 
     # ------------------------------------------------------------------ parameters ----
-    def _load_params(self):
-        for g in self.groups:
-            g.p = {name: np.array([[e.values[name] for e in g.elements]], dtype=float)
-                   for name in g.comp.parameters}
+    def cached(self, key, compute):
+        """Memo of a pure function of this structure and ``key`` (the key must hold every
+        input, e.g. a ParameterSet.fingerprint()); the 64 most recent entries are kept."""
+        memo = self._memo
+        if key in memo:
+            memo[key] = memo.pop(key)  # most recent last
+        else:
+            memo[key] = compute()
+            if len(memo) > 64:
+                memo.pop(next(iter(memo)))
+        return memo[key]
+
+    def steady(self) -> "CircuitStructure":
+        """This structure with each component's ``steady_opts`` applied (for steady-state
+        solves; same topology and numbering); itself when no component has any."""
+        if not any(g.comp.steady_opts for g in self.groups):
+            return self
+        if self._steady is None:
+            s = copy.copy(self)
+            s.groups = []
+            for g in self.groups:
+                ng = copy.copy(g)
+                ng.base = ng
+                if g.comp.steady_opts:
+                    ng.comp = copy.copy(g.comp)
+                    ng.comp.opts = {**g.comp.opts, **g.comp.steady_opts}
+                s.groups.append(ng)
+            s._locate = {eid: (s.groups[g.index], i) for eid, (g, i) in self._locate.items()}
+            s.law_specs = [_remap_spec(spec, s.groups) for spec in self.law_specs]
+            s._steady = s
+            s._memo = {}
+            self._steady = s
+        return self._steady
+
+    # --------------------------------------------------------------- constraints -------
+    def _bind_constraints(self):
+        self.law_specs = []
+        specs = list(self.netlist.constraints)
+        for law in self.laws:
+            match = [c for c in specs if isinstance(c, dict) and c.get("node") in law.nodes]
+            if not match:
+                node = sorted(law.nodes)[0]
+                raise TopologyError(
+                    f"node(s) {sorted(law.nodes)} connect only through volume stores, so the stored volume "
+                    f"{law.describe()} is conserved and the operating point is undefined until it is fixed: add "
+                    f"'constraints: [{{node: {node}, volume: <total> mL}}]' or a calibration "
+                    f"'{{node: {node}, pressure: <P> mmHg, when: {{<ID.PARAM>: <value with unit>}}}}'",
+                    file=self.file, element=law.terms[0][0], node=node)
+            c = match[0]
+            specs.remove(c)
+            self.law_specs.append(self._parse_constraint(c, law))
+        for c in specs:
+            node = c.get("node") if isinstance(c, dict) else None
+            raise NetlistError(f"constraint {c!r} does not match a conservation law (only nodes connected "
+                               "exclusively through volume stores need one)", file=self.file, node=node)
+
+    def _parse_constraint(self, c, law):
+        where = {"file": self.file, "node": c.get("node")}
+        unknown = set(c) - {"node", "volume", "pressure", "when"}
+        if unknown:
+            raise NetlistError(f"unknown constraint key(s) {sorted(unknown)}", **where)
+        # the state whose equation the law replaces (and, in the DC guess, the store kept
+        # closed to anchor the group's pressure): preferably a store leading to ground
+        row = anchor = None
+        anchor_to_ground = False
+        terms = []
+        for eid, si, sign in law.terms:
+            g, i = self._locate[eid]
+            st = g.comp.storages()[si]
+            terms.append((g, i, st.volume, sign))
+            if st.state is None:
+                continue
+            m = local_node_map(self.elements[eid], g.comp)
+            to_ground = GROUND in (m[st.plus], m[st.minus])
+            if row is None or (to_ground and not anchor_to_ground):
+                row = g.sidx[i, [s.name for s in g.states].index(st.state)]
+                anchor, anchor_to_ground = (g, i), to_ground
+        try:
+            if "volume" in c:
+                return {"kind": "volume", "volume": parse_quantity(c["volume"], "mL", "constraint volume"),
+                        "terms": terms, "row": row, "law": law, "anchor": anchor}
+            if "pressure" in c:
+                when = c.get("when") or {}
+                if not isinstance(when, dict):
+                    raise NetlistError("'when' must be a mapping ID.PARAM: value", **where)
+                for k in when:
+                    self.schema.resolve(k)
+                return {"kind": "calibration", "pressure": parse_quantity(c["pressure"], "mmHg", "constraint pressure"),
+                        "node": c["node"], "when": when, "terms": terms, "row": row, "law": law, "anchor": anchor}
+        except UnitError as exc:
+            raise NetlistError(str(exc), **where) from None
+        raise NetlistError("a constraint needs 'volume' (conserved total) or 'pressure' with 'when' "
+                           "(calibration)", **where)
+    def sparse_pattern(self):
+        """The nodal matrix's CSC pattern: every element's whole local stamp block (ground
+        rows and columns dropped), with each group's scatter onto its values (g.SP_A)."""
+        pat = self.__dict__.get("_pattern")
+        if pat is None:
+            n = self.n
+            rows = np.concatenate([g.rows.reshape(-1) for g in self.groups])
+            cols = np.concatenate([g.cols.reshape(-1) for g in self.groups])
+            inside = (rows < n) & (cols < n)
+            pat = sparse_la.Pattern(n, rows[inside], cols[inside])
+            for g in self.groups:
+                r, c = g.rows.reshape(-1), g.cols.reshape(-1)
+                k = np.nonzero((r < n) & (c < n))[0]
+                g.SP_A = sp.csr_matrix((np.ones(k.size), (pat.position(r[k], c[k]), k)),
+                                       shape=(pat.nnz, r.size))
+            self._pattern = pat
+        return pat
+
+    def incidence(self):
+        """Element-level incidence matrices (structure only, cached): own (nx, elements) state ->
+        its element, unk (elements, n) element -> its nodal unknowns, infl (elements, nx) element
+        -> the states it depends on (its own, and those of elements whose observables its
+        parameter expressions read)."""
+        inc = self.__dict__.get("_incidence_cache")
+        if inc is None:
+            n, nx = self.n, self.nx
+            eidx, k = {}, 0
+            for g in self.groups:
+                for i, eid in enumerate(g.ids):
+                    eidx[eid] = k
+                    k += 1
+            ne = k
+            o_r, o_c, u_r, u_c, f_r, f_c = [], [], [], [], [], []
+            for g in self.groups:
+                e0 = eidx[g.ids[0]]
+                el = e0 + np.arange(g.E)
+                o_r.append(g.sidx.reshape(-1))
+                o_c.append(np.repeat(el, g.S))
+                ui = g.uidx.reshape(-1)
+                inside = ui < n
+                u_r.append(np.repeat(el, g.L)[inside])
+                u_c.append(ui[inside])
+                for i, _, ex in g.exprs:
+                    for ref in ex.refs.values():
+                        if ref.kind == "observable":
+                            rg, ri = self._locate[ref.element]
+                            f_r.append(np.full(rg.S, e0 + i))
+                            f_c.append(rg.sidx[ri])
+            own = sp.csr_matrix((np.ones(nx), (np.concatenate(o_r), np.concatenate(o_c))), shape=(nx, ne))
+            unk = sp.csr_matrix((np.ones(sum(a.size for a in u_r)), (np.concatenate(u_r), np.concatenate(u_c))),
+                                shape=(ne, n))
+            infl = own.T.tocsr()
+            if f_r:
+                fr, fc = np.concatenate(f_r), np.concatenate(f_c)
+                infl = infl + sp.csr_matrix((np.ones(fr.size), (fr, fc)), shape=(ne, nx))
+            inc = (own, unk, infl.tocsr(), eidx)
+            self._incidence_cache = inc
+        return inc
+
+
+def _remap_spec(spec, groups):
+    """A conservation-law spec with its group references pointing at ``groups`` (by index)."""
+    ns = dict(spec)
+    ns["terms"] = [(groups[g.index], i, vol, sign) for g, i, vol, sign in spec["terms"]]
+    ns["anchor"] = (groups[spec["anchor"][0].index], spec["anchor"][1])
+    return ns
+
+
+class Circuit:
+    """An assembled, validated, immutable circuit: a shared :class:`CircuitStructure` plus a
+    :class:`ParameterSet`.  Build with :func:`assemble` or ``hemocircuit.load``; make value
+    variants with :meth:`with_values` / :meth:`with_parameters` (and batch, member, subset,
+    with_options, steady_variant)."""
+
+    #: structural attributes, shared with the structure
+    _SHARED = ("netlist", "file", "elements", "laws", "nodes", "branch_names", "n", "state_names",
+               "state_units", "state_scales", "nx")
+    #: private caches: derived from this object's structure and values, dropped when pickled
+    _CACHES = ("_subset_cache", "_memo", "_steady", "_jac_plans", "_rep_cache")
+
+    def __init__(self, netlist: Netlist, elements: list[ElementData]):
+        structure = CircuitStructure(netlist, elements)
+        self._bind(structure, ParameterSet.from_elements(structure.schema), None)
         self._prepare()
 
+    @classmethod
+    def _of(cls, structure, parameters, threshold=None) -> "Circuit":
+        c = cls.__new__(cls)
+        c._bind(structure, parameters, threshold)
+        c._prepare()
+        return c
+
+    def _bind(self, structure, parameters, threshold):
+        """Attach the structure and the values (groups bound to this set's arrays)."""
+        if parameters.schema is not structure.schema:
+            raise HemocircuitError("these parameters belong to another circuit structure")
+        self.structure = structure
+        for a in self._SHARED:
+            setattr(self, a, getattr(structure, a))
+        self.parameters = parameters
+        self.B = parameters.B
+        self._threshold = threshold
+        self.groups = [t.bound(parameters.group_arrays(k), parameters.group_waves(k))
+                       for k, t in enumerate(structure.groups)]
+        self._locate = {eid: (self.groups[g.index], i) for eid, (g, i) in structure._locate.items()}
+        self.law_specs = [_remap_spec(s, self.groups) for s in structure.law_specs]
+        self._subset_cache, self._memo, self._steady = {}, {}, None
+
+    def __getstate__(self):
+        state = dict(self.__dict__)
+        for k in self._CACHES:
+            state.pop(k, None)
+        return state
+
+    def __setstate__(self, state):
+        self.__dict__.update(state)
+        self._subset_cache, self._memo, self._steady = {}, {}, None
+        self._jac_plans, self._rep_cache = {}, {}
+
     def _prepare(self):
-        """Rebuild everything that depends only on parameters (called after any change).
+        """Everything that depends only on the structure and the values (once per object).
 
         Groups whose stamps depend neither on states nor on time ("static": resistors,
         constant sources) are stamped here once, into A_const and b_const, and skipped by
         every right-hand-side evaluation.
         """
         N1 = self.n + 1
-        self.__dict__.pop("_subset_cache", None)  # subset views hold the old parameters
         self._jac_plans = {}  # Jacobian sparsity patterns (sparse path) for these parameters
         sparse = self.sparse
         # dense path: the flattened (n+1)^2 matrix; sparse path: its values on the CSC pattern
-        self.A_const = np.zeros((self.B, self._sparse_pattern().nnz if sparse else N1 * N1))
+        self.A_const = np.zeros((self.B, self.structure.sparse_pattern().nnz if sparse else N1 * N1))
         self.b_const = np.zeros((self.B, N1))
         self.all_constant = True
         self.dynamic_groups = []
@@ -217,41 +449,22 @@ class Circuit:
 
     # ------------------------------------------------------------- sparse path ---------
     #: the sparse path (splu factorisations, coloured sparse Jacobians) is taken when the
-    #: nodal system has more unknowns than this; change it with set_sparse_threshold
+    #: nodal system has more unknowns than this; a circuit with another threshold:
+    #: with_sparse_threshold
     sparse_threshold = sparse_la.SPARSE_MIN_UNKNOWNS
 
     @property
     def sparse(self) -> bool:
-        """True when this circuit runs on the sparse path (n > sparse_threshold)."""
-        return self.n > self.sparse_threshold
+        """True when this circuit runs on the sparse path (n > its sparse threshold)."""
+        return self.n > (self.sparse_threshold if self._threshold is None else self._threshold)
 
-    def set_sparse_threshold(self, n_unknowns):
-        """Take the sparse path above ``n_unknowns`` nodal unknowns (None: the default,
-        ``hemocircuit.sparse.SPARSE_MIN_UNKNOWNS``; 0 forces it, a huge number forbids it)."""
-        if n_unknowns is None:
-            self.__dict__.pop("sparse_threshold", None)
-        else:
-            self.sparse_threshold = int(n_unknowns)
-        self._prepare()
-        return self
+    def with_sparse_threshold(self, n_unknowns) -> "Circuit":
+        """This circuit taking the sparse path above ``n_unknowns`` nodal unknowns (None: the
+        default, ``hemocircuit.sparse.SPARSE_MIN_UNKNOWNS``; 0 forces it, a huge number forbids it)."""
+        return Circuit._of(self.structure, self.parameters, None if n_unknowns is None else int(n_unknowns))
 
     def _sparse_pattern(self):
-        """The nodal matrix's CSC pattern: every element's whole local stamp block (ground
-        rows and columns dropped), with each group's scatter onto its values (g.SP_A)."""
-        pat = self.__dict__.get("_pattern")
-        if pat is None:
-            n = self.n
-            rows = np.concatenate([g.rows.reshape(-1) for g in self.groups])
-            cols = np.concatenate([g.cols.reshape(-1) for g in self.groups])
-            inside = (rows < n) & (cols < n)
-            pat = sparse_la.Pattern(n, rows[inside], cols[inside])
-            for g in self.groups:
-                r, c = g.rows.reshape(-1), g.cols.reshape(-1)
-                k = np.nonzero((r < n) & (c < n))[0]
-                g.SP_A = sp.csr_matrix((np.ones(k.size), (pat.position(r[k], c[k]), k)),
-                                       shape=(pat.nnz, r.size))
-            self._pattern = pat
-        return pat
+        return self.structure.sparse_pattern()
 
     def _outputs_sparse(self, t, x):
         """outputs() for large circuits: the same columns, in the same order, filled group by
@@ -315,7 +528,7 @@ class Circuit:
         return {k: M[r] for r, k in enumerate(keys)}
 
     def _scatter_A(self, g):
-        return g.SP_A if self.sparse else g.ST_A
+        return g.base.SP_A if self.sparse else g.ST_A
 
     def _factor_const(self):
         """Factorisations of the constant nodal matrix (per member), solved through the explicit
@@ -341,10 +554,7 @@ class Circuit:
         return np.repeat(arr, Bx // arr.shape[0], axis=0)
 
     # --- public services for analyses (they use these, never the private helpers) -----
-    def prepare(self):
-        """Rebuild the parameter-dependent caches after ``set_param(..., prepare=False)``."""
-        self._prepare()
-
+    # --- public services for analyses (they use these, never the private helpers) -----
     def group_params(self, rows=None):
         """Per-group parameter dicts laid out for ``rows`` state rows (a multiple of the batch
         size B; default B)."""
@@ -361,82 +571,56 @@ class Circuit:
         A, b, stamps = self._assemble(t, X, plist, dc=True)
         return self._solve(A, b), plist, stamps
 
+    def nodal_matrix(self, t, X):
+        """The nodal matrix A (Bx, n, n) of A u = b at states X (Bx, nx) (dense path; for
+        hemocircuit.derivatives)."""
+        X = np.atleast_2d(np.asarray(X, dtype=float))
+        Bx, n, N1 = X.shape[0], self.n, self.n + 1
+        if self.sparse:
+            raise HemocircuitError("nodal_matrix: this circuit runs on the sparse path")
+        if self.all_constant:
+            A = self._rep(self.A_const, Bx).reshape(-1, N1, N1)[:, :n, :n]
+            return np.broadcast_to(A, (Bx, n, n))
+        A, _, _ = self._assemble(t, X, self._bound_params(X, self._params_for(Bx), t))
+        return A
+
     def param_path(self, path: str):
         """Split 'ID.PARAM' and check it names a parameter.  Returns (element data, group, index, name)."""
-        if not isinstance(path, str) or "." not in path:
-            raise NetlistError(f"parameter path {path!r} must be ID.PARAM", file=self.file)
-        eid, name = path.split(".", 1)
-        if eid not in self.elements:
-            raise NetlistError(f"no element '{eid}' (elements: {sorted(self.elements)})", file=self.file,
-                               element=eid)
-        e = self.elements[eid]
-        g, i = self._locate[eid]
-        if name not in e.cls.parameters:
-            if name in e.cls.options:
-                raise NetlistError(f"'{name}' is a structural option; change it with Circuit.with_options "
-                                   "(or in the netlist / protocol 'initial')", file=e.file, element=eid)
-            raise NetlistError(f"no parameter '{name}'; '{e.cls.type_name}' has {sorted(e.cls.parameters)}",
-                               file=e.file, element=eid)
-        return e, g, i, name
+        e, gi, i, name = self.structure.schema.resolve(path)
+        return e, self.groups[gi], i, name
 
     def param_unit(self, path):
-        e, _, _, name = self.param_path(path)
-        return e.cls.parameters[name].unit
+        return self.parameters.unit(path)
 
-    def get_param(self, path):
-        """Current value(s) of ID.PARAM in its declared unit, shape (B,)."""
-        e, g, i, name = self.param_path(path)
-        if name in e.expressions:
-            raise NetlistError(f"'{name}' follows the expression '{e.expressions[name].text}': it has no fixed "
-                               "value (it is evaluated from the states; see the outputs)", file=e.file, element=e.id)
-        return np.broadcast_to(g.p[name][:, i], (self.B,)).copy()
+    @property
+    def law_totals(self):
+        """Conserved totals the constraints give directly (a 'volume' constraint; shape (1,)),
+        None for a calibration (computed by the operating point)."""
+        return [np.full(1, s["volume"]) if s["kind"] == "volume" else None for s in self.law_specs]
 
-    def set_param(self, path, value, prepare=True):
-        """Set ID.PARAM to ``value`` (quantity string with unit, or number in the declared unit,
-        or an array of B numbers for a batch).  Checked against the parameter's bounds."""
-        e, g, i, name = self.param_path(path)
-        par = e.cls.parameters[name]
-        if isinstance(value, (str, dict)):
-            if isinstance(value, dict):
-                from .waveforms import Constant, parse_waveform
-                wf = parse_waveform(value, par.unit, None, {"file": e.file, "element": e.id})
-                g.waves = [w for w in g.waves if not (w[0] == i and w[1] == name)]
-                if not isinstance(wf, Constant):
-                    g.waves.append((i, name, wf))
-                    g.time_dependent = True
-                    value = 0.0
-                else:
-                    value = wf.value
-            else:
-                try:
-                    value = parse_quantity(value, par.unit, f"{path}")
-                except UnitError as exc:
-                    raise NetlistError(str(exc), file=e.file, element=e.id) from None
-                g.waves = [w for w in g.waves if not (w[0] == i and w[1] == name)]
-        elif hasattr(value, "to"):
-            value = float(value.to(par.unit).magnitude)
-        arr = np.asarray(value, dtype=float)
-        check_values(e, {name: arr})
-        if name in e.expressions:
-            raise NetlistError(f"'{name}' follows an expression ({e.expressions[name].text}); it cannot be set",
-                               file=e.file, element=e.id)
-        cur = g.p[name]
-        if arr.ndim == 0:
-            cur = cur.copy()
-            cur[:, i] = arr
-        else:
-            if arr.shape != (self.B,):
-                raise HemocircuitError(f"{path}: expected {self.B} values for the batch, got shape {arr.shape}")
-            cur = np.repeat(cur, self.B, axis=0) if cur.shape[0] == 1 else cur.copy()
-            cur[:, i] = arr
-        g.p[name] = cur
-        if prepare:
-            self._prepare()
+    def cached(self, key, compute):
+        """A value derived from this circuit alone (structure and values), computed once per
+        circuit object by ``compute()`` and kept under ``key`` (e.g. the operating point's
+        calibrated conserved totals).  Circuits are immutable, so it never goes stale."""
+        if key not in self._memo:
+            self._memo[key] = compute()
+        return self._memo[key]
 
-    def set_params(self, assignments: dict):
-        for k, v in assignments.items():
-            self.set_param(k, v, prepare=False)
-        self._prepare()
+    # ------------------------------------------------------------ value variants -------
+    def with_parameters(self, parameters: ParameterSet) -> "Circuit":
+        """This circuit's structure with the values ``parameters`` (a set of this structure)."""
+        if parameters is self.parameters:
+            return self
+        return Circuit._of(self.structure, parameters, self._threshold)
+
+    def with_values(self, mapping: dict) -> "Circuit":
+        """A new circuit with ``{ID.PARAM: value}`` applied (see ParameterSet.with_values: a
+        number in the declared unit, a quantity string '5 s', a pint quantity, a waveform
+        mapping, or an array of B numbers).  Checked against the bounds; this circuit is
+        unchanged."""
+        if not mapping:
+            return self
+        return self.with_parameters(self.parameters.with_values(mapping))
 
     def with_options(self, changes: dict) -> "Circuit":
         """A re-assembled circuit with structural options changed ({ID.OPTION: value}).
@@ -444,8 +628,8 @@ class Circuit:
         A structural option changes the equations (states, nodes), not the numbers: every
         numeric value this circuit holds is kept, on the elements whose options change as on
         the others - the netlist's values, and every value changed since assembly (``--set``,
-        :meth:`set_param`, a protocol's ``initial``, a batch's per-member values), waveforms
-        set with ``set_param`` included.  Parameters that follow an expression are
+        :meth:`with_values`, a protocol's ``initial``, a batch's per-member values), waveforms
+        set with ``with_values`` included.  Parameters that follow an expression are
         re-evaluated in the new circuit, not copied.
 
         Options that change an element's *defaults* (the arteriole's ``preset``, a named
@@ -456,6 +640,8 @@ class Circuit:
         value set to exactly the old preset's number follows the new preset like an untouched
         one.
         """
+        if not changes:
+            return self
         nl = copy.deepcopy(self.netlist)
         for path, v in changes.items():
             eid, _, name = path.partition(".")
@@ -465,93 +651,74 @@ class Circuit:
                 raise NetlistError(f"no element '{eid}' (elements: {sorted(self.elements)})", file=self.file,
                                    element=eid) from None
         new = assemble(nl)
+        if self._threshold is not None:
+            new = new.with_sparse_threshold(self._threshold)
         if self.B > 1:
             new = new.batch(self.B)
         # The new assembly reproduces the netlist's values and the (possibly new) defaults;
         # on top of them, carry every value (and waveform) changed on this circuit since its
         # assembly.
+        schema, ps = new.structure.schema, new.parameters
+        updates = []
         for g in self.groups:
             waves = {(i, name): wf for i, name, wf in g.waves}
             for i, eid in enumerate(g.ids):
                 e, ne = self.elements[eid], new.elements[eid]
-                ng, ni = new._locate[eid]
+                ngi, ni = schema.locate[eid]
                 for name, arr in g.p.items():
-                    if name in e.expressions or name in ne.expressions or name not in ng.p:
+                    if name in e.expressions or name in ne.expressions or name not in ps.group_arrays(ngi):
                         continue
                     wf = waves.get((i, name))
                     if np.all(arr[:, i] == e.values[name]) and wf is e.waveforms.get(name):
                         continue  # as assembled: the new assembly has the right value
-                    ng.p[name] = np.array(np.broadcast_to(ng.p[name], (max(ng.p[name].shape[0], arr.shape[0]),
-                                                                       ng.E)))
-                    ng.p[name][:, ni] = arr[:, i]
-                    ng.waves = [w for w in ng.waves if not (w[0] == ni and w[1] == name)]
-                    if wf is not None:
-                        ng.waves.append((ni, name, wf))
-                    ng.time_dependent = ng.comp.time_dependent or bool(ng.waves)
-        new._prepare()
-        return new
+                    updates.append((ngi, ni, name, arr[:, i], wf))
+        return new.with_parameters(ps._with_columns(updates)) if updates else new
 
     def steady_variant(self) -> "Circuit":
-        """This circuit with each component's ``steady_opts`` applied (for steady-state solves)."""
-        if not any(g.comp.steady_opts for g in self.groups):
-            return self
-        c = self.copy()
-        for g in c.groups:
-            if g.comp.steady_opts:
-                g.comp = copy.copy(g.comp)
-                g.comp.opts = {**g.comp.opts, **g.comp.steady_opts}
-        return c
-
-    def copy(self) -> "Circuit":
-        return copy.deepcopy(self)
+        """This circuit with each component's ``steady_opts`` applied (for steady-state solves:
+        log compliances continued below their domain, clamps off); same values.  Itself when
+        no component has steady options."""
+        if self._steady is None:
+            s = self.structure.steady()
+            self._steady = self if s is self.structure else Circuit._of(s, self.parameters, self._threshold)
+        return self._steady
 
     def batch(self, B: int) -> "Circuit":
-        """A copy whose parameter arrays are repeated to a batch of B sets (set members with set_param)."""
-        c = self.copy()
-        c.B = B
-        for g in c.groups:
-            g.p = {k: np.repeat(v[:1], B, axis=0) if v.shape[0] == 1 else v for k, v in g.p.items()}
-        c._prepare()
-        return c
+        """This single circuit as a batch of B identical members (vary them with
+        :meth:`with_values` and arrays of B values)."""
+        if self.B != 1:
+            if B == self.B:
+                return self
+            raise HemocircuitError(f"batch({B}) of a circuit that already has {self.B} members; "
+                                   "use subset() or parameters[...] to choose members")
+        return self.with_parameters(self.parameters[np.zeros(int(B), dtype=int)])
 
     def subset(self, members) -> "Circuit":
-        """A cheap view of batch members ``members`` (shares structure, slices parameters).
+        """Batch members ``members`` as a circuit (shares the structure, slices the values and
+        the prepared matrices; kept in a private cache, so asking again is free).
 
         Used inside batch integration, where members finish at different times."""
-        members = np.asarray(members)
+        members = np.asarray(members, dtype=int).reshape(-1)
         if self.B == 1:
             return self
         if len(members) == self.B and np.all(members == np.arange(self.B)):
             return self
         key = members.tobytes()
-        cache = self.__dict__.setdefault("_subset_cache", {})
+        cache = self._subset_cache
         if key in cache:
             return cache[key]
-        c = copy.copy(self)
-        c.__dict__.pop("_subset_cache", None)
-        c.groups = []
-        for g in self.groups:
-            ng = copy.copy(g)
-            ng.p = {k: (v[members] if v.shape[0] > 1 else v) for k, v in g.p.items()}
-            c.groups.append(ng)
-        remap = {id(g): ng for g, ng in zip(self.groups, c.groups)}
-        c._locate = {eid: (remap[id(g)], i) for eid, (g, i) in self._locate.items()}
-        # conservation-law specs hold group references: point them at the new groups
-        c.law_specs = []
-        for spec in self.law_specs:
-            ns = dict(spec)
-            ns["terms"] = [(remap[id(g)], i, vol, sign) for g, i, vol, sign in spec["terms"]]
-            ns["anchor"] = (remap[id(spec["anchor"][0])], spec["anchor"][1])
-            c.law_specs.append(ns)
-        c.B = len(members)
+        c = Circuit.__new__(Circuit)
+        c._bind(self.structure, self.parameters[members], self._threshold)
+        for ng, g in zip(c.groups, self.groups):  # prepared from the whole batch: same flags
+            ng.static = g.static
+        c.all_constant = self.all_constant
+        c.dynamic_groups = [c.groups[g.index] for g in self.dynamic_groups]
         c.A_const = self.A_const[members] if self.A_const.shape[0] > 1 else self.A_const
         c.b_const = self.b_const[members] if self.b_const.shape[0] > 1 else self.b_const
         c._Ainv = None if self._Ainv is None else (self._Ainv[members] if self._Ainv.shape[0] > 1 else self._Ainv)
         c._lu = self._lu.subset(members)
         c._jac_plans = {}
         c._rep_cache = {}
-        c.law_totals = [None if v is None else np.atleast_1d(v)[members] if np.size(v) > 1 else v
-                        for v in self.law_totals]
         if len(cache) > 256:
             cache.pop(next(iter(cache)))
         cache[key] = c
@@ -559,12 +726,9 @@ class Circuit:
 
     def member(self, k: int) -> "Circuit":
         """Batch member k as a single circuit."""
-        c = self.copy()
-        for g in c.groups:
-            g.p = {n: v[k:k + 1] if v.shape[0] > 1 else v for n, v in g.p.items()}
-        c.B = 1
-        c._prepare()
-        return c
+        if self.B == 1 and k in (0, -1):
+            return self
+        return self.with_parameters(self.parameters[k])
 
     def _params(self, rep):
         """Parameter dicts for a stacked batch in which each member appears ``rep`` times."""
@@ -574,70 +738,6 @@ class Circuit:
             self._rep_cache[rep] = [{k: (np.repeat(v, rep, axis=0) if v.shape[0] > 1 else v) for k, v in g.p.items()}
                                     for g in self.groups]
         return self._rep_cache[rep]
-
-    # --------------------------------------------------------------- constraints -------
-    def _bind_constraints(self):
-        self.law_specs = []
-        specs = list(self.netlist.constraints)
-        for law in self.laws:
-            match = [c for c in specs if isinstance(c, dict) and c.get("node") in law.nodes]
-            if not match:
-                node = sorted(law.nodes)[0]
-                raise TopologyError(
-                    f"node(s) {sorted(law.nodes)} connect only through volume stores, so the stored volume "
-                    f"{law.describe()} is conserved and the operating point is undefined until it is fixed: add "
-                    f"'constraints: [{{node: {node}, volume: <total> mL}}]' or a calibration "
-                    f"'{{node: {node}, pressure: <P> mmHg, when: {{<ID.PARAM>: <value with unit>}}}}'",
-                    file=self.file, element=law.terms[0][0], node=node)
-            c = match[0]
-            specs.remove(c)
-            self.law_specs.append(self._parse_constraint(c, law))
-        for c in specs:
-            node = c.get("node") if isinstance(c, dict) else None
-            raise NetlistError(f"constraint {c!r} does not match a conservation law (only nodes connected "
-                               "exclusively through volume stores need one)", file=self.file, node=node)
-        self.law_totals = [None] * len(self.law_specs)
-        for k, s in enumerate(self.law_specs):
-            if s["kind"] == "volume":
-                self.law_totals[k] = np.full(self.B, s["volume"])
-
-    def _parse_constraint(self, c, law):
-        where = {"file": self.file, "node": c.get("node")}
-        unknown = set(c) - {"node", "volume", "pressure", "when"}
-        if unknown:
-            raise NetlistError(f"unknown constraint key(s) {sorted(unknown)}", **where)
-        # the state whose equation the law replaces (and, in the DC guess, the store kept
-        # closed to anchor the group's pressure): preferably a store leading to ground
-        row = anchor = None
-        anchor_to_ground = False
-        terms = []
-        for eid, si, sign in law.terms:
-            g, i = self._locate[eid]
-            st = g.comp.storages()[si]
-            terms.append((g, i, st.volume, sign))
-            if st.state is None:
-                continue
-            m = local_node_map(self.elements[eid], g.comp)
-            to_ground = GROUND in (m[st.plus], m[st.minus])
-            if row is None or (to_ground and not anchor_to_ground):
-                row = g.sidx[i, [s.name for s in g.states].index(st.state)]
-                anchor, anchor_to_ground = (g, i), to_ground
-        try:
-            if "volume" in c:
-                return {"kind": "volume", "volume": parse_quantity(c["volume"], "mL", "constraint volume"),
-                        "terms": terms, "row": row, "law": law, "anchor": anchor}
-            if "pressure" in c:
-                when = c.get("when") or {}
-                if not isinstance(when, dict):
-                    raise NetlistError("'when' must be a mapping ID.PARAM: value", **where)
-                for k in when:
-                    self.param_path(k)
-                return {"kind": "calibration", "pressure": parse_quantity(c["pressure"], "mmHg", "constraint pressure"),
-                        "node": c["node"], "when": when, "terms": terms, "row": row, "law": law, "anchor": anchor}
-        except UnitError as exc:
-            raise NetlistError(str(exc), **where) from None
-        raise NetlistError("a constraint needs 'volume' (conserved total) or 'pressure' with 'when' "
-                           "(calibration)", **where)
 
     def law_volumes(self, x):
         """Conserved combinations sum(sign * V) for states x (B', nx) -> list of (B',) arrays."""
@@ -877,7 +977,7 @@ class Circuit:
         nodal matrix is structurally singular): finite differences at X in column blocks.
         """
         key = (key, how, tuple(tuple(sorted((k, repr(v)) for k, v in g.comp.opts.items())) for g in self.groups))
-        plans = self.__dict__.setdefault("_jac_plans", {})
+        plans = self._jac_plans
         if key not in plans:
             X = np.atleast_2d(np.asarray(X, dtype=float))
             rc = self._structural_pattern(t, X, row_reads) if how != "numerical" else None
@@ -889,47 +989,6 @@ class Circuit:
                 plans[key] = sparse_la.JacobianPlan(self.nx, np.concatenate([rc[0], diag]),
                                                     np.concatenate([rc[1], diag]), "structural")
         return plans[key]
-
-    def _incidence(self):
-        """Element-level incidence matrices (structure only, cached): own (nx, elements) state ->
-        its element, unk (elements, n) element -> its nodal unknowns, infl (elements, nx) element
-        -> the states it depends on (its own, and those of elements whose observables its
-        parameter expressions read)."""
-        inc = self.__dict__.get("_incidence_cache")
-        if inc is None:
-            n, nx = self.n, self.nx
-            eidx, k = {}, 0
-            for g in self.groups:
-                for i, eid in enumerate(g.ids):
-                    eidx[eid] = k
-                    k += 1
-            ne = k
-            o_r, o_c, u_r, u_c, f_r, f_c = [], [], [], [], [], []
-            for g in self.groups:
-                e0 = eidx[g.ids[0]]
-                el = e0 + np.arange(g.E)
-                o_r.append(g.sidx.reshape(-1))
-                o_c.append(np.repeat(el, g.S))
-                ui = g.uidx.reshape(-1)
-                inside = ui < n
-                u_r.append(np.repeat(el, g.L)[inside])
-                u_c.append(ui[inside])
-                for i, _, ex in g.exprs:
-                    for ref in ex.refs.values():
-                        if ref.kind == "observable":
-                            rg, ri = self._locate[ref.element]
-                            f_r.append(np.full(rg.S, e0 + i))
-                            f_c.append(rg.sidx[ri])
-            own = sp.csr_matrix((np.ones(nx), (np.concatenate(o_r), np.concatenate(o_c))), shape=(nx, ne))
-            unk = sp.csr_matrix((np.ones(sum(a.size for a in u_r)), (np.concatenate(u_r), np.concatenate(u_c))),
-                                shape=(ne, n))
-            infl = own.T.tocsr()
-            if f_r:
-                fr, fc = np.concatenate(f_r), np.concatenate(f_c)
-                infl = infl + sp.csr_matrix((np.ones(fr.size), (fr, fc)), shape=(ne, nx))
-            inc = (own, unk, infl.tocsr(), eidx)
-            self._incidence_cache = inc
-        return inc
 
     def _structural_pattern(self, t, X, row_reads=None):
         """(rows, cols) of the structural Jacobian pattern (see jacobian_plan) or None."""
@@ -954,7 +1013,7 @@ class Circuit:
         r, c = np.concatenate(rows), np.concatenate(cols)
         inside = (r < n) & (c < n)
         S = sp.csr_matrix((np.ones(int(inside.sum())), (r[inside], c[inside])), shape=(n, n))
-        own, unk, infl, eidx = self._incidence()
+        own, unk, infl, eidx = self.structure.incidence()
         read = own @ unk  # (nx, n)
         infl_rows = unk.T @ infl  # (n, nx)
         direct = own @ infl  # (nx, nx)
@@ -1085,12 +1144,9 @@ def assemble(netlist: Netlist) -> Circuit:
     return c
 
 
-def load(path: str, set_params: dict | None = None) -> Circuit:
+def load(path: str, values: dict | None = None) -> Circuit:
     """Load, validate and assemble a netlist file; optionally apply {ID.PARAM: value}."""
-    c = assemble(load_netlist(path))
-    if set_params:
-        c.set_params(set_params)
-    return c
+    return assemble(load_netlist(path)).with_values(values or {})
 
 
 # the common analyses as methods (c.simulate(), c.operating_point(), ...)

@@ -8,9 +8,9 @@ exit with status 2; they never show a traceback.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 
-from . import io
 from .errors import HemocircuitError
 
 
@@ -55,7 +55,7 @@ def load_circuit(netlist, sets=None, protocol=None):
     opts = {k: v for k, v in sets.items() if _is_option(c, k)}
     if opts:
         c = c.with_options({k: _option_literal(v) for k, v in opts.items()})
-    c.set_params({k: v for k, v in sets.items() if k not in opts})
+    c = c.with_values({k: v for k, v in sets.items() if k not in opts})
     proto = None
     if protocol:
         proto = Protocol.load(str(protocol), c)
@@ -94,38 +94,108 @@ def cmd_check(args):
     print("ok: the netlist is valid" + (" and so is the protocol" if proto else ""))
 
 
+def record(args, res):
+    """Add this invocation's provenance (command line, --set, --protocol) to a result."""
+    from .provenance import add_invocation
+    netlists = getattr(args, "netlists", None) or [getattr(args, "netlist", None)]
+    add_invocation(res.metadata, getattr(args, "argv", sys.argv[1:]), _sets(getattr(args, "set", None)),
+                   getattr(args, "protocol", None), netlists=[n for n in netlists if n])
+    return res
+
+
+def save_outputs(args, res, plot=None):
+    """Compute and print ``--measure`` (saved in ``metadata['measures']``), then write ``--out``
+    (the result, with provenance) and ``--plot`` (``plot(path)``, default ``res.plot``); both
+    files were checked before the computation (:func:`_check_outputs`)."""
+    apply_measures(args, res)
+    record(args, res)
+    if getattr(args, "out", None):
+        print(f"wrote {res.save(args.out)}")
+    if getattr(args, "plot", None):
+        (plot or (lambda path: res.plot(path, select=getattr(args, "show", None))))(args.plot)
+        print(f"wrote {args.plot}")
+
+
+def apply_measures(args, res):
+    """``--measure SPEC`` (repeatable): :mod:`hemocircuit.measures`, printed and stored."""
+    specs = getattr(args, "measure", None)
+    if not specs:
+        return
+    from .measures import measure_all
+    for line in measure_all(res, specs):
+        print(line)
+
+
+def computed(args, compute):
+    """The command's result: ``compute(args, sets)`` on the netlist with ``--set`` applied, or,
+    with ``--grid``, every member of the grid run in parallel and stacked into one result
+    (:mod:`hemocircuit.grid`)."""
+    sets = _sets(getattr(args, "set", None))
+    if not getattr(args, "grid", None):
+        return compute(args, sets)
+    from . import grid
+    first = getattr(args, "netlist", None) or args.netlists[0]
+    circuit, _ = load_circuit(first, sets, getattr(args, "protocol", None))
+    return grid.run(compute, args, circuit, sets, workers=getattr(args, "workers", None))
+
+
+def report_grid(args, res, show=None):
+    """What every command prints for a --grid result: the table (grid columns first), the
+    failed members, then --measure, --out and --plot."""
+    if show:
+        show = [k for k in show if k in res.data]
+    print(res.summary(show=getattr(args, "show", None) or show or None, max_rows=24, where=getattr(args, "out", None)))
+    for where, why in res.metadata.get("failed", []):
+        print(f"failed: {where}: {why}", file=sys.stderr)
+    save_outputs(args, res)
+
+
+def partial_path(path):
+    """'run.csv' -> 'run.partial.csv': where a failed run's computed part goes."""
+    stem, ext = os.path.splitext(path)
+    return f"{stem}.partial{ext or '.csv'}"
+
+
+def compute_op(args, sets):
+    """One --grid member (:func:`computed`)."""
+    c, _ = load_circuit(args.netlist, sets, args.protocol)
+    return c.operating_point()
+
+
 def cmd_op(args):
-    c, _ = _load(args)
-    op = c.operating_point()
-    flat = op.as_flat_dict()
-    width = max(len(k) for k in flat)
-    for k, v in flat.items():
-        print(f"{k:<{width}}  {v:.8g}")
-    if args.out:
-        io.write_json(args.out, flat)
-        print(f"wrote {args.out}")
+    if args.plot and not args.grid:
+        raise HemocircuitError("op --plot: an operating point is one steady state, nothing to plot; "
+                               "use 'dc --sweep ... --plot' for curves, or op --grid ... --plot")
+    if args.grid:
+        return report_grid(args, computed(args, compute_op))
+    op = _load(args)[0].operating_point()
+    print(op.summary(show=args.show))
+    save_outputs(args, op)
+
+
+def _dc(args, c):
+    param, rng = args.sweep.split("=", 1)
+    return c.dc_sweep(param.strip(), _range_spacing(rng))
+
+
+def compute_dc(args, sets):
+    """One --grid member (:func:`computed`)."""
+    return _dc(args, load_circuit(args.netlist, sets, args.protocol)[0])
 
 
 def cmd_dc(args):
-    c, _ = _load(args)
     if not args.sweep or "=" not in args.sweep:
         raise HemocircuitError("dc needs --sweep ID.PARAM=START:STOP:STEP UNIT (e.g. Pa.value=20:200:5mmHg)")
-    param, rng = args.sweep.split("=", 1)
-    res = c.dc_sweep(param.strip(), _range_spacing(rng))
-    cols = {k: v for k, v in res.items() if k != param.strip()}
+    param = args.sweep.split("=", 1)[0].strip()
+    res = computed(args, compute_dc) if args.grid else _dc(args, _load(args)[0])
+    cols = res.columns
     show = args.show or [k for k in cols if k.startswith("Q(")][:1] + [k for k in cols if k.startswith("P(")][:3]
-    print("  ".join(f"{h:>14}" for h in [io.labelled(param, res.units)] + [io.labelled(s, res.units) for s in show]))
-    for i in range(len(res[param.strip()])):
-        print("  ".join(f"{v:>14.6g}" for v in [res[param.strip()][i]] + [cols[s][i] for s in show]))
+    if args.grid:
+        return report_grid(args, res, show)
+    print(res.summary(show=show, max_rows=0, where=args.out))
     for v, why in res.failed:
         print(f"failed at {param}={v:g}: {why}", file=sys.stderr)
-    if args.out:
-        io.write_csv(args.out, cols, res.units, first=(param.strip(), res[param.strip()], res.units[param.strip()]))
-        print(f"wrote {args.out}")
-    if args.plot:
-        io.plot_series(args.plot, res[param.strip()], io.labelled(param.strip(), res.units), cols, res.units,
-                       title=f"{c.netlist.name}: DC sweep", select=args.show)
-        print(f"wrote {args.plot}")
+    save_outputs(args, res)
 
 
 def _range_spacing(r):
@@ -133,28 +203,94 @@ def _range_spacing(r):
     return re.sub(r"(\d)([A-Za-z])", r"\1 \2", r, count=1)
 
 
-def cmd_tran(args):
-    c, proto = _load(args, uses_events=True)
+def compute_tran(args, sets):
+    """One run (a --grid member, :func:`computed`)."""
+    c, proto = load_circuit(args.netlist, sets, args.protocol)
     t_end = float(_unit_to(args.t_end, "s")) if args.t_end else None
     dt = float(_unit_to(args.dt, "s")) if args.dt else None
     ic = _assignments(args.ic, "--ic", "ID.STATE=VALUE", "Cv.V=20mL")
-    res = c.simulate(t_end, dt=dt, protocol=events_only(proto), method=args.method, ic=ic)
+    return c.simulate(t_end, dt=dt, protocol=events_only(proto), method=args.method, ic=ic)
+
+
+def cmd_tran(args):
+    from .errors import SolverError
+
+    if args.grid:
+        return report_grid(args, computed(args, compute_tran))
+    try:
+        res = compute_tran(args, _sets(args.set))
+    except SolverError as exc:
+        part = exc.partial
+        if args.out and part is not None and part.n_rows:
+            record(args, part)
+            path = part.save(partial_path(args.out))
+            print(f"error: {exc}", file=sys.stderr)
+            print(f"the part computed (t = {part.t[0]:g} .. {part.t[-1]:g} s, {part.n_rows} points) is in "
+                  f"{path}, marked partial", file=sys.stderr)
+            raise _Reported() from None
+        raise
     print(f"{len(res.t)} points, t = {res.t[0]:g} .. {res.t[-1]:g} s; solver {res.stats}")
-    last = {k: v[-1] for k, v in res.columns.items()}
-    for k in (args.show or list(last)[:12]):
-        print(f"  {io.labelled(k, res.units)} at end: {last[k]:.6g}")
-    if args.out:
-        io.write_csv(args.out, res.columns, res.units, first=("time", res.t, "s"))
-        print(f"wrote {args.out}")
-    if args.plot:
-        io.plot_series(args.plot, res.t, "time [s]", res.columns, res.units, title=c.netlist.name, select=args.show)
-        print(f"wrote {args.plot}")
+    names = args.show or list(res.columns)[:12]
+    res.check_columns(names)
+    for k in names:
+        print(f"  {res.label(k)} at end: {res[k][-1]:.6g}")
+    if len(names) < len(res.columns):
+        print(f"  (showing {len(names)} of {len(res.columns)} columns; "
+              + (f"all in {args.out})" if args.out else "all with --out FILE.csv)"))
+    save_outputs(args, res)
+
+
+class _Reported(HemocircuitError):
+    """An error already reported on stderr (exit status 2, nothing more printed)."""
 
 
 def _unit_to(text, unit):
     from .units import parse_quantity
     return parse_quantity(_unit_spacing(str(text)) if not str(text).replace(".", "").isdigit() else f"{text} {unit}",
                           unit)
+
+
+def cmd_show(args):
+    """Reload a result file: its provenance, a summary, optionally a plot or a re-run."""
+    from .provenance import command_of, describe
+    from .results import Result
+
+    res = Result.load(args.result)
+    print(describe(res.metadata))
+    print(f"{res.n_rows} rows x {len(res)} columns; index {res.index}")
+    print(res.summary(show=args.show, where=args.result))
+    if args.plot:
+        res.plot(args.plot, select=args.show)
+        print(f"wrote {args.plot}")
+    if args.rerun:
+        argv, cwd = command_of(res.metadata)
+        if not argv:
+            raise HemocircuitError(f"{args.result}: no command line in its provenance (written by the API?)")
+        new = _rerun_argv(argv, os.path.abspath(args.rerun))
+        print("re-running: hemocircuit " + " ".join(new) + (f"  (in {cwd})" if cwd else ""))
+        here = os.getcwd()
+        try:
+            if cwd:
+                os.chdir(cwd)
+            return main(new)
+        finally:
+            os.chdir(here)
+    return 0
+
+
+def _rerun_argv(argv, out):
+    """The stored command line with --out replaced by ``out`` and plot outputs dropped."""
+    new, skip = [], False
+    for a in argv:
+        if skip:
+            skip = False
+            continue
+        key = a.split("=", 1)[0]
+        if key in ("--out", "--plot", "--phase-plot"):
+            skip = "=" not in a
+            continue
+        new.append(a)
+    return new + ["--out", out]
 
 
 def cmd_graph(args):
@@ -165,13 +301,24 @@ def cmd_graph(args):
     print(f"wrote {out}")
 
 
-def build_parser():
-    p = argparse.ArgumentParser(prog="hemocircuit", description="Lumped-parameter hemodynamic circuits.")
-    sub = p.add_subparsers(dest="command", required=True)
+BUILTIN = ("check", "op", "dc", "tran", "graph", "show")
 
-    def common(sp, outputs=True, netlist=True):
-        """The loader's arguments (netlist, --set, --protocol: see load_circuit), shared by every
-        command; with ``outputs`` also --out, --plot, --show."""
+
+def build_parser(command=None):
+    """The argument parser.  ``command``: the command about to run -- only the analysis
+    module that defines it is imported (``hemocircuit CMD`` starts without importing the
+    others); None: every command (also ``--help``, which lists the analysis commands from
+    their sources without importing them)."""
+    from . import __version__
+
+    p = argparse.ArgumentParser(prog="hemocircuit", description="Lumped-parameter hemodynamic circuits.")
+    p.add_argument("--version", action="version", version=f"hemocircuit {__version__}")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    def common(sp, outputs=True, netlist=True, grid=True):
+        """The loader's arguments (netlist, --set, --protocol: see load_circuit) and --quiet,
+        shared by every command; with ``grid`` also --grid, --workers and --measure
+        (:func:`computed`, :func:`apply_measures`); with ``outputs`` also --out, --plot, --show."""
         if netlist:
             sp.add_argument("netlist", help="netlist YAML file")
         sp.add_argument("--set", action="append", metavar="ID.PARAM=VALUE",
@@ -179,13 +326,23 @@ def build_parser():
                              "(e.g. art.ca_order=2); repeatable")
         sp.add_argument("--protocol", help="protocol YAML: its 'initial' settings apply to every command, "
                                            "its timed events to tran")
+        sp.add_argument("--quiet", action="store_true", help="no progress bars (and, for ac, no table)")
+        if grid:
+            sp.add_argument("--grid", action="append", metavar="ID.PARAM=V1,V2,...",
+                            help="nested sweep: run the command for each value (units allowed, e.g. "
+                                 "art.tau_Ca=1,10s or Pa.value=60:120:20mmHg; structural options too); "
+                                 "repeatable, Cartesian product; one result, grid columns first")
+            sp.add_argument("--workers", type=int, help="worker processes for --grid (default: all cores)")
+            sp.add_argument("--measure", action="append", metavar="SPEC",
+                            help="a measure of the result (repeatable), e.g. 'plateau Q(Rla) 10%% ref=100mmHg', "
+                                 "'resonance P(a)', 'mean P(a) from=10s' (docs/analyses.md, Measures)")
         if outputs:
             sp.add_argument("--out", help="output file (CSV for series/sweeps, JSON for op, PNG for graph)")
             sp.add_argument("--plot", help="PNG plot file")
             sp.add_argument("--show", action="append", help="column to print/plot (repeatable)")
         return sp
 
-    common(sub.add_parser("check", help="validate a netlist (and protocol)")).set_defaults(func=cmd_check)
+    common(sub.add_parser("check", help="validate a netlist (and protocol)"), grid=False).set_defaults(func=cmd_check)
     common(sub.add_parser("op", help="operating point (steady state)")).set_defaults(func=cmd_op)
     sp = common(sub.add_parser("dc", help="DC sweep of a parameter"))
     sp.add_argument("--sweep", help="ID.PARAM=START:STOP:STEP UNIT, e.g. Pa.value=20:200:5mmHg")
@@ -198,13 +355,45 @@ def build_parser():
                     help="start with this state overridden (units allowed, e.g. Cv.V=20mL, art.Ca=1e-7M); "
                          "the others at the operating point; repeatable")
     sp.set_defaults(func=cmd_tran)
-    common(sub.add_parser("graph", help="draw the circuit graph to PNG")).set_defaults(func=cmd_graph)
-    for register in _extra_commands():
+    common(sub.add_parser("graph", help="draw the circuit graph to PNG"), grid=False).set_defaults(func=cmd_graph)
+    sp = sub.add_parser("show", help="reload a result file: provenance, summary, re-plot, re-run")
+    sp.add_argument("result", help="a CSV or JSON file written by a hemocircuit command (--out)")
+    sp.add_argument("--plot", help="draw it again to this PNG file")
+    sp.add_argument("--show", action="append", help="column to print/plot (repeatable)")
+    sp.add_argument("--rerun", metavar="OUT", help="run the command stored in its provenance again, writing OUT")
+    sp.add_argument("--set", action="append", help=argparse.SUPPRESS)
+    sp.add_argument("--protocol", help=argparse.SUPPRESS)
+    sp.add_argument("--quiet", action="store_true", help="no progress bars (for --rerun)")
+    sp.set_defaults(func=cmd_show)
+    p.commands = sub.choices  # {name: parser}
+    index = command_index()
+    if command == "--help":  # names and one-line help only: nothing imported
+        for name, (_, text) in index.items():
+            sub.add_parser(name, help=text)
+        return p
+    if command in BUILTIN:
+        return p
+    for register in _extra_commands(index[command][0] if command in index else None):
         register(sub, common)
     return p
 
 
-def _extra_commands():
+def command_index():
+    """{command: (module, help)} of the analysis modules' commands, read from their sources
+    (``sub.add_parser("NAME", help="...")`` in ``register_cli``) without importing them."""
+    import re
+    from pathlib import Path
+    out = {}
+    for path in sorted((Path(__file__).parent / "analyses").glob("*.py")):
+        text = path.read_text(encoding="utf-8")
+        if "def register_cli" not in text:
+            continue
+        for m in re.finditer(r'add_parser\(\s*"([\w-]+)",\s*help="([^"]*)"', text):
+            out[m.group(1)] = (path.stem, m.group(2))
+    return out
+
+
+def _extra_commands(only=None):
     """Commands contributed by analysis modules: every module of ``hemocircuit.analyses`` that
     defines ``register_cli(subparsers, common)`` (found by scanning the package, like the
     components), then third-party ones registered under the entry-point group
@@ -217,6 +406,8 @@ def _extra_commands():
 
     out = []
     for info in sorted(pkgutil.iter_modules(analyses.__path__), key=lambda i: i.name):
+        if only is not None and info.name != only:
+            continue
         spec = info.module_finder.find_spec(info.name)
         origin = getattr(spec, "origin", None)
         if origin and origin.endswith(".py"):
@@ -226,6 +417,8 @@ def _extra_commands():
         m = importlib.import_module(f"{analyses.__name__}.{info.name}")
         if callable(getattr(m, "register_cli", None)):
             out.append(m.register_cli)
+    if only is not None:
+        return out
     for ep in metadata.entry_points(group="hemocircuit.analyses"):
         try:
             obj = ep.load()
@@ -236,11 +429,44 @@ def _extra_commands():
     return out
 
 
+OUTPUT_OPTIONS = ("out", "plot", "phase_plot")
+
+
+def _check_outputs(args):
+    """Every output file's folder is checked (or created) before anything is computed."""
+    from . import io
+    for key in OUTPUT_OPTIONS:
+        path = getattr(args, key, None)
+        if path:
+            io.prepare_output(path, "--" + key.replace("_", "-"))
+
+
 def main(argv=None):
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else [str(a) for a in argv]
+    first = next((a for a in argv if not a.startswith("-")), None)
+    if first is None or first == "help":
+        parser = build_parser("--help")  # --help, --version, or no command: nothing heavy imported
+    else:
+        parser = build_parser(first)
+        if first not in parser.commands:  # maybe a plug-in's command: load them all
+            parser = build_parser()
+        if first not in parser.commands:
+            import difflib
+            known = sorted(parser.commands)
+            near = difflib.get_close_matches(first, known, n=2)
+            print(f"hemocircuit: error: unknown command {first!r}" +
+                  (f"; did you mean {' or '.join(near)}?" if near else f"; commands: {', '.join(sorted(known))}"),
+                  file=sys.stderr)
+            return 2
     args = parser.parse_args(argv)
+    args.argv = argv
+    from . import progress
+    progress.enable(not getattr(args, "quiet", False))
     try:
-        args.func(args)
+        _check_outputs(args)
+        rc = args.func(args)
+    except _Reported:
+        return 2
     except HemocircuitError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -250,7 +476,7 @@ def main(argv=None):
         import os
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
-    return 0
+    return rc if isinstance(rc, int) else 0
 
 
 if __name__ == "__main__":

@@ -235,6 +235,24 @@ class Component:
         Volume stores open their branches (no flow); inductors short themselves."""
         return A_loc, b_loc
 
+    # --- analytic derivatives (optional; used by hemocircuit.derivatives) -----------------
+    def state_partials(self, p, x, u, t, src=None):
+        """Analytic partial derivatives of the element's equations with respect to its own
+        states, at states ``x`` and local unknowns ``u`` (shapes as in :meth:`stamp`), or
+        None (the default: not provided; finite differences are used).  A dict of arrays
+        (leading axes may broadcast; L = K + M local unknowns, S states):
+          ``dA``    d A_loc / d x      (B, E, L, L, S)
+          ``db``    d b_loc / d x      (B, E, L, S)
+          ``df_dx`` d(dx/dt)/dx at fixed u   (B, E, S, S)
+          ``df_du`` d(dx/dt)/du at fixed x   (B, E, S, L)
+        hemocircuit.derivatives composes them through the nodal solve into the circuit's
+        state Jacobian when every component with states provides them."""
+        return None
+
+    def provides_state_partials(self) -> bool:
+        """True if the type implements :meth:`state_partials`."""
+        return type(self).state_partials is not Component.state_partials
+
     def has_dc_stamp(self) -> bool:
         """True if :meth:`dc_stamp` changes the stamp (by default: the type overrides it)."""
         return type(self).dc_stamp is not Component.dc_stamp

@@ -49,3 +49,12 @@ class SolverError(HemocircuitError):
             shown = ", ".join(f"{k}={v:.6g}" for k, v in list(state.items())[:12])
             parts.append(f"state: {shown}")
         super().__init__("; ".join(parts))
+
+
+class FitSpecError(NetlistError):
+    """A fit specification (hemocircuit fit) or one of its data files is malformed.  The message
+    names the spec file and the key (``datasets[1].sigma``), or the data file and its column."""
+
+    def __init__(self, message: str, file=None, key=None):
+        self.key = key
+        super().__init__(f"{key}: {message}" if key else message, file=file)

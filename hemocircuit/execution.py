@@ -28,30 +28,35 @@ def split(items, n_chunks):
     return [items[bounds[k]:bounds[k + 1]] for k in range(n_chunks) if bounds[k + 1] > bounds[k]]
 
 
-def run_chunks(fn, chunks, scheduler=None, workers=None, progress=False, desc="runs"):
+def run_chunks(fn, chunks, scheduler=None, workers=None, progress=None, desc="runs", sizes=None):
     """[fn(chunk) for chunk in chunks], in order, on the chosen executor.
 
     scheduler: None / 'processes' (local worker processes), 'serial' (this process), a Dask
     scheduler address 'tcp://HOST:PORT', or a dask.distributed Client.
+    progress: a bar counting runs (:class:`hemocircuit.progress.Tracker`); ``sizes[i]`` is the
+    number of runs in chunk i (default 1 each); ``fn`` may report runs as they finish with
+    :func:`hemocircuit.progress.advance`.
     """
+    from functools import partial
+
+    from . import progress as _progress
+
     workers = workers or default_workers()
-    bar = _bar(progress, sum(len(c) if hasattr(c, "__len__") else 1 for c in chunks), desc)
     results = [None] * len(chunks)
+    with _progress.Tracker(sizes or [1] * len(chunks), desc, progress) as bar:
+        def done(i, r):
+            results[i] = r
+            bar.chunk_done(i)
 
-    def done(i, r):
-        results[i] = r
-        if bar is not None:
-            bar.update(len(chunks[i]) if hasattr(chunks[i], "__len__") else 1)
-
-    try:
         if scheduler == "serial" or (scheduler in (None, "processes") and (workers == 1 or len(chunks) == 1)):
             for i, c in enumerate(chunks):
-                done(i, fn(c))
+                done(i, _progress.call_in_chunk(fn, i, c))
         elif scheduler in (None, "processes"):
             import multiprocessing as mp
             ctx = mp.get_context("fork") if hasattr(os, "fork") else None
+            bar.listen_to_workers(ctx)
             with ProcessPoolExecutor(max_workers=min(workers, len(chunks)), mp_context=ctx) as ex:
-                futs = {ex.submit(fn, c): i for i, c in enumerate(chunks)}
+                futs = {ex.submit(partial(_progress.call_in_chunk, fn, i), c): i for i, c in enumerate(chunks)}
                 for f in as_completed(futs):
                     done(futs[f], f.result())
         else:
@@ -61,9 +66,6 @@ def run_chunks(fn, chunks, scheduler=None, workers=None, progress=False, desc="r
             index = {f.key: i for i, f in enumerate(futs)}
             for f in das_completed(futs):
                 done(index[f.key], f.result())
-    finally:
-        if bar is not None:
-            bar.close()
     return results
 
 
@@ -79,10 +81,3 @@ def _dask_client(scheduler):
         return Client(scheduler, timeout="10s")
     except OSError as exc:
         raise HemocircuitError(f"cannot reach the Dask scheduler {scheduler}: {exc}") from None
-
-
-def _bar(progress, total, desc):
-    if not progress:
-        return None
-    from tqdm import tqdm
-    return tqdm(total=total, desc=desc, unit="run")

@@ -1,46 +1,73 @@
-"""Writing results: CSV for series and sweeps, JSON for an operating point, PNG plots.
+"""Writing files safely: atomic text and figure writes, output folders checked up front, and
+the series plot.
 
-Column names carry their unit: ``time [s]``, ``P(a) [mmHg]``, ``Q(Rla) [mL/s]``, ``V(Ca) [mL]``,
-``art.r [um]``.
+Every output file (CSV, JSON, PNG) is written to a temporary file in the destination folder
+and then renamed over the destination (``os.replace``, atomic on POSIX and Windows): an
+interrupted write (an exception, SIGINT, SIGTERM) leaves the previous file intact and never a
+truncated one.  The table formats themselves are in :mod:`hemocircuit.results`.
 """
 from __future__ import annotations
 
-import csv
-import json
-import math
+import contextlib
+import os
+import tempfile
 
 import numpy as np
 
-
-def labelled(name, units):
-    u = units.get(name, "")
-    return f"{name} [{u}]" if u else name
+from .errors import HemocircuitError
 
 
-def write_csv(path, columns: dict, units: dict, first=None):
-    """Write equal-length columns; ``first`` (name, array, unit) is put in front (time, swept param)."""
-    names = list(columns)
-    header = ([f"{first[0]} [{first[2]}]"] if first else []) + [labelled(n, units) for n in names]
-    data = ([np.asarray(first[1])] if first else []) + [np.asarray(columns[n]) for n in names]
-    n = len(data[0]) if data else 0
-    with open(path, "w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(header)
-        for i in range(n):
-            w.writerow([_fmt(col[i]) for col in data])
+def prepare_output(path, flag="--out"):
+    """Check (before any computation) that ``path`` can be written: its folder exists, or is
+    created when the folder's parent exists; otherwise a clear error naming the option."""
+    path = os.fspath(path)
+    folder = os.path.dirname(os.path.abspath(path))
+    if os.path.isdir(path):
+        raise HemocircuitError(f"{flag} {path}: is a folder; give a file name")
+    if not os.path.isdir(folder):
+        parent = os.path.dirname(folder)
+        if not os.path.isdir(parent):
+            raise HemocircuitError(f"{flag} {path}: the folder {folder} does not exist, nor its parent {parent}; "
+                                   "create it first")
+        try:
+            os.mkdir(folder)
+        except OSError as exc:
+            raise HemocircuitError(f"{flag} {path}: cannot create the folder {folder}: {exc.strerror}") from None
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise HemocircuitError(f"{flag} {path}: the folder {folder} is not writable")
+    return path
 
 
-def _fmt(v):
+@contextlib.contextmanager
+def atomic_file(path, mode="w", **kwargs):
+    """Open a temporary file beside ``path``; on a clean exit it replaces ``path`` (fsync'd
+    first), on an exception it is removed and ``path`` is left as it was."""
+    path = os.fspath(path)
+    folder = os.path.dirname(os.path.abspath(path))
+    fd, tmp = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.", suffix=".tmp", dir=folder)
     try:
-        f = float(v)
-    except (TypeError, ValueError):
-        return str(v)
-    return "nan" if math.isnan(f) else repr(f)
+        with os.fdopen(fd, mode, **kwargs) as fh:
+            yield fh
+            fh.flush()
+            os.fsync(fh.fileno())
+        mask = os.umask(0)
+        os.umask(mask)
+        os.chmod(tmp, 0o666 & ~mask)  # mkstemp creates 0600; give the file the usual permissions
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
 
 
-def write_json(path, flat: dict):
-    with open(path, "w") as fh:
-        json.dump(flat, fh, indent=1)
+def atomic_write(path, text):
+    """Write ``text`` to ``path`` atomically (UTF-8)."""
+    try:
+        with atomic_file(path, "w", encoding="utf-8", newline="") as fh:
+            fh.write(text)
+    except OSError as exc:
+        raise HemocircuitError(f"cannot write {path}: {exc.strerror or exc}") from None
+    return str(path)
 
 
 def pyplot():
@@ -53,20 +80,25 @@ def pyplot():
 
 
 def save_figure(fig, path, dpi=110):
-    """Lay out, write and close a figure."""
+    """Lay out, write (atomically) and close a figure."""
     import matplotlib.pyplot as plt
 
     fig.tight_layout()
-    fig.savefig(path, dpi=dpi)
-    plt.close(fig)
+    fmt = os.path.splitext(os.fspath(path))[1].lstrip(".").lower() or "png"
+    try:
+        with atomic_file(path, "wb") as fh:
+            fig.savefig(fh, dpi=dpi, format=fmt)
+    except OSError as exc:
+        raise HemocircuitError(f"cannot write {path}: {exc.strerror or exc}") from None
+    finally:
+        plt.close(fig)
 
 
 def plot_series(path, x, xlabel, columns: dict, units: dict, title="", select=None):
     """One panel per unit (pressures, flows, volumes, ...), every selected column drawn."""
     plt = pyplot()
 
-    names = [n for n in (select or columns) if n in columns and np.ndim(columns[n]) == 1
-             and np.all(np.isfinite(columns[n])) is not None]
+    names = [n for n in (select or columns) if n in columns and np.ndim(columns[n]) == 1]
     by_unit = {}
     for n in names:
         by_unit.setdefault(units.get(n, ""), []).append(n)

@@ -27,7 +27,8 @@ class Event:
     set: dict
 
     def apply(self, circuit):
-        circuit.set_params(self.set)
+        """The circuit with this event's values (a new circuit; ``circuit`` is unchanged)."""
+        return circuit.with_values(self.set)
 
 
 @dataclass
@@ -91,19 +92,16 @@ class Protocol:
                 if eid in c.elements and name in c.elements[eid].cls.options:
                     raise NetlistError(f"event at {ev.at:g} s sets the structural option '{path}'; options may only "
                                        "be set in 'initial'", file=self.file, element=eid)
-            probe = c.copy()
             try:
-                probe.set_params(ev.set)
+                c = ev.apply(c)
             except NetlistError as exc:
                 raise NetlistError(f"event at {ev.at:g} s: {exc}", file=self.file) from None
-            c = probe
         return True
 
     def apply_initial(self, circuit):
         opts = {k: v for k, v in self.initial.items() if _is_option(circuit, k)}
-        c = circuit.with_options(opts) if opts else circuit.copy()
-        c.set_params({k: v for k, v in self.initial.items() if k not in opts})
-        return c
+        c = circuit.with_options(opts) if opts else circuit
+        return c.with_values({k: v for k, v in self.initial.items() if k not in opts})
 
 
 def _reject_bare_numbers(circuit, mapping, what, file):

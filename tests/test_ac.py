@@ -75,7 +75,7 @@ def test_rc_low_pass_gain_phase_and_relative_gain(write):
     assert res.y0["P(a)"] == pytest.approx(40.0)
     assert res.p0 == pytest.approx(40.0)
     assert res.input == "Ps.value"
-    assert res.units["input"] == "mmHg"
+    assert res.input_unit == "mmHg" and res.units["gain(Q(R1)/Ps.value)"] == "mL/s/mmHg"
     # no flow at DC; the flow leads by 45 deg at the corner
     assert abs(res.H["Q(R1)"][0]) < 1e-9
     assert res.phase["Q(R1)"][1] == pytest.approx(45.0, abs=1e-5)
@@ -95,8 +95,7 @@ def test_transfer_batched_solve_matches_loop():
 def _dc_slope(c, names, Pa, h=0.01):
     vals = {}
     for sgn in (1, -1):
-        c2 = c.copy()
-        c2.set_param("Pa.value", Pa + sgn * h)
+        c2 = c.with_values({"Pa.value": Pa + sgn * h})
         vals[sgn] = c2.operating_point().values
     return {n: (vals[1][n] - vals[-1][n]) / (2 * h) for n in names}
 
@@ -107,10 +106,10 @@ def test_low_frequency_gain_equals_dc_sweep_slope(net):
     operating points).  For the ICP variant the conserved blood + intracranial volume is held,
     as in the DC sweep, and the law's structural zero eigenvalue is projected out."""
     c = hc.load(NETS / f"{net}.yaml")
-    c.set_param("art.tau_Ca", 1.0)
+    c = c.with_values({"art.tau_Ca": 1.0})
     names = ["Q(Rla)", "Q(Rsv)", "art.r"]
     for Pa in (30.0, 80.0):
-        c.set_param("Pa.value", Pa)
+        c = c.with_values({"Pa.value": Pa})
         res = ac_response(c, "Pa", names, [0.0, 1e-7])
         slope = _dc_slope(c, names, Pa)
         for n in names:
@@ -125,7 +124,7 @@ def test_arterial_compliance_resonance_and_lead():
     q2 resonates between 0.08 and 0.14 Hz, flow leads Pa at 0.1 Hz, and slowing Ca
     (tau_Ca = 10 s) moves the peak lower and makes it larger."""
     c = hc.load(NETS / "arterial_compliance.yaml")
-    c.set_param("art.tau_Ca", 1.0)
+    c = c.with_values({"art.tau_Ca": 1.0})
     f = np.logspace(np.log10(0.005), 0, 400)
     res = ac_response(c, "Pa", ["Q(Rla)", "Q(Rsv)"], f)
     g = res.rel_gain["Q(Rsv)"]
@@ -134,7 +133,7 @@ def test_arterial_compliance_resonance_and_lead():
     i = int(np.argmin(np.abs(f - 0.1)))
     assert 20.0 <= res.phase["Q(Rla)"][i] <= 35.0
     assert 55.0 <= res.phase["Q(Rla)"].max() <= 75.0
-    c.set_param("art.tau_Ca", 10.0)
+    c = c.with_values({"art.tau_Ca": 10.0})
     slow = ac_response(c, "Pa", ["Q(Rsv)"], f)
     k10 = int(np.argmax(slow.rel_gain["Q(Rsv)"]))
     assert f[k10] < f[k]
@@ -145,11 +144,11 @@ def test_batch_circuit_and_derived_output():
     c = hc.load(NETS / "arterial_compliance.yaml")
     f = np.array([0.01, 0.1, 1.0])
     cb = c.batch(2)
-    cb.set_param("Pa.value", np.array([30.0, 80.0]))
+    cb = cb.with_values({"Pa.value": np.array([30.0, 80.0])})
     rb = ac_response(cb, "Pa", ["Q(Rsv)", "V_a"], f)
     assert rb.H["Q(Rsv)"].shape == (2, 3)
     for k, Pa in enumerate((30.0, 80.0)):
-        c.set_param("Pa.value", Pa)
+        c = c.with_values({"Pa.value": Pa})
         r1 = ac_response(c, "Pa", ["Q(Rsv)", "V_a"], f)
         for n in ("Q(Rsv)", "V_a"):
             np.testing.assert_allclose(rb.H[n][k], r1.H[n], rtol=1e-6)
@@ -190,9 +189,9 @@ def test_cli_ac(tmp_path, capsys):
                "--output", "Q(Rsv)", "--freq", "0.001:10Hz", "--per-decade", "5", "--set", "art.tau_Ca=1s",
                "--out", str(out), "--plot", str(png)])
     assert rc == 0
-    lines = out.read_text().splitlines()
-    assert lines[0].split(",")[:4] == ["f [Hz]", "gain Q(Rla) [mL/s/mmHg]", "rel_gain Q(Rla) [1]",
-                                       "phase Q(Rla) [deg]"]
+    lines = [ln for ln in out.read_text().splitlines() if not ln.startswith("#")]  # provenance header
+    assert lines[0].split(",")[:4] == ["frequency [Hz]", "gain(Q(Rla)/Pa.value) [mL/s/mmHg]",
+                                       "rel_gain(Q(Rla)/Pa.value) [1]", "phase(Q(Rla)/Pa.value) [deg]"]
     assert len(lines) == 1 + 21
     assert png.stat().st_size > 10_000
     capsys.readouterr()

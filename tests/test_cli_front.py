@@ -30,57 +30,54 @@ def active():
 
 
 def read_csv(path):
+    """(header, rows) of a result CSV, its '# key: value' provenance lines skipped."""
     with open(path) as fh:
-        rows = list(csv.reader(fh))
+        rows = list(csv.reader(ln for ln in fh if not ln.startswith("#")))
     return rows[0], rows[1:]
 
 
 # ------------------------------------------------ 1. structural options keep the numbers ----
 def test_with_options_keeps_values_set_on_the_changed_element(active):
-    c = active.copy()
-    c.set_param("art.tau_Ca", "5 s")
-    c.set_param("Rla.R", 2 * float(c.get_param("Rla.R")[0]))
+    c = active.with_values({"art.tau_Ca": "5 s"})
+    c = c.with_values({"Rla.R": 2 * float(c.parameters.values["Rla.R"][0])})
     new = c.with_options({"art.volume_flow": False})
     assert new.elements["art"].opts["volume_flow"] is False
-    assert new.get_param("art.tau_Ca")[0] == 5.0        # was reset to the preset's 1 s
-    assert new.get_param("Rla.R")[0] == c.get_param("Rla.R")[0]
-    assert new.get_param("art.L")[0] == pytest.approx(50e-3)  # the netlist's value
+    assert new.parameters.values["art.tau_Ca"][0] == 5.0        # was reset to the preset's 1 s
+    assert new.parameters.values["Rla.R"][0] == c.parameters.values["Rla.R"][0]
+    assert new.parameters.values["art.L"][0] == pytest.approx(50e-3)  # the netlist's value
     # and a second change keeps them again
     again = new.with_options({"art.ca_order": 2})
-    assert again.get_param("art.tau_Ca")[0] == 5.0
+    assert again.parameters.values["art.tau_Ca"][0] == 5.0
     assert "art.dCa" in again.state_names
 
 
 def test_with_options_keeps_per_member_values_of_a_batch(active):
     b = active.batch(3)
-    b.set_param("art.tau_Ca", np.array([1.0, 2.0, 3.0]))
+    b = b.with_values({"art.tau_Ca": np.array([1.0, 2.0, 3.0])})
     new = b.with_options({"art.ca_order": 2})
     assert new.B == 3
-    np.testing.assert_array_equal(new.get_param("art.tau_Ca"), [1.0, 2.0, 3.0])
+    np.testing.assert_array_equal(new.parameters.values["art.tau_Ca"], [1.0, 2.0, 3.0])
 
 
 def test_with_options_keeps_a_waveform_set_on_the_circuit(active):
-    c = active.copy()
-    c.set_param("Pa.value", {"pwl": [["0 s", "80 mmHg"], ["7 s", "90 mmHg"]]})
+    c = active.with_values({"Pa.value": {"pwl": [["0 s", "80 mmHg"], ["7 s", "90 mmHg"]]}})
     new = c.with_options({"art.volume_flow": False})
     assert 7.0 in new.breakpoints(0.0, 20.0)
     # ...and a constant set over a netlist waveform stays constant
-    c2 = new.copy()
-    c2.set_param("Pa.value", "85 mmHg")
+    c2 = new.with_values({"Pa.value": "85 mmHg"})
     assert c2.with_options({"art.ca_order": 2}).breakpoints(0.0, 20.0) == []
 
 
 def test_preset_change_replaces_preset_values_but_keeps_explicit_ones(active):
     from hemocircuit.components.arteriole.parameters import PRESETS
-    c = active.copy()
-    c.set_param("art.eta", 0.3)        # explicit (--set)
-    c.set_param("art.tau_Ca", "5 s")   # explicit
+    c = active.with_values({"art.eta": 0.3})        # explicit (--set)
+    c = c.with_values({"art.tau_Ca": "5 s"})  # explicit
     new = c.with_options({"art.preset": "falcone91"})
-    assert new.get_param("art.eta")[0] == 0.3
-    assert new.get_param("art.tau_Ca")[0] == 5.0
-    assert new.get_param("art.v")[0] == PRESETS["falcone91"]["v"] != PRESETS["kuo91"]["v"]
-    assert new.get_param("art.L")[0] == pytest.approx(50e-3)  # written in the netlist
-    assert new.get_param("art.n")[0] == 16000
+    assert new.parameters.values["art.eta"][0] == 0.3
+    assert new.parameters.values["art.tau_Ca"][0] == 5.0
+    assert new.parameters.values["art.v"][0] == PRESETS["falcone91"]["v"] != PRESETS["kuo91"]["v"]
+    assert new.parameters.values["art.L"][0] == pytest.approx(50e-3)  # written in the netlist
+    assert new.parameters.values["art.n"][0] == 16000
 
 
 def test_freq_grid_over_a_structural_option_keeps_set_values(active):
@@ -89,7 +86,7 @@ def test_freq_grid_over_a_structural_option_keeps_set_values(active):
     batches = build_batches(c, [{"art.volume_flow": v} for v in (True, False)])
     assert len(batches) == 2
     for bc, _ in batches:
-        np.testing.assert_array_equal(bc.get_param("art.tau_Ca"), 5.0)
+        np.testing.assert_array_equal(bc.parameters.values["art.tau_Ca"], 5.0)
 
 
 # ------------------------------------------------ 2. one CLI front, structural --set ---------
@@ -107,7 +104,7 @@ def test_freq_structural_set_and_grid_over_an_option(monkeypatch, tmp_path, caps
     def spy(job):
         c = job[0]
         seen.append((c.elements["art"].opts["volume_flow"], c.elements["art"].opts["ca_order"],
-                     c.get_param("art.tau_Ca").tolist()))
+                     c.parameters.values["art.tau_Ca"].tolist()))
         return real(job)
 
     monkeypatch.setattr(freq_mod, "_run_chunk", spy)
@@ -117,7 +114,7 @@ def test_freq_structural_set_and_grid_over_an_option(monkeypatch, tmp_path, caps
                  "--rtol", "1e-5", "--workers", "1", "--out", str(out)]) == 0
     assert sorted(seen) == [(False, 2, [5.0]), (True, 2, [5.0])]
     head, rows = read_csv(out)
-    assert len(rows) == 4 and all(r[head.index("error")] == "" for r in rows)
+    assert len(rows) == 2 and all(r[head.index("error")] == "" for r in rows)  # one row per run
 
 
 def test_envelope_structural_set(tmp_path, capsys):
@@ -125,7 +122,7 @@ def test_envelope_structural_set(tmp_path, capsys):
     assert main(["envelope", str(PAYNE06_ACTIVE), "--set", "art.ca_order=2", "--sweep", "Pa.value=80mmHg",
                  "--output", "art.dCa", "--t-end", "2", "--dt", "0.1", "--workers", "1", "--out", str(out)]) == 0
     head, rows = read_csv(out)
-    assert "art.dCa max" in head and len(rows) == 1
+    assert "max(art.dCa) [M/s]" in head and "Pa.value [mmHg]" in head and len(rows) == 1
 
 
 def test_periodic_structural_set(monkeypatch, tmp_path, capsys):
@@ -157,7 +154,7 @@ def test_every_command_takes_set_and_protocol():
 def test_protocol_initial_applies_to_batch_commands(write, tmp_path, capsys):
     proto = write("initial: {art.ca_order: 2}\n", "p.yaml")
     c, pr = load_circuit(PAYNE06_ACTIVE, {"art.tau_Ca": "5s"}, proto)
-    assert pr is not None and "art.dCa" in c.state_names and c.get_param("art.tau_Ca")[0] == 5.0
+    assert pr is not None and "art.dCa" in c.state_names and c.parameters.values["art.tau_Ca"][0] == 5.0
     out = tmp_path / "env.csv"
     assert main(["envelope", str(PAYNE06_ACTIVE), "--protocol", str(proto), "--sweep", "Pa.value=80mmHg",
                  "--output", "art.dCa", "--t-end", "1", "--dt", "0.1", "--workers", "1", "--out", str(out)]) == 0

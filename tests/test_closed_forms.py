@@ -143,7 +143,7 @@ def test_resistor_divider_dc_sweep_exact(write):
     R2 = np.array([1.0, 2.0, 5.0, 17.0])
     np.testing.assert_allclose(sw["P(m)"], 10 * R2 / (3 + R2), rtol=1e-12)
     # the circuit the sweep came from is unchanged
-    assert c.get_param("R2.R")[0] == 7.0
+    assert c.parameters.values["R2.R"][0] == 7.0
 
 
 def test_operating_point_and_sweep_of_a_circuit_without_states(write):

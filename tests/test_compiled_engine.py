@@ -52,8 +52,8 @@ def test_compiled_matches_scipy_with_protocol_and_waveform():
     """A step protocol on the inertia variant (inductor following the arteriole's radius
     through an expression): both engines agree within their tolerances."""
     c = hc.load(os.path.join(NETLISTS, "inertia.yaml"))
-    c.set_param("Pa.amplitude", "8 mmHg")
-    c.set_param("Pa.frequency", "0.1 Hz")
+    c = c.with_values({"Pa.amplitude": "8 mmHg"})
+    c = c.with_values({"Pa.frequency": "0.1 Hz"})
     a = c.simulate(30.0, dt=0.5, engine="compiled", rtol=1e-8)
     b = c.simulate(30.0, dt=0.5, engine="scipy", rtol=1e-8)
     for col in ("art.r", "Q(Rla)", "Q(Lb)", "V(Cic)"):
@@ -104,7 +104,7 @@ def test_batch_members_independent():
     system = CompiledSystem.of(c)
     x0 = operating_point(c).x
     cb = c.batch(3)
-    cb.set_param("Pa.value", np.array([70.0, 80.0, 90.0]))
+    cb = cb.with_values({"Pa.value": np.array([70.0, 80.0, 90.0])})
     P = system.params(cb)
     t = np.linspace(0, 20, 21)
     X, st = system.integrate_batch(t, np.repeat(x0[None], 3, axis=0), P, rtol=1e-7)

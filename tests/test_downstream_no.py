@@ -31,8 +31,7 @@ H_SCALE = 3 ** (1 / 3)  # h_wv = h_w 3^(1/3)
 
 def _rdb_to_rdw(c):
     """The thesis's second case: blood decay rate reduced to the wall's (scaled) r_dw."""
-    c = c.copy()
-    c.set_param("art.r_db", float(c.get_param("art.r_dw")[0] * c.get_param("art.no_speed")[0]))
+    c = c.with_values({"art.r_db": float(c.parameters.values["art.r_dw"][0] * c.parameters.values["art.no_speed"][0])})
     return c
 
 
@@ -50,7 +49,7 @@ def ops():
 
 def _art_params(circuit):
     """The arteriole's parameters (SI, no_speed applied) as plain floats."""
-    g, i = circuit._locate["art"]
+    g, i = circuit.element_group("art")
     return effective({k: float(v[0, i]) for k, v in g.p.items()})
 
 
@@ -166,11 +165,11 @@ HYDRAULIC = ["P(in)", "P(alpha)", "P(beta)", "P(v)", "P(ic)", "P(out)", "Q(Rla)"
 @pytest.mark.parametrize("Pa", [50.0, 80.0, 130.0])
 def test_hydraulic_steady_state_unchanged(Pa):
     base = hc.load(BASE)
-    base.set_param("Pa.value", Pa)
+    base = base.with_values({"Pa.value": Pa})
     ref = operating_point(base)
     for path in (CONSISTENT, THESIS):
         c = hc.load(path)
-        c.set_param("Pa.value", Pa)
+        c = c.with_values({"Pa.value": Pa})
         op = operating_point(c)
         assert op["P(v_in)"] == pytest.approx(op["P(v)"], abs=1e-12)  # the meter has no pressure drop
         for k in HYDRAULIC:
@@ -182,8 +181,7 @@ def test_hydraulic_transient_unchanged(path):
     """The thesis's 10 % step 80 -> 72 mmHg: flows, pressures, radius as in payne06."""
     def step(c):
         x0 = operating_point(c).x
-        c = c.copy()
-        c.set_param("Pa.value", 72.0)
+        c = c.with_values({"Pa.value": 72.0})
         return simulate(c, 30.0, dt=0.5, x0=x0)
 
     ref, res = step(hc.load(BASE)), step(hc.load(path))
@@ -199,8 +197,7 @@ def test_venous_tracer_mass_balance(ops, reading):
     """eq. dcvdt as written, with q3 and dV_v/dt explicit, holds along a transient although the
     pool meters only q2:  V dC/dt + C dV/dt = q2 C_in,v - q3 C - D_v C - G (C - C_T)."""
     c, op = ops[reading, "base"]
-    c72 = c.copy()
-    c72.set_param("Pa.value", 72.0)
+    c72 = c.with_values({"Pa.value": 72.0})
     res = simulate(c72, 3.0, dt=0.25, x0=op.x)
     p = _art_params(c)
     h_wv = H_SCALE * p["h_w"]

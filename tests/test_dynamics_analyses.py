@@ -37,7 +37,6 @@ from paths import ROOT
 
 NETS = ROOT / "netlists"
 Q1, Q2 = "Q(Rla)", "Q(Rsv)"
-NUMERIC = ("rel_amplitude", "gain", "abs_gain", "phase [deg]", "thd", "steady", "mean", "periods")
 
 pytestmark = pytest.mark.filterwarnings("ignore::RuntimeWarning")
 
@@ -52,19 +51,25 @@ def vaso():
     return hc.load(NETS / "vasomotion.yaml")
 
 
-def pick(rows, output, f=None, **grid):
-    """Rows of one output (and grid point), sorted by frequency; or the single row at f."""
-    rs = [r for r in rows if r["output"] == output and all(np.isclose(r[k], v) for k, v in grid.items())]
-    rs.sort(key=lambda r: r["frequency [Hz]"])
+def pick(res, output, f=None, **grid):
+    """Runs of one output (and grid point) of a FreqResult, sorted by frequency, as dicts
+    {rel_amplitude, rel_gain, gain, phase, thd, steady, mean: that output's columns; frequency,
+    periods, settled, error, grid values}; or the single run at f."""
+    per_output = {q: f"{q}({output})" for q in ("rel_amplitude", "thd", "steady", "mean")}
+    per_output.update({q: f"{q}({output}/{res.input})" for q in ("rel_gain", "gain", "phase")})
+    rs = [{**{q: r[c] for q, c in per_output.items()}, **{k: r[k] for k in ("frequency", "periods", "settled", "error")},
+           **{k: r[k] for k in res.index}}
+          for r in res.rows() if all(np.isclose(r[k], v) for k, v in grid.items())]
+    rs.sort(key=lambda r: r["frequency"])
     if f is None:
         return rs
-    (r,) = [r for r in rs if np.isclose(r["frequency [Hz]"], f)]
+    (r,) = [r for r in rs if np.isclose(r["frequency"], f)]
     return r
 
 
-def series(rows, output, key, **grid):
-    rs = pick(rows, output, **grid)
-    return np.array([r["frequency [Hz]"] for r in rs]), np.array([r[key] for r in rs])
+def series(res, output, key, **grid):
+    rs = pick(res, output, **grid)
+    return np.array([r["frequency"] for r in rs]), np.array([r[key] for r in rs])
 
 
 # ------------------------------------------------------------ 1. AC = small-signal limit --------
@@ -72,12 +77,12 @@ def test_ac_matches_nonlinear_frequency_response_at_small_amplitude(artc):
     freqs = [0.005, 0.05, 0.1, 0.5, 1.0]
     ac = ac_response(artc, "Pa", [Q1, Q2], freqs)
     rows = frequency_response(artc, freqs, [Q1, Q2], step=0.0, amplitude=0.01, scheduler="serial")
-    assert not any(r["error"] for r in rows)
+    assert not any(rows["error"])
     for o in (Q1, Q2):
-        f, gain = series(rows, o, "gain")
-        _, phase = series(rows, o, "phase [deg]")
+        f, gain = series(rows, o, "rel_gain")
+        _, phase = series(rows, o, "phase")
         np.testing.assert_allclose(f, freqs)
-        assert all(r["settled"] for r in pick(rows, o))
+        assert all(rows["settled"])
         np.testing.assert_allclose(gain, ac.rel_gain[o], rtol=0.02, err_msg=o)
         # arg difference, wrapped (AC phase is unwrapped along frequency, the batch's is not)
         dphi = (phase - ac.phase[o] + 180.0) % 360.0 - 180.0
@@ -93,7 +98,7 @@ def nl_pa(artc):
     """Thesis forcing (10 % step + 10 % sine), tau_Ca = 1 s, Pa = 30 and 80 mmHg: one batch."""
     rows = frequency_response(artc, F_NL, [Q1, Q2], step=0.1, amplitude=0.1,
                               grid=[("Pa.value", [30.0, 80.0])], scheduler="serial")
-    assert not any(r["error"] for r in rows)
+    assert not any(rows["error"])
     return rows
 
 
@@ -102,9 +107,9 @@ def ac_cases(artc):
     f = np.logspace(-3, 0, 121)
     out = {}
     for name, sets in (("80", {}), ("tau10", {"art.tau_Ca": 10.0}), ("30", {"Pa.value": 30.0})):
-        c = artc.copy()
+        c = artc
         if sets:
-            c.set_params(sets)
+            c = c.with_values(sets)
         out[name] = ac_response(c, "Pa", [Q1, Q2], f)
     return out
 
@@ -124,13 +129,13 @@ def test_flow_leads_pa_by_20_to_35_deg_at_01_hz(nl_pa, ac_cases):
     # measured: q1 +25.9 deg, q2 +20.6 deg (nonlinear); AC +25.6 / +20.0.  Both inside the
     # thesis band; q2 only just (0.6 deg), q1 comfortably.
     for o in (Q1, Q2):
-        ph = pick(nl_pa, o, 0.1, **{"Pa.value": 80.0})["phase [deg]"]
+        ph = pick(nl_pa, o, 0.1, **{"Pa.value": 80.0})["phase"]
         assert 20.0 <= ph <= 35.0, (o, ph)
 
 
 def test_maximum_lead_55_to_75_deg_in_the_low_band(nl_pa, ac_cases):
     for o in (Q1, Q2):
-        f, ph = series(nl_pa, o, "phase [deg]", **{"Pa.value": 80.0})
+        f, ph = series(nl_pa, o, "phase", **{"Pa.value": 80.0})
         low = f <= 0.1
         k = int(np.argmax(ph[low]))
         assert 55.0 <= ph[low][k] <= 75.0, (o, f[low], ph[low])
@@ -143,7 +148,7 @@ def test_slower_calcium_moves_the_peak_lower_and_raises_it(artc, nl_pa, ac_cases
     # rtol 1e-7 (not the default 1e-8): 2x faster, amplitudes unchanged to 5 digits
     rows = frequency_response(artc, [0.02, 0.03, 0.045], [Q2], step=0.1, amplitude=0.1, rtol=1e-7,
                               grid=[("art.tau_Ca", [10.0])], scheduler="serial")
-    assert all(r["settled"] and not r["error"] for r in rows)
+    assert all(rows["settled"]) and not any(rows["error"])
     f10, a10 = series(rows, Q2, "rel_amplitude")
     f1, a1 = series(nl_pa, Q2, "rel_amplitude", **{"Pa.value": 80.0})
     k = int(np.argmax(a10))
@@ -184,12 +189,11 @@ def test_settle_detection_is_not_fooled_by_a_slow_drift(artc, nl_pa):
     the batch stops after 4 periods with q2 at 0.13690 against 0.13583 (+0.79 %), q1 at 0.39838
     against 0.39795 (+0.11 %), well above the 1e-3 settle tolerance for q2.  (With
     settle_tol = 1e-12 and 60 periods the batch gives 0.135827, the shooting value.)"""
-    c = artc.copy()
-    c.set_param("Pa.value", 30.0)
+    c = artc.with_values({"Pa.value": 30.0})
     op = operating_point(c)
-    c.set_param("Pa.value", 33.0)
-    c.set_param("Pa.amplitude", 3.0)
-    c.set_param("Pa.frequency", 1.0)
+    c = c.with_values({"Pa.value": 33.0})
+    c = c.with_values({"Pa.amplitude": 3.0})
+    c = c.with_values({"Pa.frequency": 1.0})
     orb = shoot(c, op.x, 1.0, forced=True, rtol=1e-8, tol=1e-7)
     assert orb.converged
     n = len(orb.t) - 1
@@ -207,13 +211,13 @@ def _small_batch(artc, **kw):
 
 
 def _assert_same_rows(a, b):
-    assert len(a) == len(b)
-    for ra, rb in zip(a, b):
-        assert (ra["art.tau_Ca"], ra["frequency [Hz]"], ra["output"]) == (rb["art.tau_Ca"], rb["frequency [Hz]"],
-                                                                          rb["output"])
-        assert not ra["error"] and not rb["error"]
-        for k in NUMERIC:
-            assert ra[k] == pytest.approx(rb[k], rel=1e-12, abs=0), (k, ra, rb)
+    assert a.n_rows == b.n_rows and list(a.keys()) == list(b.keys())
+    assert not any(a["error"]) and not any(b["error"])
+    for k, col in a.items():
+        if col.dtype.kind == "f":
+            np.testing.assert_allclose(b[k], col, rtol=1e-12, atol=0, err_msg=k)
+        else:
+            assert list(b[k]) == list(col), k
 
 
 @pytest.fixture(scope="module")
@@ -249,7 +253,7 @@ def test_member_trajectory_does_not_depend_on_its_batch_companions(vaso):
     vasomotion members that both reach the Ca floor (second-order Ca), together and alone."""
     x = np.array(operating_point(vaso).x, float).reshape(-1)
     b = vaso.batch(2)
-    b.set_param("art.zeta", np.array([0.1, 0.2]))
+    b = b.with_values({"art.zeta": np.array([0.1, 0.2])})
     i = vaso.state_names.index("art.dCa")
     x0 = np.repeat(x[None], 2, axis=0)
     x0[0, i], x0[1, i] = -5 * vaso.state_scales[i], -8 * vaso.state_scales[i]
@@ -257,7 +261,7 @@ def test_member_trajectory_does_not_depend_on_its_batch_companions(vaso):
     together = integrate(b, x0, grid, rtol=1e-6, atol=1e-6)
     assert together.ok.all()
     for k in range(2):
-        alone = integrate(b.subset([k]).copy(), x0[k:k + 1], grid, rtol=1e-6, atol=1e-6)
+        alone = integrate(b.subset([k]), x0[k:k + 1], grid, rtol=1e-6, atol=1e-6)
         diff = np.max(np.abs(alone.x[0] - together.x[k]) / vaso.state_scales)
         assert diff <= 1e-12, (k, diff)  # measured: 5.9e-8 and 1.5e-4
 
@@ -266,15 +270,18 @@ def test_member_trajectory_does_not_depend_on_its_batch_companions(vaso):
 BAD_PA = -500.0  # mmHg: the operating point fails cleanly (SolverError, Newton + fallbacks)
 
 
-def _check_failure_rows(rows):
-    good = [r for r in rows if r["Pa.value"] == 80.0]
-    bad = [r for r in rows if r["Pa.value"] == BAD_PA]
-    assert len(good) == len(bad) == 2
+def _check_failure_rows(res):
+    good = [r for r in res.rows() if r["Pa.value"] == 80.0]
+    bad = [r for r in res.rows() if r["Pa.value"] == BAD_PA]
+    assert len(good) == len(bad) == 1  # one row per run, every output in it
     for r in bad:
         assert "operating point" in r["error"] and "no operating point found" in r["error"], r
+        assert np.isnan(r[f"rel_gain({Q1}/Pa.value)"])
     for r in good:
         assert r["error"] == "", r["error"]
-        assert 1.0 < r["gain"] < 2.5
+        for o in (Q1, Q2):
+            assert 1.0 < r[f"rel_gain({o}/Pa.value)"] < 2.5
+    assert len(res.metadata["failed"]) == 1
 
 
 def test_failing_member_recorded_others_complete_with_worker_processes(artc):
@@ -309,20 +316,20 @@ def vaso_env(vaso):
     # the instability grows at +0.067 /s: from the 1e-3 kick the cycle is full-size after
     # ~100 s; window = last 30 % (168-240 s).  t_end 200/250/300/400 s give the same min/max
     # within 0.15 um.
-    rows = envelope(vaso, ("art.zeta", [0.1, 0.5]), outputs=["art.r", Q1], t_end=240.0, dt=0.1, rtol=1e-5,
-                    keep_series=["art.r"], scheduler="serial")
-    assert not any("error" in r for r in rows)
-    return {r["art.zeta"]: r for r in rows}
+    res = envelope(vaso, ("art.zeta", [0.1, 0.5]), outputs=["art.r", Q1], t_end=240.0, dt=0.1, rtol=1e-5,
+                   keep_series=["art.r"], scheduler="serial")
+    assert not any(res["error"])
+    return {r["art.zeta"]: {**r, "series": s} for r, s in zip(res.rows(), res.series)}
 
 
 def test_vasomotion_limit_cycle_envelope(vaso_env):
     r = vaso_env[0.1]
     assert r["oscillating"]
-    assert 57.0 <= r["art.r min"] <= 64.0, r["art.r min"]
-    assert 99.0 <= r["art.r max"] <= 106.0, r["art.r max"]
-    assert 76.0 <= r["art.r steady"] <= 78.0, r["art.r steady"]
-    assert 7.0 <= r["period [s]"] <= 9.0, r["period [s]"]
-    assert r[f"{Q1} mean"] > 1.1 * r[f"{Q1} steady"]  # oscillation raises the mean flow
+    assert 57.0 <= r["min(art.r)"] <= 64.0, r["min(art.r)"]
+    assert 99.0 <= r["max(art.r)"] <= 106.0, r["max(art.r)"]
+    assert 76.0 <= r["steady(art.r)"] <= 78.0, r["steady(art.r)"]
+    assert 7.0 <= r["period"] <= 9.0, r["period"]
+    assert r[f"mean({Q1})"] > 1.1 * r[f"steady({Q1})"]  # oscillation raises the mean flow
     # the limit cycle has been reached: both halves of the window have the same range
     y = r["series"]["art.r"]
     h = len(y) // 2
@@ -332,9 +339,9 @@ def test_vasomotion_limit_cycle_envelope(vaso_env):
 def test_more_damping_removes_the_oscillation(vaso_env):
     r = vaso_env[0.5]
     assert not r["oscillating"]
-    assert np.isnan(r["period [s]"])
-    assert r["art.r max"] - r["art.r min"] < 1e-3
-    assert r["art.r mean"] == pytest.approx(r["art.r steady"], abs=1e-3)
+    assert np.isnan(r["period"])
+    assert r["max(art.r)"] - r["min(art.r)"] < 1e-3
+    assert r["mean(art.r)"] == pytest.approx(r["steady(art.r)"], abs=1e-3)
 
 
 # ------------------------------------------------------------ 6. periodic orbits ---------------
@@ -343,17 +350,17 @@ def test_shooting_converges_on_the_vasomotion_limit_cycle(vaso, vaso_env):
     orb = shoot(vaso, x, T, rtol=1e-7, tol=1e-6)
     env = vaso_env[0.1]
     assert orb.converged
-    assert orb.period == pytest.approx(env["period [s]"], rel=0.02)
+    assert orb.period == pytest.approx(env["period"], rel=0.02)
     r = orb.columns["art.r"]
-    assert abs(r.min() - env["art.r min"]) < 1.0
-    assert abs(r.max() - env["art.r max"]) < 1.0
+    assert abs(r.min() - env["min(art.r)"]) < 1.0
+    assert abs(r.max() - env["max(art.r)"]) < 1.0
     # orbital stability: the flow direction and the ICP conservation law give multipliers ~1;
     # the others lie inside the unit circle (measured: |mu| <= 0.688)
     assert len(orb.nontrivial_multipliers) == vaso.nx - 2
     assert np.all(np.abs(orb.nontrivial_multipliers) < 1.0)
     assert orb.stable
     # the time-averaged flow over the exact cycle exceeds the steady flow
-    assert orb.columns[Q1][:-1].mean() > env[f"{Q1} steady"]
+    assert orb.columns[Q1][:-1].mean() > env[f"steady({Q1})"]
     # phi_T(x0) = x0 with an independent integrator (LSODA)
     res = vaso.simulate(orb.period, dt=orb.period / 50, x0=orb.x0, method="LSODA", rtol=1e-9, atol=1e-9)
     assert np.max(np.abs(res.x[-1] - orb.x0) / vaso.state_scales) < 1e-3
@@ -363,10 +370,9 @@ def test_forced_periodic_steady_state_matches_the_frequency_response(artc, nl_pa
     """Pa = 88 + 8 sin(2 pi 0.1 t) mmHg = the thesis forcing (10 % step + 10 % sine of 80 mmHg):
     shooting from the 80 mmHg operating point gives the periodic steady state directly."""
     x_op = operating_point(artc).x
-    c = artc.copy()
-    c.set_param("Pa.value", 88.0)
-    c.set_param("Pa.amplitude", 8.0)
-    c.set_param("Pa.frequency", 0.1)
+    c = artc.with_values({"Pa.value": 88.0})
+    c = c.with_values({"Pa.amplitude": 8.0})
+    c = c.with_values({"Pa.frequency": 0.1})
     orb = shoot(c, x_op, 10.0, forced=True, rtol=1e-8, tol=1e-7)
     assert orb.converged and orb.period == 10.0
     assert orb.stable  # a stable equilibrium forced: every multiplier inside (|mu| <= 0.62)
@@ -377,5 +383,5 @@ def test_forced_periodic_steady_state_matches_the_frequency_response(artc, nl_pa
     for o in (Q1, Q2):
         H_orb = _dft(orb.columns[o][:n], n, 1) / X1
         row = pick(nl_pa, o, 0.1, **{"Pa.value": 80.0})
-        H_fr = row["abs_gain"] * np.exp(1j * np.radians(row["phase [deg]"]))
+        H_fr = row["gain"] * np.exp(1j * np.radians(row["phase"]))
         assert abs(H_orb - H_fr) <= 0.01 * abs(H_fr), (o, H_orb, H_fr)

@@ -31,9 +31,9 @@ def circuit():
 
 def op_at(circuit, P, dP=0.0, unit="cmH2O", options=None):
     """Operating point with P = (Pup + Pdown)/2 and dP = Pup - Pdown (in ``unit``)."""
-    c = circuit.with_options(options) if options else circuit.copy()
-    c.set_param("Pup.value", f"{P + dP / 2} {unit}")
-    c.set_param("Pdown.value", f"{P - dP / 2} {unit}")
+    c = circuit.with_options(options) if options else circuit
+    c = c.with_values({"Pup.value": f"{P + dP / 2} {unit}"})
+    c = c.with_values({"Pdown.value": f"{P - dP / 2} {unit}"})
     return c.operating_point()
 
 
@@ -43,8 +43,8 @@ def curve(circuit, preset, dP=0.0, passive=False, P=P_GRID):
     if passive:
         opts["art.passive"] = True
     c = circuit.with_options(opts).batch(len(P))
-    c.set_param("Pup.value", (P + dP / 2) * CM)
-    c.set_param("Pdown.value", (P - dP / 2) * CM)
+    c = c.with_values({"Pup.value": (P + dP / 2) * CM})
+    c = c.with_values({"Pdown.value": (P - dP / 2) * CM})
     return np.asarray(c.operating_point()["art.r"])
 
 
@@ -86,7 +86,7 @@ def test_flow_dilates_the_active_vessel(circuit):
 def test_circuit_pressures_are_mean_and_drop(circuit):
     """The circuit's operating point equals the element's own steady-state solve at
     P = (Pup + Pdown)/2, dP = Pup - Pdown (wiring and unit conversions)."""
-    g, i = circuit._locate["art"]
+    g, i = circuit.element_group("art")
     p = {k: float(v[0, i]) for k, v in g.p.items()}
     for P, dP in ((40.0, 0.0), (80.0, 4.0), (120.0, 10.0)):
         op = op_at(circuit, P, dP)
@@ -133,7 +133,7 @@ def test_flow_shifts_the_active_curve_up_at_every_pressure(curves, preset):
 def protocol(name, circuit, **initial):
     """Load examples/protocols/<name>.yaml, optionally with extra 'initial' settings.
 
-    Extra parameters go into the protocol's ``initial`` (not circuit.set_param): the protocol's
+    Extra parameters go into the protocol's ``initial`` (not circuit.with_values): the protocol's
     structural option art.ca_order rebuilds the element, which drops values set before."""
     with open(os.path.join(PROTOCOLS, f"{name}.yaml")) as fh:
         data = yaml.safe_load(fh)
@@ -188,7 +188,7 @@ def test_a_fast_flow_induced_dilation(run_a):
 
 def test_a_delayed_constriction_after_flow_stops(circuit, run_a):
     t, r, Cw = run_a
-    NO_U = float(circuit.get_param("art.NO_U")[0])
+    NO_U = float(circuit.parameters.values["art.NO_U"][0])
     plateau = r_at(run_a, 299.9)
     m = t >= 300
     t_drop = t[m][np.argmax(r[m] < plateau - 1.0)]
@@ -217,8 +217,7 @@ def test_protocols_end_at_the_operating_point_of_their_last_pressures(circuit, n
     proto = protocol(name, circuit)
     t, r, _ = simulate(circuit, proto, dt=1.0)
     last = {**proto.initial, **{k: v for ev in proto.events for k, v in ev.set.items()}}
-    c = circuit.copy()
-    c.set_params({k: v for k, v in last.items() if k.endswith(".value")})
+    c = circuit.with_values({k: v for k, v in last.items() if k.endswith(".value")})
     assert r[-1] == pytest.approx(c.operating_point()["art.r"], abs=0.1)
     assert np.all(np.isfinite(r)) and r.min() > 40.0 and r.max() < 110.0
 

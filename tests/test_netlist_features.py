@@ -1,5 +1,5 @@
 """Netlist features: extends chains, relative paths, ${name} parameters, expressions, the
-ID.PARAM namespace (set_param, sweeps, protocols), constraints, CLI outputs."""
+ID.PARAM namespace (with_values, sweeps, protocols), constraints, CLI outputs."""
 import csv
 import json
 import math
@@ -65,10 +65,10 @@ def chain(write):
 def test_extends_chain(chain):
     a, b, c = (hc.load(str(p)) for p in chain)
     # A: Rbase = 2 -> R1 = 2, Rhalf = 1 -> R2 = 1: P(a) = 80 * 1/3
-    assert a.get_param("R2.R")[0] == 1.0
+    assert a.parameters.values["R2.R"][0] == 1.0
     assert a.operating_point()["P(a)"] == pytest.approx(80 / 3, rel=1e-12)
     # B: Rbase = 4 (overridden) -> R1 = 4, R2 = 6 (changed) parallel to R3 + R4 = 4 -> 2.4
-    assert b.get_param("R1.R")[0] == 4.0
+    assert b.parameters.values["R1.R"][0] == 4.0
     assert b.operating_point()["P(a)"] == pytest.approx(80 * 2.4 / 6.4, rel=1e-12)
     assert b.netlist.name == "B"
     # C: Pin = 100 (overridden), R1 = 1 (changed), R4 removed, Cb added: P(a) = 100 * 6/7
@@ -83,7 +83,7 @@ def test_extends_chain(chain):
     assert c.elements["R3"].file == str(chain[1])
     assert c.elements["R1"].file == str(chain[2]) and c.elements["Cb"].file == str(chain[2])
     # the base files are unchanged by loading the variants
-    assert hc.load(str(chain[0])).get_param("R1.R")[0] == 2.0
+    assert hc.load(str(chain[0])).parameters.values["R1.R"][0] == 2.0
 
 
 def test_extends_keeps_table_paths_relative_to_their_own_file(chain, write):
@@ -96,7 +96,7 @@ def test_extends_keeps_table_paths_relative_to_their_own_file(chain, write):
         np.testing.assert_allclose(res["Q(Qx)"], 2.0 * res.t, rtol=1e-12, atol=1e-12)
     # even when a variant changes another parameter of that element
     v = write("extends: C.yaml\nchange: {Qx: {amplitude: 1 mL/s, frequency: 0 Hz}}\n", "D.yaml")
-    assert hc.load(str(v)).get_param("Qx.amplitude")[0] == 1.0
+    assert hc.load(str(v)).parameters.values["Qx.amplitude"][0] == 1.0
 
 
 def test_extends_errors_name_the_variant_file(chain, write):
@@ -174,8 +174,8 @@ def test_dollar_parameters(write):
           - {id: R2, type: resistor,   nodes: [a, ground], R: "0.7 * ${Rtot}"}
           - {id: C1, type: compliance, nodes: [a, ground], C: 1 mL/mmHg}
         """))
-    assert c.get_param("Ps.value")[0] == pytest.approx(80.0, rel=1e-12)
-    assert c.get_param("R1.R")[0] == pytest.approx(3.0, rel=1e-12)
+    assert c.parameters.values["Ps.value"][0] == pytest.approx(80.0, rel=1e-12)
+    assert c.parameters.values["R1.R"][0] == pytest.approx(3.0, rel=1e-12)
     assert c.operating_point()["P(a)"] == pytest.approx(56.0, rel=1e-12)
     assert c.netlist.parameters["P2"] == "90 mmHg"
 
@@ -207,13 +207,13 @@ def test_expression_following_another_parameter(expr_circuit):
     assert op["Q(R2)"] == pytest.approx(7 / 9, rel=1e-12)
     assert op["P(d)"] == pytest.approx(42 / 9, rel=1e-12)
     # the expression follows R1 when it is changed (same ID.PARAM path as --set)
-    c.set_param("R1.R", "5 mmHg*s/mL")
+    c = c.with_values({"R1.R": "5 mmHg*s/mL"})
     op = c.operating_point()
     assert op["Q(R2)"] == pytest.approx(7 / 15, rel=1e-12)
     assert op["P(d)"] == pytest.approx(70 / 15, rel=1e-12)
     # a parameter that follows an expression cannot be set
     with pytest.raises(NetlistError, match="follows an expression"):
-        c.set_param("R2.R", "1 mmHg*s/mL")
+        c.with_values({"R2.R": "1 mmHg*s/mL"})
     # sweeping the parameter an expression follows
     sw = c.dc_sweep("R1.R", [1.0, 2.0])
     np.testing.assert_allclose(sw["Q(R2)"], [7 / 3, 7 / 6], rtol=1e-12)
@@ -247,10 +247,10 @@ def test_expression_following_a_state(expr_circuit):
     assert op["Q(Ps)"] == pytest.approx(-(7 / 9 + 7 / (0.5 * V + 1)), rel=1e-12)
 
 
-def test_get_param_of_an_expression_is_a_clear_error(expr_circuit):
+def test_value_of_an_expression_is_a_clear_error(expr_circuit):
     """A parameter that follows an expression has no fixed value: say so (never a silent NaN)."""
     with pytest.raises(hc.NetlistError, match="expression"):
-        expr_circuit.get_param("R2.R")
+        expr_circuit.parameters.values["R2.R"]
 
 
 def test_expression_errors(write):
@@ -282,14 +282,14 @@ def test_expression_errors(write):
 
 
 # --------------------------------------------------------------- ID.PARAM / set ----------
-def test_set_param_units_and_bounds():
+def test_with_values_units_and_bounds():
     c = hc.load(str(PAYNE06))
-    c.set_param("Pa.value", "100 cmH2O")
-    assert c.get_param("Pa.value")[0] == pytest.approx(100 * CMH2O / MMHG, rel=1e-12)
+    c = c.with_values({"Pa.value": "100 cmH2O"})
+    assert c.parameters.values["Pa.value"][0] == pytest.approx(100 * CMH2O / MMHG, rel=1e-12)
     q = (100 * CMH2O / MMHG - 6) / 22.28
     assert c.operating_point()["Q(Rla)"] == pytest.approx(q, rel=1e-10)
-    c.set_param("Cv.k", "186 1/L")
-    assert c.get_param("Cv.k")[0] == pytest.approx(0.186, rel=1e-12)
+    c = c.with_values({"Cv.k": "186 1/L"})
+    assert c.parameters.values["Cv.k"][0] == pytest.approx(0.186, rel=1e-12)
     for path, value, frag in [("Rla.R", "0 mmHg*s/mL", "not physical"),
                               ("Rla.R", "-3 mmHg*s/mL", "not physical"),
                               ("Cv.k", "-1 1/mL", "not physical"),
@@ -299,14 +299,14 @@ def test_set_param_units_and_bounds():
                               ("Zz.R", "1 mmHg", "no element 'Zz'"),
                               ("Rla", "1 mmHg", "ID.PARAM")]:
         with pytest.raises(NetlistError, match=frag) as ei:
-            c.set_param(path, value)
+            c.with_values({path: value})
         if "." in path and path.split(".")[0] in c.elements:
             assert ei.value.element == path.split(".")[0]
     # failed sets change nothing
-    assert c.get_param("Rla.R")[0] == 0.4 and c.get_param("Cv.k")[0] == pytest.approx(0.186)
+    assert c.parameters.values["Rla.R"][0] == 0.4 and c.parameters.values["Cv.k"][0] == pytest.approx(0.186)
 
 
-def test_load_with_set_params():
+def test_load_with_values():
     c = hc.load(str(PAYNE06), {"Pa.value": "60 mmHg", "Rsa.R": "10 mmHg*s/mL"})
     q = (60 - 6) / (0.4 + 10 + 1.32 + 0.56)
     assert c.operating_point()["Q(Rsa)"] == pytest.approx(q, rel=1e-10)
@@ -348,7 +348,7 @@ def test_protocol_events_change_sources_at_their_time(write):
     assert res["Q(R1)"][i4] == pytest.approx((P2 - P_at4) / 1.0, rel=1e-6)
     assert res["Q(R1)"][i4 - 1] == pytest.approx((P2 - Pa[i4 - 1]) / 2.0, rel=1e-6)
     # the circuit itself is untouched by the protocol
-    assert c.get_param("Ps.value")[0] == 50.0 and c.get_param("R1.R")[0] == 2.0
+    assert c.parameters.values["Ps.value"][0] == 50.0 and c.parameters.values["R1.R"][0] == 2.0
 
 
 def test_protocol_sets_a_waveform(write):
@@ -369,7 +369,7 @@ def test_protocol_via_cli_tran(write, tmp_path, capsys):
     assert main(["tran", str(net), "--protocol", str(p), "--dt", "0.5 s", "--out", str(out),
                  "--set", "R1.R=4mmHg*s/mL"]) == 0
     with open(out) as fh:
-        rows = list(csv.reader(fh))
+        rows = list(csv.reader(ln for ln in fh if not ln.startswith("#")))  # provenance lines skipped
     assert rows[0] == ["time [s]", "P(in) [mmHg]", "P(a) [mmHg]", "Q(Ps) [mL/s]", "Q(R1) [mL/s]",
                        "Q(C1) [mL/s]", "V(C1) [mL]", "C1.C [mL/mmHg]"]
     data = np.array(rows[1:], dtype=float)
@@ -416,7 +416,7 @@ def test_store_only_node_volume_constraint(write):
     assert op["P(ic)"] == pytest.approx(_pic(100, 58.6875), rel=1e-10)
     assert op["P(ic)"] == pytest.approx(14.2647058823529, rel=1e-10)
     assert op["V(Ca)"] + op["V(Cv)"] == pytest.approx(58.6875, rel=1e-12)
-    c.set_param("Pa.value", "80 mmHg")
+    c = c.with_values({"Pa.value": "80 mmHg"})
     op = c.operating_point()
     assert op["P(ic)"] == pytest.approx(10.0, rel=1e-10)
     assert op["P(a)"] == pytest.approx(70.625, rel=1e-12)
@@ -444,7 +444,7 @@ def test_store_only_node_calibration_constraint(write):
     assert op["P(ic)"] == pytest.approx(_pic(100, 58.6875), rel=1e-9)
     assert op["P(ic)"] == pytest.approx(14.2647058823529, rel=1e-9)
     # and it stays calibrated when the same circuit is moved to yet another pressure
-    c.set_param("Pa.value", "60 mmHg")
+    c = c.with_values({"Pa.value": "60 mmHg"})
     assert c.operating_point()["P(ic)"] == pytest.approx(_pic(60, 58.6875), rel=1e-9)
 
 
@@ -453,7 +453,9 @@ def test_cli_op_json(tmp_path, capsys):
     out = tmp_path / "op.json"
     assert main(["op", str(PAYNE06), "--set", "Pa.value=90mmHg", "--out", str(out)]) == 0
     printed = capsys.readouterr().out
-    data = json.loads(out.read_text())
+    doc = json.loads(out.read_text())
+    assert doc["metadata"]["analysis"] == "op" and doc["metadata"]["provenance"]["sets"] == {"Pa.value": "90 mmHg"}
+    data = doc["values"]
     q = (90 - 6) / 22.28
     assert data["P(alpha) [mmHg]"] == pytest.approx(90 - 0.4 * q, rel=1e-10)
     assert data["Q(Rla) [mL/s]"] == pytest.approx(q, rel=1e-10)
@@ -467,7 +469,7 @@ def test_cli_dc_sweep_pressure_flow_line(tmp_path, capsys):
     out = tmp_path / "sweep.csv"
     assert main(["dc", str(PAYNE06), "--sweep", "Pa.value=20:200:5mmHg", "--out", str(out)]) == 0
     with open(out) as fh:
-        rows = list(csv.reader(fh))
+        rows = list(csv.reader(ln for ln in fh if not ln.startswith("#")))  # provenance lines skipped
     head = rows[0]
     assert head[0] == "Pa.value [mmHg]" and "Q(Rla) [mL/s]" in head and "P(alpha) [mmHg]" in head
     data = np.array(rows[1:], dtype=float)

@@ -16,7 +16,7 @@ NETS = ROOT / "netlists"
 @pytest.fixture(scope="module")
 def artcomp_sweep():
     c = hc.load(NETS / "arterial_compliance.yaml")
-    c.set_param("art.tau_Ca", 1.0)
+    c = c.with_values({"art.tau_Ca": 1.0})
     return stability_sweep(c, "Pa.value", "20:200:10 mmHg")
 
 
@@ -80,7 +80,7 @@ def test_hard_limit_gives_no_false_huge_eigenvalue(artcomp_sweep):
     assert all(a == [] for a, v in zip(r.at_limit, r.values) if v >= 40)
     # the artefact itself: the dynamic (clamped) circuit, V at its limit 0, forward difference
     c = hc.load(NETS / "arterial_compliance.yaml")
-    c.set_param("Pa.value", 20.0)
+    c = c.with_values({"Pa.value": 20.0})
     x = r.x[np.flatnonzero(low)[0]].copy()
     x[c.state_names.index("Cv.V")] = 0.0
     lam_false = np.linalg.eigvals(c.jacobian(0.0, x))
@@ -166,10 +166,10 @@ def test_cli_stability(tmp_path, capsys):
     assert rc == 0
     text = capsys.readouterr().out
     assert "complex pair for Pa.value in [" in text
-    lines = out.read_text().splitlines()
+    lines = [ln for ln in out.read_text().splitlines() if not ln.startswith("#")]  # provenance header
     head = lines[0].split(",")
-    assert head[:3] == ["Pa.value [mmHg]", "classification", "n_unstable"]
-    assert "pair_freq [Hz]" in head and "re5 [1/s]" in head and "re6 [1/s]" not in head
+    assert head[:3] == ["Pa.value [mmHg]", "classification", "n_unstable [1]"]
+    assert "frequency(pair) [Hz]" in head and "re(lambda5) [1/s]" in head and "re(lambda6) [1/s]" not in head
     assert len(lines) == 1 + 5
     assert png.stat().st_size > 10_000
     assert main(["stability", str(NETS / "arterial_compliance.yaml")]) == 2

@@ -119,10 +119,10 @@ def test_netlist_values_in_other_units_give_the_same_circuit(write):
     a = hc.load(write(NET.format(P="10 cmH2O", R="0.5 mmHg*s/mL", Q="2 L/min", C="1 mL/mmHg"), "a.yaml"))
     b = hc.load(write(NET.format(P=f"{10 * CMH2O} Pa", R=f"{0.5 * MMHG * 1e6} Pa*s/m^3",
                                  Q="3.3333333333333333e-5 m^3/s", C=f"{1e-6 / MMHG} m^3/Pa"), "b.yaml"))
-    assert a.get_param("Ps.value")[0] == pytest.approx(10 * CMH2O / MMHG, rel=1e-12)
-    assert a.get_param("Qs.value")[0] == pytest.approx(100 / 3, rel=1e-12)
+    assert a.parameters.values["Ps.value"][0] == pytest.approx(10 * CMH2O / MMHG, rel=1e-12)
+    assert a.parameters.values["Qs.value"][0] == pytest.approx(100 / 3, rel=1e-12)
     for p in ("Ps.value", "R1.R", "Qs.value", "C1.C"):
-        assert a.get_param(p)[0] == pytest.approx(b.get_param(p)[0], rel=1e-12), p
+        assert a.parameters.values[p][0] == pytest.approx(b.parameters.values[p][0], rel=1e-12), p
     # hand-solved operating point: node a from Kirchhoff, (P - Pa)/0.5 + Q = Pa/1
     P, Q = 10 * CMH2O / MMHG, 100 / 3
     Pa = (P / 0.5 + Q) / (1 / 0.5 + 1)
@@ -151,19 +151,19 @@ def test_wrong_dimension_in_netlist_names_element(write):
     assert str(path) in msg and "Qs" in msg and "dimension" in msg and "mL/s" in msg
 
 
-def test_set_param_converts_units(write):
+def test_with_values_converts_units(write):
     c = hc.load(write(NET.format(P="80 mmHg", R="1 mmHg*s/mL", Q="1 mL/s", C="1 mL/mmHg")))
-    c.set_param("Ps.value", "100 cmH2O")
-    assert c.get_param("Ps.value")[0] == pytest.approx(100 * CMH2O / MMHG, rel=1e-12)
-    c.set_param("Qs.value", "1.2 L/min")
-    assert c.get_param("Qs.value")[0] == pytest.approx(20.0, rel=1e-12)
-    c.set_param("R1.R", 2.5)  # plain numbers are in the declared unit
-    assert c.get_param("R1.R")[0] == 2.5
+    c = c.with_values({"Ps.value": "100 cmH2O"})
+    assert c.parameters.values["Ps.value"][0] == pytest.approx(100 * CMH2O / MMHG, rel=1e-12)
+    c = c.with_values({"Qs.value": "1.2 L/min"})
+    assert c.parameters.values["Qs.value"][0] == pytest.approx(20.0, rel=1e-12)
+    c = c.with_values({"R1.R": 2.5})  # plain numbers are in the declared unit
+    assert c.parameters.values["R1.R"][0] == 2.5
     with pytest.raises(NetlistError, match="no unit"):
-        c.set_param("R1.R", "2.5")
+        c.with_values({"R1.R": "2.5"})
     with pytest.raises(NetlistError, match="dimension"):
-        c.set_param("R1.R", "2.5 mmHg")
-    assert c.get_param("R1.R")[0] == 2.5
+        c.with_values({"R1.R": "2.5 mmHg"})
+    assert c.parameters.values["R1.R"][0] == 2.5
 
 
 def test_boundary_constants_are_pints():

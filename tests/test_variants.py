@@ -61,12 +61,11 @@ def test_payne06_thesis_numbers():
     p_im = 0.5 * (op["P(alpha)"] + op["P(beta)"])
     assert abs(p_im - 48.5) <= 0.5
     assert abs(op["art.Cw"] - 4.9e-6) <= 0.03 * 4.9e-6
-    no_u = c.get_param("art.NO_U")[0]
+    no_u = c.parameters.values["art.NO_U"][0]
     assert op["art.Cw"] / no_u > 130
 
     def drop(pa):
-        c.set_param("Pa.value", pa)
-        o = c.operating_point()
+        o = c.with_values({"Pa.value": pa}).operating_point()
         return o["P(alpha)"] - o["P(beta)"] - 2.4
 
     pa_24 = brentq(drop, 5.0, 20.0, xtol=1e-4)

@@ -29,6 +29,8 @@ from ..errors import HemocircuitError, NetlistError
 from ..units import UnitError, parse_quantity
 from .linearize import linearize
 from ..io import pyplot, save_figure
+from ..provenance import clock, stamp
+from ..results import Result
 
 
 def parse_freqs(spec, per_decade=20):
@@ -90,12 +92,16 @@ def unwrapped_phase(H):
     return np.degrees(ph + shift)
 
 
-class ACResult:
-    """Result of :func:`ac_response`.
+class ACResult(Result):
+    """Result of :func:`ac_response`: a :class:`hemocircuit.results.Result` indexed by
+    ``frequency`` [Hz], per output ``o`` and input ``p`` the columns ``gain(o/p)`` [output
+    unit/input unit], ``rel_gain(o/p)`` [1], ``phase(o/p)`` [deg], ``re_H(o/p)``,
+    ``im_H(o/p)`` [output unit/input unit].
 
-    freq (F,) [Hz]; per output name: H[name] complex, gain[name], rel_gain[name], phase[name]
-    (arrays (F,), or (B, F) for a batch circuit); y0[name] the operating-point value; p0 the
-    input's value; units; the linearisation ``lin`` and operating point ``op``.
+    Attributes as arrays (F,) (or (B, F) for a batch circuit, whose table holds member 0):
+    freq [Hz]; per output name: H[name] complex, gain[name], rel_gain[name], phase[name];
+    y0[name] the operating-point value; p0 the input's value; input_unit, output_units; the
+    linearisation ``lin``, operating point ``op``, ``eigenvalues`` and ``stable``.
     """
 
     def __init__(self, freq, input, p0, outputs, H, y0, units, lin, op):
@@ -110,7 +116,8 @@ class ACResult:
             self.rel_gain = {n: np.abs(h) * np.abs(np.asarray(p0)[..., None] / np.asarray(self.y0[n])[..., None])
                              for n, h in self.H.items()}
         self.phase = {n: unwrapped_phase(h) for n, h in self.H.items()}
-        self.units = units
+        self.input_unit = units.get("input", "")
+        self.output_units = {n: units.get(n, "") for n in self.outputs}
         self.lin = lin
         self.op = op
         # an unstable equilibrium still has a (formal) transfer function, but no periodic
@@ -118,18 +125,20 @@ class ACResult:
         lam = np.linalg.eigvals(lin.A_red)  # (n,) or (B, n)
         self.eigenvalues = lam
         self.stable = bool(np.all(lam.real < 1e-9 * np.max(np.abs(lam), initial=1e-300)))
-
-    def columns(self):
-        """Tidy columns for a CSV (single circuit): per output gain, rel_gain, phase, Re, Im."""
-        cols, units = {}, {}
+        cols, cunits = {"frequency": np.asarray(freq, dtype=float)}, {"frequency": "Hz"}
+        first = (lambda a: np.atleast_2d(a)[0])  # a batch's table holds its first member
         for n in self.outputs:
-            u = f"{self.units.get(n, '')}/{self.units.get('input', '')}".strip("/")
-            for key, arr, unit in ((f"gain {n}", self.gain[n], u), (f"rel_gain {n}", self.rel_gain[n], "1"),
-                                   (f"phase {n}", self.phase[n], "deg"), (f"Re {n}", self.H[n].real, u),
-                                   (f"Im {n}", self.H[n].imag, u)):
-                cols[key] = arr
-                units[key] = unit
-        return cols, units
+            u = f"{self.output_units[n]}/{self.input_unit}" if self.input_unit else self.output_units[n]
+            for name, arr, unit in ((f"gain({n}/{input})", self.gain[n], u),
+                                    (f"rel_gain({n}/{input})", self.rel_gain[n], "1"),
+                                    (f"phase({n}/{input})", self.phase[n], "deg"),
+                                    (f"re_H({n}/{input})", self.H[n].real, u),
+                                    (f"im_H({n}/{input})", self.H[n].imag, u)):
+                cols[name], cunits[name] = first(arr), unit
+        super().__init__(cols, cunits, index=["frequency"])
+        self.metadata["measures"] = {"input_value": float(np.atleast_1d(p0)[0]), "stable": self.stable,
+                                     **{f"operating_point({n})": float(np.atleast_1d(self.y0[n])[0])
+                                        for n in self.outputs}}
 
 
 def ac_response(circuit, input=None, outputs=None, freqs="0.001:10 Hz", per_decade=20,
@@ -146,6 +155,7 @@ def ac_response(circuit, input=None, outputs=None, freqs="0.001:10 Hz", per_deca
     from ..outputs import default_input, default_outputs
     from .op import operating_point
 
+    started = clock()
     if input is None:
         input = default_input(circuit)
     if outputs is None:
@@ -167,41 +177,68 @@ def ac_response(circuit, input=None, outputs=None, freqs="0.001:10 Hz", per_deca
         if n not in units and n in derived:
             units[n] = str(derived[n].get("unit", ""))
     units["input"] = circuit.param_unit(lin.input)
-    return ACResult(f, lin.input, lin.p0, outputs, H, lin.y0, units, lin, op)
+    res = ACResult(f, lin.input, lin.p0, outputs, H, lin.y0, units, lin, op)
+    return stamp(res, "ac", circuit, {"input": lin.input, "outputs": outputs, "freqs": freqs if isinstance(freqs, str)
+                                      else None, "per_decade": per_decade, "t": t, "linearisation": "central differences"},
+                 started)
 
 
 # ------------------------------------------------------------------------------ plots -----
-def plot_bode(path, res: ACResult, title=""):
-    """Bode plot: relative gain (log-log) and phase (deg, leading positive) against frequency."""
+def plot_result(res, path, select=None, title=None):
+    """Bode plot from a result's columns (fresh or reloaded): relative gain (log-log) and phase
+    (deg, leading positive) against frequency, one line per output and grid member."""
     plt = pyplot()
 
+    f = res["frequency"]
+    names = [k[len("rel_gain("):-1] for k in res.keys() if k.startswith("rel_gain(")]
+    if select:
+        names = [n for n in names if n.split("/")[0] in select] or names
+    from ..grid import members
+    groups = members(res, [k for k in res.index if k != "frequency"])
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(8, 6.5), sharex=True)
-    for n in res.outputs:
-        ax1.loglog(res.freq, np.atleast_2d(res.rel_gain[n])[0], label=f"{n} (|H| at f0: "
-                   f"{np.atleast_2d(res.gain[n])[0][0]:.3g} {res.units.get(n, '')}/{res.units['input']})")
-        ax2.semilogx(res.freq, np.atleast_2d(res.phase[n])[0], label=n)
-    ax1.set_ylabel(f"relative gain (dy/y)/(d{res.input}/{res.input})")
+    for j, n in enumerate(names):
+        for g, (glab, mask) in enumerate(groups):
+            f = np.asarray(res["frequency"][mask], dtype=float)
+            gain = np.asarray(res[f"gain({n})"][mask], dtype=float)
+            lab = n.split("/")[0] + (f" ({glab})" if glab else
+                                     f" (|H| at {f[0]:.3g} Hz: {gain[0]:.3g} {res.units[f'gain({n})']})")
+            color = f"C{(g if len(groups) > 1 else j) % 10}"
+            style = ["-", "--", ":", "-."][(j if len(groups) > 1 else 0) % 4]
+            ax1.loglog(f, res[f"rel_gain({n})"][mask], style, color=color, label=lab)
+            ax2.semilogx(f, res[f"phase({n})"][mask], style, color=color, label=lab)
+    ax1.set_ylabel("relative gain (dy/y0)/(dp/p0) [1]")
     ax1.grid(alpha=0.3, which="both")
     ax1.legend(fontsize=8)
     ax2.axhline(0, color="k", lw=0.6)
     ax2.set_ylabel("phase [deg] (+ = output leads)")
     ax2.set_xlabel("frequency [Hz]")
     ax2.grid(alpha=0.3, which="both")
-    ax2.legend(fontsize=8)
-    if title:
-        ax1.set_title(title)
+    ax1.set_title(title or res._title())
     save_figure(fig, path)
+    return str(path)
 
 
 # ------------------------------------------------------------------------------ CLI -------
-def cmd_ac(args):
-    from .. import io
-    from ..cli import _load
+def _ac(args, c):
+    return ac_response(c, input=args.input, outputs=args.output or None, freqs=args.freq, per_decade=args.per_decade)
 
-    c, _ = _load(args)
-    res = ac_response(c, input=args.input, outputs=args.output or None, freqs=args.freq, per_decade=args.per_decade)
+
+def compute_ac(args, sets):
+    """One --grid member (:func:`hemocircuit.cli.computed`)."""
+    from ..cli import load_circuit
+    return _ac(args, load_circuit(args.netlist, sets, args.protocol)[0])
+
+
+def cmd_ac(args):
+    from ..cli import _load, computed, report_grid, save_outputs
+
+    if args.grid:
+        res = computed(args, compute_ac)
+        show = [k for k in res.keys() if k.startswith(("rel_gain(", "phase("))]
+        return report_grid(args, res, show)
+    res = _ac(args, _load(args)[0])
     outputs = res.outputs
-    print(f"AC: {res.input} = {res.p0:.6g} {res.units['input']} -> {', '.join(outputs)}; "
+    print(f"AC: {res.input} = {res.p0:.6g} {res.input_unit} -> {', '.join(outputs)}; "
           f"{len(res.freq)} frequencies {res.freq[0]:.4g}..{res.freq[-1]:.4g} Hz")
     sys.stdout.flush()
     if not res.stable:
@@ -212,22 +249,15 @@ def cmd_ac(args):
     for n in outputs:
         g = res.rel_gain[n]
         k = int(np.nanargmax(g))
-        print(f"  {n}: operating point {res.y0[n]:.6g} {res.units.get(n, '')}; "
-              f"gain at {res.freq[0]:.4g} Hz {res.gain[n][0]:.6g} {res.units.get(n, '')}/{res.units['input']} "
+        u = res.output_units[n]
+        print(f"  {n}: operating point {res.y0[n]:.6g} {u}; "
+              f"gain at {res.freq[0]:.4g} Hz {res.gain[n][0]:.6g} {u}/{res.input_unit} "
               f"(relative {g[0]:.4g}, phase {res.phase[n][0]:+.2f} deg); "
               f"relative-gain peak {g[k]:.4g} at {res.freq[k]:.4g} Hz")
-    cols, units = res.columns()
     if not args.quiet:
-        show = [k for n in outputs for k in (f"rel_gain {n}", f"phase {n}")]
-        print("  ".join(f"{h:>16}" for h in ["f [Hz]"] + show))
-        for i in range(len(res.freq)):
-            print("  ".join(f"{v:>16.6g}" for v in [res.freq[i]] + [cols[s][i] for s in show]))
-    if args.out:
-        io.write_csv(args.out, cols, units, first=("f", res.freq, "Hz"))
-        print(f"wrote {args.out}")
-    if args.plot:
-        plot_bode(args.plot, res, title=f"{c.netlist.name}: {res.input} = {res.p0:.4g} {res.units['input']}")
-        print(f"wrote {args.plot}")
+        show = [k for n in outputs for k in (f"rel_gain({n}/{res.input})", f"phase({n}/{res.input})")]
+        print(res.summary(show=show, max_rows=0, where=args.out))
+    save_outputs(args, res)
 
 
 def register_cli(sub, common):
@@ -239,5 +269,4 @@ def register_cli(sub, common):
     sp.add_argument("--freq", default="0.001:10Hz",
                     help="F1:F2 UNIT (log-spaced), F1:F2:STEP UNIT (linear) or a list (default 0.001:10Hz)")
     sp.add_argument("--per-decade", type=int, default=20, help="points per decade for F1:F2 (default 20)")
-    sp.add_argument("--quiet", action="store_true", help="do not print the table")
     sp.set_defaults(func=cmd_ac)

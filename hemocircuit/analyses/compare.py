@@ -2,81 +2,96 @@
 
 ``hemocircuit compare A.yaml B.yaml ... --sweep Pa.value=20:200:2mmHg`` computes the steady
 states of every netlist over the sweep; ``--tran --protocol P.yaml`` runs the same protocol
-on each.  Output: one tidy CSV (netlist, x, quantity, value, unit) and one overlay plot per
-quantity.  Quantities are every netlist's ``derived`` entries plus the columns they share.
+on each.  Output: one CSV, a row per (netlist, x) and a column per quantity (``name [unit]``),
+and one plot (a panel per unit, a line per netlist).  Quantities are every netlist's ``derived`` entries plus the columns they share.
 """
 from __future__ import annotations
 
-import csv
-import os
+import sys
 
 import numpy as np
 
 from ..derived import derived_units, evaluate_derived
 from ..errors import HemocircuitError
-from ..io import pyplot, save_figure
+from ..provenance import clock, stamp
+from ..results import Result
 
 
 def compare_sweep(circuits, param, values):
-    """{netlist name: (x, {quantity: array}, {quantity: unit})} for a DC sweep."""
-    out = {}
+    """Steady states of every circuit over ``param`` = ``values`` -> :class:`CompareResult`."""
+    started = clock()
+    parts = {}
     for c in circuits:
         res = c.dc_sweep(param, values)
-        cols = {k: v for k, v in res.items() if k != param}
+        cols = res.columns
         d = evaluate_derived(c.netlist.derived, cols, c.file)
         units = {**res.units, **derived_units(c.netlist.derived)}
-        out[c.netlist.name] = (np.asarray(res[param]), {**d, **cols}, units, res.failed)
-    return out
+        parts[_name(c, parts)] = (np.asarray(res[param]), {**d, **cols}, units, res.failed)
+    res = CompareResult(parts, param, circuits[0].param_unit(param))
+    return stamp(res, "compare", circuits[0], {"mode": "sweep", "param": param,
+                                               "values": values if isinstance(values, str) else None,
+                                               "netlists": [c.file for c in circuits],
+                                               "derived": _derived_names(circuits)}, started)
+
+
+def _name(c, parts):
+    """The netlist's name, made unique (two netlists of one name must not merge their rows)."""
+    name, k = c.netlist.name, 2
+    while name in parts:
+        name, k = f"{c.netlist.name} ({k})", k + 1
+    return name
+
+
+def _derived_names(circuits):
+    names = []
+    for c in circuits:
+        names += [k for k in c.netlist.derived if k not in names]
+    return names
 
 
 def compare_transient(circuits, protocol, t_end=None, dt=None):
-    out = {}
+    """The same protocol on every circuit -> :class:`CompareResult` indexed by netlist and time."""
+    started = clock()
+    parts = {}
     for c in circuits:
         r = c.simulate(t_end, dt=dt, protocol=protocol)
         d = evaluate_derived(c.netlist.derived, r.columns, c.file)
-        out[c.netlist.name] = (r.t, {**d, **r.columns}, {**r.units, **derived_units(c.netlist.derived)}, [])
-    return out
+        parts[_name(c, parts)] = (r.t, {**d, **r.columns}, {**r.units, **derived_units(c.netlist.derived)}, [])
+    res = CompareResult(parts, "time", "s")
+    return stamp(res, "compare", circuits[0], {"mode": "tran", "protocol": protocol if isinstance(protocol, str)
+                                               else getattr(protocol, "file", None), "t_end": t_end, "dt": dt,
+                                               "netlists": [c.file for c in circuits],
+                                               "derived": _derived_names(circuits)}, started)
 
 
-def shared_quantities(results, derived_first=True):
-    names = None
-    for _, (_, q, _, _) in results.items():
-        names = set(q) if names is None else names & set(q)
-    names = names or set()
-    return sorted(names)
+class CompareResult(Result):
+    """Several netlists side by side: one row per (netlist, x), indexed by ``netlist`` and the
+    swept parameter (or ``time``); every quantity any netlist has is a column, NaN for the
+    netlists without it.  ``parts`` {netlist name: (x, {quantity: array}, units, failed)}."""
 
+    def __init__(self, parts, xname, xunit):
+        self.parts = parts
+        names = []
+        for _, (_, q, _, _) in parts.items():
+            names += [k for k in q if k not in names]
+        units = {xname: xunit}
+        for _, (_, q, u, _) in parts.items():
+            for k in q:
+                units.setdefault(k, u.get(k, ""))
+        cols = {"netlist": np.concatenate([np.array([n] * len(x), dtype=object) for n, (x, _, _, _) in parts.items()]),
+                xname: np.concatenate([np.asarray(x, dtype=float) for x, _, _, _ in parts.values()])}
+        for k in names:
+            cols[k] = np.concatenate([np.asarray(q[k], dtype=float) if k in q else np.full(len(x), np.nan)
+                                      for x, q, _, _ in parts.values()])
+        super().__init__(cols, units, index=["netlist", xname])
+        self.metadata["failed"] = [[n, v, why] for n, (_, _, _, failed) in parts.items() for v, why in failed]
 
-def write_tidy(path, results, xname, xunit):
-    with open(path, "w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(["netlist", f"{xname} [{xunit}]", "quantity", "value", "unit"])
-        for name, (x, q, units, _) in results.items():
-            for k in sorted(q):
-                v = np.asarray(q[k], dtype=float)
-                for xi, vi in zip(x, v):
-                    w.writerow([name, repr(float(xi)), k, repr(float(vi)), units.get(k, "")])
-
-
-def plot_overlays(prefix, results, quantities, xlabel):
-    plt = pyplot()
-
-    files = []
-    for k in quantities:
-        fig, ax = plt.subplots(figsize=(6.4, 4))
-        unit = ""
-        for name, (x, q, units, _) in results.items():
-            if k in q:
-                ax.plot(x, q[k], label=name)
-                unit = units.get(k, unit)
-        ax.set_xlabel(xlabel)
-        ax.set_ylabel(f"{k} [{unit}]" if unit else k)
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
-        safe = "".join(ch if ch.isalnum() or ch in "._-" else "_" for ch in k)
-        f = f"{prefix}_{safe}.png"
-        save_figure(fig, f, dpi=100)
-        files.append(f)
-    return files
+    def shared_quantities(self):
+        """Quantities every netlist has, sorted."""
+        names = None
+        for _, (_, q, _, _) in self.parts.items():
+            names = set(q) if names is None else names & set(q)
+        return sorted(names or set())
 
 
 def register_cli(sub, common):
@@ -87,51 +102,55 @@ def register_cli(sub, common):
     sp.add_argument("--tran", action="store_true", help="run --protocol on each netlist instead of a sweep")
     sp.add_argument("--t-end", help="end time for --tran")
     sp.add_argument("--dt", help="output interval for --tran")
-    sp.add_argument("--out", help="tidy CSV file")
-    sp.add_argument("--plot", help="prefix of the overlay PNG files (one per quantity)")
+    sp.add_argument("--out", help="result CSV (a row per netlist and x; or .json)")
+    sp.add_argument("--plot", help="PNG: the quantities of interest, a panel per unit, a line per netlist")
     sp.add_argument("--show", action="append", help="quantity to print/plot (default: derived quantities)")
     sp.set_defaults(func=cmd_compare)
 
 
-def cmd_compare(args):
-    from ..cli import _range_spacing, _sets, _unit_to, events_only, load_circuit
+def compute_compare(args, sets):
+    """The comparison on the netlists with ``sets`` applied (also one --grid member)."""
+    from ..cli import _range_spacing, _unit_to, events_only, load_circuit
 
     circuits, proto = [], None
     for path in args.netlists:
-        c, proto = load_circuit(path, _sets(args.set), args.protocol)
+        c, proto = load_circuit(path, sets, args.protocol)
         circuits.append(c)
     if args.tran:
-        if not args.protocol:
-            raise HemocircuitError("compare --tran needs --protocol")
         t_end = float(_unit_to(args.t_end, "s")) if args.t_end else None
         dt = float(_unit_to(args.dt, "s")) if args.dt else None
-        results = compare_transient(circuits, events_only(proto), t_end, dt)
-        xname, xunit = "time", "s"
-    else:
-        if not args.sweep or "=" not in args.sweep:
-            raise HemocircuitError("compare needs --sweep ID.PARAM=START:STOP:STEP UNIT (or --tran)")
-        param, rng = args.sweep.split("=", 1)
-        param = param.strip()
-        results = compare_sweep(circuits, param, _range_spacing(rng))
-        xname, xunit = param, circuits[0].param_unit(param)
-    derived = []
-    for c in circuits:
-        derived += [k for k in c.netlist.derived if k not in derived]
-    shown = args.show or [k for k in derived if all(k in q for _, q, _, _ in results.values())] or \
-        shared_quantities(results)[:6]
-    header = ["netlist", f"{xname} [{xunit}]"] + shown
-    print("  ".join(f"{h:>16}" for h in header))
-    for name, (x, q, units, failed) in results.items():
-        step = max(1, len(x) // 10)
-        for i in range(0, len(x), step):
-            vals = [q[k][i] if k in q else np.nan for k in shown]
-            print("  ".join([f"{name:>16}", f"{x[i]:>16.6g}"] + [f"{v:>16.6g}" for v in vals]))
-        for v, why in failed:
-            print(f"{name}: failed at {xname}={v:g}: {why}")
+        return compare_transient(circuits, events_only(proto), t_end, dt)
+    param, rng = args.sweep.split("=", 1)
+    return compare_sweep(circuits, param.strip(), _range_spacing(rng))
+
+
+def cmd_compare(args):
+    from ..cli import apply_measures, computed, record
+
+    if args.tran and not args.protocol:
+        raise HemocircuitError("compare --tran needs --protocol")
+    if not args.tran and (not args.sweep or "=" not in args.sweep):
+        raise HemocircuitError("compare needs --sweep ID.PARAM=START:STOP:STEP UNIT (or --tran)")
+    res = computed(args, compute_compare)
+    derived = res.metadata.get("settings", {}).get("derived", [])
+    shown = args.show or [k for k in derived if k in res.data and _in_every_netlist(res, k)] or \
+        [k for k in res.columns if _in_every_netlist(res, k)][:6]
+    print(res.summary(show=shown, max_rows=24, where=args.out))
+    for item in res.metadata.get("failed", []):
+        print(f"failed: {item}", file=sys.stderr)
+    apply_measures(args, res)
+    record(args, res)
     if args.out:
-        write_tidy(args.out, results, xname, xunit)
-        print(f"wrote {args.out}")
+        print(f"wrote {res.save(args.out)}")
     if args.plot:
-        prefix = os.path.splitext(args.plot)[0]
-        files = plot_overlays(prefix, results, shown, f"{xname} [{xunit}]")
-        print("wrote " + ", ".join(files))
+        res.plot(args.plot, select=args.show)
+        print(f"wrote {args.plot}")
+
+
+def _in_every_netlist(res, k):
+    """Whether every netlist of a comparison has quantity ``k`` (some finite value)."""
+    try:
+        v = np.asarray(res[k], dtype=float)
+    except (TypeError, ValueError):
+        return False
+    return all(np.any(np.isfinite(v[res["netlist"] == n])) for n in dict.fromkeys(res["netlist"]))

@@ -4,6 +4,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import NetlistError, SolverError
+from ..provenance import clock, stamp
+from ..results import Result
 from ..units import UnitError, parse_quantity
 
 
@@ -40,45 +42,58 @@ def parse_range(spec: str, unit: str) -> np.ndarray:
         raise NetlistError(f"sweep {spec!r}: {exc}") from None
 
 
-def dc_sweep(circuit, param: str, values, progress=False):
+def dc_sweep(circuit, param: str, values, progress=None):
     """Operating points for ``param`` (ID.PARAM) over ``values`` (array in the declared unit,
     or a range string like '20:200:5 mmHg').  Each point starts from the previous solution.
 
-    Returns a dict column -> array with the swept parameter first; points that fail are NaN
-    and listed in result['_failed'] with their reasons.
+    Returns a :class:`SweepResult` indexed by ``param``; points that fail are NaN rows and
+    listed in ``result.failed`` [(value, reason)] (``metadata['failed']``).
     """
     from .op import operating_point
 
+    started = clock()
     unit = circuit.param_unit(param)
     vals = parse_range(values, unit) if isinstance(values, str) else np.asarray(values, dtype=float)
-    c = circuit.copy()
     rows, failed = [], []
     x_prev = None
-    for v in vals:
-        c.set_param(param, float(v))
-        try:
-            op = operating_point(c, x0=None if x_prev is None else x_prev)
-        except SolverError:
-            try:  # continuation failed: retry from a fresh DC guess
-                op = operating_point(c)
-            except SolverError as exc2:
-                failed.append((float(v), str(exc2)))
-                rows.append(None)
-                continue
-        x_prev = op.x
-        rows.append(op.values)
+    from ..progress import bar
+    with bar(len(vals), "dc sweep", unit="point", progress=progress) as b:
+        for v in vals:
+            b.update(1)
+            c = circuit.with_values({param: float(v)})
+            try:
+                op = operating_point(c, x0=None if x_prev is None else x_prev)
+            except SolverError:
+                try:  # continuation failed: retry from a fresh DC guess
+                    op = operating_point(c)
+                except SolverError as exc2:
+                    failed.append((float(v), str(exc2)))
+                    rows.append(None)
+                    continue
+            x_prev = op.x
+            rows.append(op.values)
     keys = next((list(r) for r in rows if r is not None), [])
     out = {f"{param}": vals}
     for k in keys:
         out[k] = np.array([r[k] if r is not None else np.nan for r in rows])
-    units = {param: unit, **c.column_units()}
-    return SweepResult(out, units, failed)
+    units = {param: unit, **circuit.column_units()}
+    res = SweepResult(out, units, failed, param)
+    return stamp(res, "dc", circuit, {"param": param, "values": values if isinstance(values, str) else None,
+                                      "continuation": True}, started)
 
 
-class SweepResult(dict):
-    """Columns of a sweep (dict name -> array) with units and failures."""
+class SweepResult(Result):
+    """Operating points along a swept parameter (the index column); ``failed`` [(value, reason)]."""
 
-    def __init__(self, data, units, failed):
-        super().__init__(data)
-        self.units = units
-        self.failed = failed
+    def __init__(self, data, units, failed, param=None):
+        param = param or next(iter(data))
+        super().__init__(data, units, index=[param])
+        self.metadata["failed"] = [[v, why] for v, why in failed]
+
+    @property
+    def param(self):
+        return self.index[0]
+
+    @property
+    def failed(self):
+        return [(v, why) for v, why in self.metadata.get("failed", [])]

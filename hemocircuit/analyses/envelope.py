@@ -13,12 +13,17 @@ mean and the second half of the window has at least half the peak-to-peak of the
 """
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 
-from ..batch import build_batches, expand_grid, parse_grid_arg, resolve_values
+from ..batch import build_batches, expand_grid, grid_columns, parse_grid_arg, resolve_values
 from ..batch_integrator import integrate
 from ..execution import run_chunks, split
+from ..derived import derived_units
 from ..io import pyplot, save_figure
+from ..provenance import clock, stamp
+from ..results import Result
 
 
 def _law_states(c):
@@ -54,7 +59,7 @@ def _summary(bc, k, r, grid, opv, kk, opt):
         n_win = max(int(len(grid) * opt["window"]), 4)
         if not r.ok[k]:
             return {"error": r.message[k]}
-        cols = bc.member(k).outputs(grid[-n_win:], r.x[k, -n_win:])
+        cols = bc.subset([k]).outputs(grid[-n_win:], r.x[k, -n_win:])
         tw = grid[-n_win:]
         osc = {}
         for o in opt["outputs"]:
@@ -90,65 +95,118 @@ def _period(t, y):
 
 
 def envelope(circuit, sweep, grid=None, outputs=None, t_end=1000.0, dt=0.1, window=0.3,
-             kick=1e-3, osc_tol=1e-3, rtol=1e-5, keep_series=None, scheduler=None, workers=None, progress=False):
-    """sweep: (ID.PARAM, values) ; grid: [(ID.PARAM, values)].  Returns tidy rows (dicts).
+             kick=1e-3, osc_tol=1e-3, rtol=1e-5, keep_series=None, scheduler=None, workers=None, progress=None,
+             members=None):
+    """sweep: (ID.PARAM, values) ; grid: [(ID.PARAM, values)]; or ``members``: an explicit list
+    of parameter sets [{ID.PARAM: value}] in place of the sweep x grid product.  Returns an
+    :class:`EnvelopeResult` (one row per point or member).
 
     outputs: columns to report, the first giving the period; default the netlist's
     ``outputs:`` for 'envelope' (:func:`hemocircuit.outputs.default_outputs`)."""
     from ..outputs import default_outputs
 
+    started = clock()
     outputs = list(default_outputs(circuit, "envelope") if outputs is None else outputs)
     grids = resolve_values(circuit, ([sweep] if sweep else []) + list(grid or []))
-    assignments = expand_grid(grids)
+    assignments = expand_grid(grids) if members is None else list(members)
     opt = dict(outputs=outputs, t_end=float(t_end), dt=float(dt), window=float(window), kick=kick,
                osc_tol=osc_tol, rtol=rtol, keep_series=keep_series)
     jobs, where = [], []
-    for bc, members in build_batches(circuit, assignments):
-        n = (workers or 2) if scheduler != "serial" else 1
-        for chunk in split(list(range(len(members))), n):
-            sub = bc.subset(chunk).copy()
-            sub.__dict__.pop("_subset_cache", None)
-            jobs.append((sub, opt))
-            where.append([members[j] for j in chunk])
-    results = run_chunks(_run_chunk, jobs, scheduler=scheduler, workers=workers, progress=progress, desc="envelope")
-    rows = []
+    for bc, idx in build_batches(circuit, assignments):
+        # a few chunks per worker: the bar (runs done / total) moves while runs last minutes
+        n = min(len(idx), 4 * (workers or 2)) if scheduler != "serial" else 1
+        for chunk in split(list(range(len(idx))), n):
+            jobs.append((bc.subset(chunk), opt))  # pickles without caches
+            where.append([idx[j] for j in chunk])
+    results = run_chunks(_run_chunk, jobs, scheduler=scheduler, workers=workers, progress=progress, desc="envelope",
+                         sizes=[len(w) for w in where])
+    by_member = [None] * len(assignments)
     for chunk, res in zip(where, results):
         for k, r in zip(chunk, res):
-            rows.append({**{p: v for p, v in assignments[k].items()}, **r})
-    return rows
+            by_member[k] = r
+    paths = ([p for p, _ in grids] if members is None
+             else list(dict.fromkeys(k for m in assignments for k in m)))
+    res = EnvelopeResult(circuit, paths, assignments, by_member, outputs)
+    settings = dict(sweep=[sweep[0], [str(v) for v in grids[0][1]]] if sweep else None,
+                    grid={p: [str(v) for v in vals] for p, vals in grids[1 if sweep else 0:]}, outputs=outputs,
+                    t_end=float(t_end), dt=float(dt), window=float(window), kick=kick, osc_tol=osc_tol, rtol=rtol,
+                    atol=rtol)
+    return stamp(res, "envelope", circuit, settings, started)
 
 
-def plot_envelope(path, rows, output, sweep_param):
+class EnvelopeResult(Result):
+    """One row per member of the sweep x grid, indexed by the swept and grid parameters.  Per
+    output ``o``: ``min(o)``, ``max(o)``, ``mean(o)`` (over whole periods of the window) and
+    ``steady(o)`` (the operating point), in ``o``'s unit; per member ``oscillating``,
+    ``period`` [s] (NaN when steady) and ``error`` (empty if it ran).  ``series`` (with
+    ``keep_series``): per row {column: values over the window} and ``t`` its times (not written
+    to files)."""
+
+    def __init__(self, circuit, paths, assignments, by_member, outputs):
+        self.outputs = list(outputs)
+        cols, units = grid_columns(circuit, paths, assignments)
+        cu = {**circuit.column_units(), **derived_units(circuit.netlist.derived or {})}
+        n = len(assignments)
+        for o in outputs:
+            for q in ("min", "max", "mean", "steady"):
+                cols[f"{q}({o})"], units[f"{q}({o})"] = np.full(n, np.nan), cu.get(o, "")
+        cols["oscillating"] = np.zeros(n, bool)
+        cols["period"], units["period"] = np.full(n, np.nan), "s"
+        cols["error"] = np.array([""] * n, dtype=object)
+        self.series, self.t = [None] * n, [None] * n
+        for k, r in enumerate(by_member):
+            if "error" in r:
+                cols["error"][k] = r["error"]
+                continue
+            for o in outputs:
+                for q in ("min", "max", "mean", "steady"):
+                    cols[f"{q}({o})"][k] = r[f"{o} {q}"]
+            cols["oscillating"][k] = r["oscillating"]
+            cols["period"][k] = r["period [s]"]
+            self.series[k], self.t[k] = r.get("series"), r.get("t")
+        super().__init__(cols, units, index=list(paths))
+        self.metadata["failed"] = [[{p: str(a[p]) for p in paths}, r["error"]]
+                                   for a, r in zip(assignments, by_member) if "error" in r]
+
+
+def plot_result(res, path, select=None, title=None):
+    """Envelope of the first output (or ``select[0]``) against the swept parameter: the steady
+    value as a line, the [min, max] range shaded, one per grid member (fresh or reloaded)."""
     plt = pyplot()
 
-    series = {}
-    for r in rows:
-        if "error" in r:
-            continue
-        key = tuple((k, str(v)) for k, v in r.items() if "." in k and k != sweep_param and " " not in k)
-        series.setdefault(key, []).append(r)
-    fig, ax = plt.subplots(figsize=(7, 4.5))
-    for key, rs in series.items():
-        x = [float(str(r[sweep_param]).split()[0]) for r in rs]
-        lab = ", ".join(f"{k}={v}" for k, v in key)
-        line, = ax.plot(x, [r[f"{output} steady"] for r in rs], "-", lw=1, label=f"steady {lab}")
-        ax.fill_between(x, [r[f"{output} min"] for r in rs], [r[f"{output} max"] for r in rs], alpha=0.25,
-                        color=line.get_color(), label=f"range {lab}")
-    ax.set_xlabel(sweep_param)
-    ax.set_ylabel(output)
+    outs = [k[4:-1] for k in res.keys() if k.startswith("min(")]
+    output = next((o for o in (select or []) if o in outs), outs[0])
+    sweep_param, grid = res.index[0], res.index[1:]
+    from ..grid import members
+    ok = np.array([not e for e in res["error"]], bool)
+    fig, ax = plt.subplots(figsize=(8, 5))
+    for g, (lab, mask) in enumerate(members(res, grid)):
+        sel = ok & mask
+        x = np.asarray(res[sweep_param][sel], dtype=float)
+        order = np.argsort(x)
+        color = f"C{g % 10}"
+        ax.fill_between(x[order], res[f"min({output})"][sel][order], res[f"max({output})"][sel][order], alpha=0.2,
+                        color=color, lw=0, label=f"min..max {lab}".strip())
+        ax.plot(x[order], res[f"steady({output})"][sel][order], ["-", "--", ":", "-."][g % 4], color=color,
+                lw=max(2.2 - 0.4 * g, 1.0), marker=".", label=f"steady state {lab}".strip())
+    ax.set_xlabel(res.label(sweep_param))
+    ax.set_ylabel(f"{output} [{res.units.get(f'min({output})', '')}]")
+    win = (res.metadata.get("settings") or {}).get("window")
+    last = f"the last {100 * float(win):.0f} % of each run" if win else "the last part of each run"
+    ax.set_title(title or f"{res._title()}: {output}, steady state and range over {last}", fontsize=10)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=6)
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0)
     save_figure(fig, path)
+    return str(path)
 
 
-def plot_phase_plane(path, rows, x_col, y_col):
+def plot_phase_plane(path, res, x_col, y_col):
     plt = pyplot()
 
     fig, ax = plt.subplots(figsize=(5.5, 4.5))
-    for r in rows:
-        s = r.get("series")
+    for r, s in zip(res.rows(), res.series):
         if s and x_col in s and y_col in s:
-            lab = ", ".join(f"{k}={v}" for k, v in r.items() if "." in k and " " not in k)
+            lab = ", ".join(f"{k}={_fmt(r[k])}" for k in res.index)
             ax.plot(s[x_col], s[y_col], lw=0.7, label=lab)
     ax.set_xlabel(x_col)
     ax.set_ylabel(y_col)
@@ -157,28 +215,30 @@ def plot_phase_plane(path, rows, x_col, y_col):
     save_figure(fig, path)
 
 
+def _fmt(v):
+    return f"{v:.4g}" if isinstance(v, float) else str(v)
+
+
 def register_cli(sub, common):
     sp = common(sub.add_parser("envelope", help="oscillation envelope over a sweep x grid (batched)"), outputs=False)
     sp.add_argument("--sweep", required=True, help="ID.PARAM=START:STOP:STEP UNIT or V1,V2,...")
-    sp.add_argument("--grid", action="append", help="ID.PARAM=V1,V2 (repeatable)")
     sp.add_argument("--output", action="append",
                     help="outputs to report, the first gives the period (default: the netlist's 'outputs:')")
     sp.add_argument("--t-end", type=float, default=1000.0, help="s (default 1000)")
     sp.add_argument("--dt", type=float, default=0.1, help="output interval, s")
     sp.add_argument("--rtol", type=float, default=1e-5)
     sp.add_argument("--scheduler")
-    sp.add_argument("--workers", type=int)
-    sp.add_argument("--out", help="tidy CSV")
+    sp.add_argument("--out", help="result CSV (one row per member; or .json)")
     sp.add_argument("--plot", help="envelope PNG (first output)")
+    sp.add_argument("--show", action="append", help="column to print (repeatable)")
     sp.add_argument("--phase-plot", help="phase-plane PNG (the netlist's 'outputs: {phase_plane: [x, y]}')")
     sp.set_defaults(func=cmd_envelope)
 
 
 def cmd_envelope(args):
-    from ..cli import _load
+    from ..cli import _load, save_outputs
     from ..errors import HemocircuitError
     from ..outputs import default_outputs
-    from .freq import write_rows
 
     c, _ = _load(args)
     outputs = args.output or default_outputs(c, "envelope")
@@ -191,22 +251,14 @@ def cmd_envelope(args):
             raise HemocircuitError(f"--phase-plot needs two columns (x, y): declare 'outputs: {{phase_plane: [X, Y]}}' "
                                    f"in the netlist (found {keep})")
         keep = keep[:2]
-    rows = envelope(c, sweep, grid, outputs, t_end=args.t_end, dt=args.dt, rtol=args.rtol, keep_series=keep,
-                    scheduler=args.scheduler, workers=args.workers, progress=True)
+    res = envelope(c, sweep, grid, outputs, t_end=args.t_end, dt=args.dt, rtol=args.rtol, keep_series=keep,
+                   scheduler=args.scheduler, workers=args.workers)
     o = outputs[0]
-    for r in rows:
-        if "error" in r:
-            print(f"failed: {r}")
-            continue
-        lab = ", ".join(f"{k}={v}" for k, v in r.items() if "." in k and " " not in k)
-        print(f"{lab:>40}: {o} {r[f'{o} min']:.4g}..{r[f'{o} max']:.4g} (steady {r[f'{o} steady']:.4g}) "
-              f"{'OSCILLATING period %.3g s' % r['period [s]'] if r['oscillating'] else 'steady'}")
-    if args.out:
-        write_rows(args.out, [{k: v for k, v in r.items() if k not in ("series", "t")} for r in rows])
-        print(f"wrote {args.out}")
-    if args.plot:
-        plot_envelope(args.plot, rows, o, sweep[0])
-        print(f"wrote {args.plot}")
+    show = [f"min({o})", f"max({o})", f"steady({o})", "oscillating", "period"]
+    print(res.summary(show=args.show or show, max_rows=0, where=args.out))
+    for where, why in res.metadata["failed"]:
+        print(f"failed: {where}: {why}", file=sys.stderr)
+    save_outputs(args, res)
     if args.phase_plot:
-        plot_phase_plane(args.phase_plot, rows, keep[0], keep[1])
+        plot_phase_plane(args.phase_plot, res, keep[0], keep[1])
         print(f"wrote {args.phase_plot}")

@@ -17,13 +17,19 @@ All members integrate together in the vectorised batch integrator; chunks run in
 """
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 
-from ..batch import build_batches, expand_grid, parse_grid_arg, resolve_values
+from ..batch import build_batches, expand_grid, grid_columns, parse_grid_arg, resolve_values
 from ..batch_integrator import integrate
 from ..errors import HemocircuitError
 from ..execution import run_chunks, split
+from ..derived import derived_units
 from ..io import pyplot, save_figure
+from ..progress import advance
+from ..provenance import clock, stamp
+from ..results import Result
 
 SAMPLES = 64  # per period
 
@@ -36,7 +42,7 @@ def _dft(y, n_per, k):
 
 
 def _member_outputs(bc, k, t, X, outputs, inp_col):
-    m = bc.member(k)
+    m = bc.subset([k])  # a view of member k (member() deep-copies the circuit: ~10 ms a call)
     cols = m.outputs(t, X)
     return np.array([cols[o] for o in outputs]), cols[inp_col]
 
@@ -52,14 +58,13 @@ def _run_chunk(job):
     from .op import operating_points
     X0, opv, errors = operating_points(bc)
     y0 = np.stack([opv.get(o, np.full(B, np.nan)) for o in outputs], axis=1) if opv else np.full((B, len(outputs)), np.nan)
-    P0 = bc.get_param(f"{inp}.{drive.value}")
+    P0 = bc.parameters.values[f"{inp}.{drive.value}"]
     f = np.array([m["frequency"] for m in members])
-    bc.set_param(f"{inp}.{drive.value}", P0 * (1 + opt["step"]), prepare=False)
-    bc.set_param(f"{inp}.{drive.amplitude}", P0 * opt["rel_amplitude"], prepare=False)
-    bc.set_param(f"{inp}.{drive.frequency}", f, prepare=False)
-    bc.set_param(f"{inp}.{drive.phase}", np.zeros(B), prepare=False)
-    bc.set_param(f"{inp}.{drive.start}", np.zeros(B), prepare=False)
-    bc.prepare()
+    bc = bc.with_values({f"{inp}.{drive.value}": P0 * (1 + opt["step"]),
+                         f"{inp}.{drive.amplitude}": P0 * opt["rel_amplitude"],
+                         f"{inp}.{drive.frequency}": f,
+                         f"{inp}.{drive.phase}": np.zeros(B),
+                         f"{inp}.{drive.start}": np.zeros(B)})
     period = 1.0 / f
     t = np.zeros(B)
     x = X0.copy()
@@ -68,6 +73,7 @@ def _run_chunk(job):
     for k, e in enumerate(errors):
         if e is not None:
             res[k] = {"error": e}
+            advance()
     total_periods = np.zeros(B, int)
     block = opt["block_periods"]
     while True:
@@ -83,6 +89,7 @@ def _run_chunk(job):
             if not r.ok[j]:
                 failed[m] = True
                 res[m] = {"error": r.message[j]}
+                advance()
                 continue
             tt = grid[j]
             Y, X_in = _member_outputs(sub, j, tt, r.x[j], outputs, inp_node_col)
@@ -110,6 +117,7 @@ def _run_chunk(job):
                     "thd": np.sqrt(np.sum(np.abs(harm) ** 2, axis=0)) / np.abs(Y1),
                     "periods": int(total_periods[m]), "settled": bool(np.all(rel < opt["settle_tol"])),
                 }
+                advance()
             t[m] = tt[-1]
             x[m] = r.x[j, -1]
     return res
@@ -117,18 +125,20 @@ def _run_chunk(job):
 
 def frequency_response(circuit, freqs, outputs=None, input=None, step=0.1, amplitude=0.1,
                        grid=None, settle_tol=1e-3, n_periods=2, block_periods=4, max_periods=400, rtol=1e-8,
-                       scheduler=None, workers=None, progress=False):
-    """Batched nonlinear frequency response.  ``grid``: [(ID.PARAM, [values])].  Returns a list
-    of rows (dicts), one per (grid point, frequency, output): tidy data.
+                       scheduler=None, workers=None, progress=None, members=None):
+    """Batched nonlinear frequency response.  ``grid``: [(ID.PARAM, [values])]; or ``members``:
+    an explicit list of parameter sets [{ID.PARAM: value}] (e.g. sensitivity samples) in place
+    of the grid's cartesian product.
 
     ``input``: a source element with a built-in sine term (Component.drive); default the
-    netlist's ``input:``.  ``outputs``: default the netlist's ``outputs:`` for 'freq'."""
+    netlist's ``input:``.  ``outputs``: default the netlist's ``outputs:`` for 'freq'.
+    Returns a :class:`FreqResult` (one row per grid point x frequency)."""
     from ..outputs import default_input, default_outputs, drive_of, input_element
 
     outputs = list(default_outputs(circuit, "freq") if outputs is None else outputs)
     grid = resolve_values(circuit, grid or [])
     assignments, descr = [], []
-    for g in expand_grid(grid):
+    for g in (expand_grid(grid) if members is None else members):
         for f in np.atleast_1d(freqs):
             assignments.append(dict(g))
             descr.append({"grid": g, "frequency": float(f)})
@@ -144,83 +154,113 @@ def frequency_response(circuit, freqs, outputs=None, input=None, step=0.1, ampli
     opt = dict(outputs=outputs, input=input, drive=drive, input_col=inp_col, step=step, rel_amplitude=amplitude,
                settle_tol=settle_tol, n_periods=n_periods, block_periods=max(block_periods, n_periods + 1),
                max_periods=max_periods, rtol=rtol)
+    started = clock()
     jobs, where = [], []
-    for bc, members in build_batches(circuit, assignments):
+    for bc, idx in build_batches(circuit, assignments):
         # chunks of one batch keep contiguous members (similar frequencies) together
-        for chunk in split(list(members), (workers or 2) if scheduler != "serial" else 1):
-            sub = bc.subset([members.index(k) for k in chunk])
-            sub = sub.copy() if sub is bc else sub
-            jobs.append((_detach(sub), [descr[k] for k in chunk], opt))
+        for chunk in split(list(idx), (workers or 2) if scheduler != "serial" else 1):
+            sub = bc.subset([idx.index(k) for k in chunk])  # pickles without caches
+            jobs.append((sub, [descr[k] for k in chunk], opt))
             where.append(chunk)
     results = run_chunks(_run_chunk, jobs, scheduler=scheduler, workers=workers, progress=progress,
-                         desc="frequency response")
-    rows = []
+                         desc="frequency response", sizes=[len(w) for w in where])
+    by_member = [None] * len(descr)
     for chunk, res in zip(where, results):
         for k, r in zip(chunk, res):
-            d = descr[k]
-            base = {**{p: v for p, v in d["grid"].items()}, "frequency [Hz]": d["frequency"]}
+            by_member[k] = r
+    inp_path = f"{input}.{drive.value}"
+    paths = [p for p, _ in grid] if members is None else list(dict.fromkeys(k for m in members for k in m))
+    res = FreqResult(circuit, paths, assignments, descr, by_member, outputs, inp_path)
+    settings = dict(input=inp_path, outputs=outputs, frequencies=[float(f) for f in np.atleast_1d(freqs)],
+                    grid={p: [str(v) for v in vals] for p, vals in grid}, step=step, amplitude=amplitude,
+                    settle_tol=settle_tol, n_periods=n_periods, block_periods=block_periods,
+                    max_periods=max_periods, rtol=rtol, atol=rtol, samples_per_period=SAMPLES)
+    return stamp(res, "freq", circuit, settings, started)
+
+
+class FreqResult(Result):
+    """The nonlinear frequency response: one row per run (grid member x frequency), indexed by
+    the grid parameters and ``frequency`` [Hz].  Per output ``o`` (input ``p``, its drive
+    parameter, e.g. ``Pa.value``): ``rel_amplitude(o)`` [1] = |Y1|/y0, ``rel_gain(o/p)`` [1] =
+    (|Y1|/y0)/(|X1|/P0), ``gain(o/p)`` [o unit/p unit] = |Y1|/|X1|, ``phase(o/p)`` [deg]
+    (positive: the output leads), ``thd(o)`` [1], ``steady(o)`` and ``mean(o)`` [o unit]; per
+    run ``periods`` [1], ``settled``, ``settle_change`` [1] and ``error`` (empty if it ran)."""
+
+    def __init__(self, circuit, paths, assignments, descr, by_member, outputs, inp_path):
+        self.outputs, self.input = list(outputs), inp_path
+        cols, units = grid_columns(circuit, paths, assignments)
+        cols["frequency"], units["frequency"] = np.array([d["frequency"] for d in descr]), "Hz"
+        cu = {**circuit.column_units(), **derived_units(circuit.netlist.derived or {})}
+        iu = circuit.param_unit(inp_path)
+        n = len(descr)
+        nan = np.full(n, np.nan)
+        for o in outputs:
+            ou = cu.get(o, "")
+            for name, unit in ((f"rel_amplitude({o})", "1"), (f"rel_gain({o}/{inp_path})", "1"),
+                               (f"gain({o}/{inp_path})", f"{ou}/{iu}"), (f"phase({o}/{inp_path})", "deg"),
+                               (f"thd({o})", "1"), (f"steady({o})", ou), (f"mean({o})", ou)):
+                cols[name], units[name] = nan.copy(), unit
+        cols["periods"], units["periods"] = nan.copy(), "1"
+        cols["settled"] = np.zeros(n, bool)
+        cols["settle_change"], units["settle_change"] = nan.copy(), "1"
+        cols["error"] = np.array([""] * n, dtype=object)
+        for k, r in enumerate(by_member):
             if "error" in r:
-                for o in outputs:
-                    rows.append({**base, "output": o, "error": r["error"]})
+                cols["error"][k] = r["error"]
                 continue
             for i, o in enumerate(outputs):
                 Y1, X1, y0 = r["Y1"][i], r["X1"], r["y0"][i]
-                rows.append({**base, "output": o,
-                             "rel_amplitude": float(abs(Y1) / abs(y0)),
-                             "gain": float((abs(Y1) / abs(y0)) / (abs(X1) / abs(r["P0"]))),
-                             "abs_gain": float(abs(Y1) / abs(X1)),
-                             "phase [deg]": float(np.degrees(np.angle(Y1 / X1))),
-                             "thd": float(r["thd"][i]), "steady": float(y0), "mean": float(r["mean"][i]),
-                             "periods": r["periods"], "settled": r["settled"],
-                             "settle_change": r["settle_change"], "error": ""})
-    return rows
+                cols[f"rel_amplitude({o})"][k] = abs(Y1) / abs(y0)
+                cols[f"rel_gain({o}/{inp_path})"][k] = (abs(Y1) / abs(y0)) / (abs(X1) / abs(r["P0"]))
+                cols[f"gain({o}/{inp_path})"][k] = abs(Y1) / abs(X1)
+                cols[f"phase({o}/{inp_path})"][k] = np.degrees(np.angle(Y1 / X1))
+                cols[f"thd({o})"][k] = r["thd"][i]
+                cols[f"steady({o})"][k] = y0
+                cols[f"mean({o})"][k] = r["mean"][i]
+            cols["periods"][k] = r["periods"]
+            cols["settled"][k] = r["settled"]
+            cols["settle_change"][k] = r["settle_change"]
+        super().__init__(cols, units, index=list(paths) + ["frequency"])
+        self.metadata["failed"] = [[{p: str(a[p]) for p in paths} | {"frequency": d["frequency"]}, r["error"]]
+                                   for a, d, r in zip(assignments, descr, by_member) if "error" in r]
 
 
-def _detach(c):
-    """A self-contained picklable copy of a (subset) circuit."""
-    c = c.copy()
-    c.__dict__.pop("_subset_cache", None)
-    return c
-
-
-def write_rows(path, rows):
-    import csv
-    keys = []
-    for r in rows:
-        keys += [k for k in r if k not in keys]
-    with open(path, "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=keys)
-        w.writeheader()
-        for r in rows:
-            w.writerow(r)
-
-
-def plot_bode(path, rows, outputs):
+def plot_result(res, path, select=None, title=None):
+    """Bode plot from a result's columns (fresh or reloaded): relative gain and phase against
+    frequency, one line per grid member and output."""
     plt = pyplot()
 
-    fig, (a1, a2) = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
-    keyf = lambda r: tuple((k, str(v)) for k, v in r.items() if k not in (
-        "frequency [Hz]", "output", "rel_amplitude", "gain", "abs_gain", "phase [deg]", "thd", "steady", "mean",
-        "periods", "settled", "error"))
-    series = {}
-    for r in rows:
-        if r.get("error"):
-            continue
-        series.setdefault((keyf(r), r["output"]), []).append(r)
-    for (g, o), rs in series.items():
-        rs = sorted(rs, key=lambda r: r["frequency [Hz]"])
-        f = [r["frequency [Hz]"] for r in rs]
-        label = o + (" " + ", ".join(f"{k}={v}" for k, v in g) if g else "")
-        ls = "-" if o == outputs[0] else "--"
-        a1.semilogx(f, [r["rel_amplitude"] for r in rs], ls, label=label)
-        a2.semilogx(f, [r["phase [deg]"] for r in rs], ls, label=label)
-    a1.set_ylabel("amplitude / steady value")
-    a2.set_ylabel("phase [deg] (+ = leads)")
+    grid = [k for k in res.index if k != "frequency"]
+    outs = [k[len("rel_gain("):-1] for k in res.keys() if k.startswith("rel_gain(")]
+    if select:
+        outs = [o for o in outs if o.split("/")[0] in select] or outs
+    ok = np.array([not e for e in res["error"]], bool) if "error" in res else np.ones(res.n_rows, bool)
+    keys = sorted({tuple(res[g][i] for g in grid) for i in np.nonzero(ok)[0]}, key=str)
+    fig, (a1, a2) = plt.subplots(2, 1, figsize=(8, 6.5), sharex=True)
+    styles = ["-", "--", ":", "-."]
+    for j, o in enumerate(outs):
+        for key in keys:
+            sel = ok & np.all([res[g] == v for g, v in zip(grid, key)], axis=0) if grid else ok
+            f = res["frequency"][sel]
+            order = np.argsort(f)
+            lab = o.split("/")[0] + ("" if not grid else " " + ", ".join(
+                f"{g}={_fmt_value(v)} {res.units.get(g, '')}".rstrip() for g, v in zip(grid, key)))
+            line, = a1.semilogx(f[order], res[f"rel_gain({o})"][sel][order], styles[j % 4], marker=".", label=lab)
+            a2.semilogx(f[order], res[f"phase({o})"][sel][order], styles[j % 4], marker=".", color=line.get_color(),
+                        label=lab)
+    a1.set_ylabel("relative gain (|Y1|/y0)/(|X1|/P0) [1]")
+    a2.set_ylabel("phase [deg] (+ = output leads)")
     a2.set_xlabel("frequency [Hz]")
     for a in (a1, a2):
         a.grid(alpha=0.3, which="both")
     a1.legend(fontsize=7)
+    a1.set_title(title or res._title())
     save_figure(fig, path)
+    return str(path)
+
+
+def _fmt_value(v):
+    return f"{v:.4g}" if isinstance(v, (float, np.floating)) else str(v)
 
 
 def register_cli(sub, common):
@@ -233,12 +273,11 @@ def register_cli(sub, common):
     sp.add_argument("--per-decade", type=float, default=10.0)
     sp.add_argument("--step", type=float, default=10.0, help="step in percent of the baseline (default 10)")
     sp.add_argument("--amplitude", type=float, default=10.0, help="sine amplitude in percent (default 10)")
-    sp.add_argument("--grid", action="append", help="ID.PARAM=V1,V2,... (repeatable; cartesian product)")
     sp.add_argument("--scheduler", help="Dask scheduler address tcp://HOST:PORT (default: local processes)")
-    sp.add_argument("--workers", type=int, help="local worker processes (default: all cores)")
     sp.add_argument("--rtol", type=float, default=1e-8)
-    sp.add_argument("--out", help="tidy CSV")
+    sp.add_argument("--out", help="result CSV (one row per run; or .json)")
     sp.add_argument("--plot", help="Bode plot PNG")
+    sp.add_argument("--show", action="append", help="column to print (repeatable)")
     sp.set_defaults(func=cmd_freq)
 
 
@@ -253,7 +292,7 @@ def parse_freqs(text, per_decade):
 
 
 def cmd_freq(args):
-    from ..cli import _load
+    from ..cli import _load, save_outputs
 
     c, _ = _load(args)
     from ..outputs import default_outputs
@@ -261,18 +300,11 @@ def cmd_freq(args):
     outputs = args.output or default_outputs(c, "freq")
     freqs = parse_freqs(args.freq, args.per_decade)
     grid = [parse_grid_arg(g) for g in (args.grid or [])]
-    rows = frequency_response(c, freqs, outputs, args.input, args.step / 100, args.amplitude / 100, grid,
-                              rtol=args.rtol, scheduler=args.scheduler, workers=args.workers, progress=True)
-    for r in rows:
-        if r.get("error"):
-            print(f"failed: {r}")
-        else:
-            g = ", ".join(f"{k}={v}" for k, v in r.items() if "." in k and k not in ("phase [deg]",))
-            print(f"{g:>30} f={r['frequency [Hz]']:.4g} Hz {r['output']:>8}: amp {r['rel_amplitude']:.4g} "
-                  f"gain {r['gain']:.4g} phase {r['phase [deg]']:+.2f} deg thd {r['thd']:.3g}")
-    if args.out:
-        write_rows(args.out, rows)
-        print(f"wrote {args.out}")
-    if args.plot:
-        plot_bode(args.plot, rows, outputs)
-        print(f"wrote {args.plot}")
+    res = frequency_response(c, freqs, outputs, args.input, args.step / 100, args.amplitude / 100, grid,
+                             rtol=args.rtol, scheduler=args.scheduler, workers=args.workers)
+    show = [k for o in res.outputs for k in (f"rel_amplitude({o})", f"rel_gain({o}/{res.input})",
+                                             f"phase({o}/{res.input})", f"thd({o})")]
+    print(res.summary(show=args.show or show, max_rows=0, max_cols=0, where=args.out))
+    for where, why in res.metadata["failed"]:
+        print(f"failed: {where}: {why}", file=sys.stderr)
+    save_outputs(args, res)

@@ -1,7 +1,8 @@
 """Linearisation at an operating point (shared by the AC and stability analyses).
 
 For dx/dt = f(x, p) and outputs y = g(x, p), with p one parameter (the input: a source's
-drive parameter, or any ``ID.PARAM``), this computes by *central* finite differences
+drive parameter, or any ``ID.PARAM``), this computes through the derivatives service
+(hemocircuit.derivatives: central differences, or analytic partials where components give them)
 
     A = df/dx (nx, nx)   B = df/dp (nx,)   C = dg/dx (ny, nx)   D = dg/dp (ny,)
 
@@ -31,10 +32,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..derived import evaluate_derived
+from .. import derivatives
 from ..errors import HemocircuitError
 
-EPS = 1e-6  # relative central-difference step (truncation ~ eps^2, round-off ~ 1e-16/eps)
+EPS = derivatives.CENTRAL_REL  # relative central-difference step (the derivatives service's rule)
 
 
 @dataclass
@@ -72,89 +73,18 @@ def input_path(circuit, name):
     return _path(circuit, name)
 
 
-def _steps(circuit, X, eps=EPS):
-    h = eps * np.maximum(np.abs(X), circuit.state_scales)
-    return (X + h) - X  # exactly representable
-
-
 def state_jacobian(circuit, x, t=0.0, eps=EPS):
-    """Central-difference Jacobian df/dx of ``circuit`` (use the steady variant) at x.
+    """Jacobian df/dx of ``circuit`` (use the steady variant) at x (hemocircuit.derivatives:
+    analytic where the components provide it, central differences otherwise).
 
-    x (nx,) -> (nx, nx); x (B, nx) for a batch circuit -> (B, nx, nx).  One batched evaluation.
-    """
-    single = np.ndim(x) == 1
-    X = np.atleast_2d(np.asarray(x, dtype=float))
-    Bm, nx = X.shape
-    h = _steps(circuit, X, eps)
-    stack = np.repeat(X[:, None, :], 2 * nx, axis=1)
-    idx = np.arange(nx)
-    stack[:, idx, idx] += h
-    stack[:, nx + idx, idx] -= h
-    F = circuit.evaluate(t, stack.reshape(Bm * 2 * nx, nx)).reshape(Bm, 2 * nx, nx)
-    J = (F[:, :nx, :] - F[:, nx:, :]) / (2 * h[:, :, None])  # (B, col, row)
-    J = np.swapaxes(J, 1, 2)
-    return J[0] if single else J
-
-
-def _output_values(circuit, t, X, names):
-    """Outputs ``names`` for states X (rows a multiple of the circuit's batch) -> (rows, ny)."""
-    cols = circuit.outputs(t, X)
-    missing = [n for n in names if n not in cols]
-    derived = circuit.netlist.derived or {}
-    if missing:
-        want = {n: derived[n] for n in missing if n in derived}
-        unknown = [n for n in missing if n not in derived]
-        if unknown:
-            raise HemocircuitError(f"unknown output(s) {unknown}; available: {sorted(cols)} "
-                                   + (f"and derived {sorted(derived)}" if derived else ""))
-        cols = {**cols, **evaluate_derived(want, cols, circuit.file)}
-    return np.stack([np.broadcast_to(np.asarray(cols[n], dtype=float), (X.shape[0],)) for n in names], axis=1)
-
-
-def _param_batch(circuit, path, X, values):
-    """A batch circuit whose member (m, k) has the parameters of member m with ``path`` set to
-    values[m, k]; returns (circuit, stacked states) laid out member-major."""
-    Bm, K = values.shape
-    cb = circuit.copy()
-    for g in cb.groups:
-        g.p = {n: (np.repeat(v, K, axis=0) if v.shape[0] > 1 else v) for n, v in g.p.items()}
-    cb.B = Bm * K
-    cb.set_param(path, values.reshape(-1))
-    return cb, np.repeat(X, K, axis=0)
+    x (nx,) -> (nx, nx); x (B, nx) for a batch circuit -> (B, nx, nx)."""
+    return derivatives.state_jacobian(circuit, x, t, rel=eps)
 
 
 def law_gradients(circuit, x, t=0.0, eps=EPS):
-    """Gradients c (m, nx) (or (B, m, nx)) of the conserved combinations sum(sign * V).
-
-    Stores whose volume is a state contribute exactly +-1; a store whose volume is a function
-    of other states (an arteriolar bed's pi r^2 L n) contributes its central-difference gradient
-    (the raw volume, not the reported max(V, 0) of a collapsed store).
-    """
-    single = np.ndim(x) == 1
-    X = np.atleast_2d(np.asarray(x, dtype=float))
-    Bm, nx = X.shape
-    specs = circuit.law_specs
-    c = np.zeros((Bm, len(specs), nx))
-    if not specs:
-        return c[0] if single else c
-    plist = circuit.group_params(Bm)
-    for k, spec in enumerate(specs):
-        for g, i, vol, sign in spec["terms"]:
-            st = next((s for s in g.comp.storages() if s.volume == vol), None)
-            names = [s.name for s in g.states]
-            if st is not None and st.state is not None:
-                c[:, k, g.sidx[i, names.index(st.state)]] += sign
-                continue
-            p = plist[circuit.groups.index(g)]
-            xl = X[:, g.sidx]  # (B, E, S)
-            for j in range(g.S):
-                h = eps * np.maximum(np.abs(xl[:, i, j]), g.states[j].scale)
-                xp, xm = xl.copy(), xl.copy()
-                xp[:, i, j] += h
-                xm[:, i, j] -= h
-                dv = (g.comp.observe(p, xp, None, t)[vol][:, i] - g.comp.observe(p, xm, None, t)[vol][:, i]) / (2 * h)
-                c[:, k, g.sidx[i, j]] += sign * dv
-    return c[0] if single else c
+    """Gradients c (m, nx) (or (B, m, nx)) of the conserved combinations (see
+    hemocircuit.derivatives.law_gradients)."""
+    return derivatives.law_gradients(circuit, x, t, rel=eps)
 
 
 def reduction_basis(c):
@@ -203,25 +133,14 @@ def linearize(circuit, x=None, input=None, outputs=(), t=0.0, eps=EPS, op=None) 
     path = input_path(sv, input)
     Bv = C = D = y0 = p0 = None
     if outputs:
-        h = _steps(sv, X, eps)
-        stack = np.repeat(X[:, None, :], 2 * nx + 1, axis=1)
-        idx = np.arange(nx)
-        stack[:, 1 + idx, idx] += h
-        stack[:, 1 + nx + idx, idx] -= h
-        Y = _output_values(sv, t, stack.reshape(-1, nx), outputs).reshape(Bm, 2 * nx + 1, len(outputs))
-        y0 = Y[:, 0, :]
-        C = np.swapaxes((Y[:, 1:nx + 1, :] - Y[:, nx + 1:, :]) / (2 * h[:, :, None]), 1, 2)  # (B, ny, nx)
+        C, y0 = derivatives.central_jacobian(lambda rows: derivatives.output_values(sv, t, rows, outputs), X,
+                                             sv.state_scales, eps, with_value=True)  # (B, ny, nx)
     if path is not None:
-        p0 = sv.get_param(path)  # (B,)
-        hp = eps * np.where(p0 != 0, np.abs(p0), 1.0)
-        hp = (p0 + hp) - p0
-        vals = np.stack([p0 + hp, p0 - hp], axis=1)
-        cb, Xp = _param_batch(sv, path, X, vals)
-        F = cb.evaluate(t, Xp).reshape(Bm, 2, nx)
-        Bv = (F[:, 0] - F[:, 1]) / (2 * hp[:, None])
+        sens = derivatives.parameter_sensitivity(sv, [path], X, t, outputs, rel=eps)
+        p0 = sens.p0[:, 0]  # (B,)
+        Bv = sens.rhs[:, :, 0]
         if outputs:
-            Yp = _output_values(cb, t, Xp, outputs).reshape(Bm, 2, len(outputs))
-            D = (Yp[:, 0] - Yp[:, 1]) / (2 * hp[:, None])
+            D = sens.outputs[:, :, 0]
     c = law_gradients(sv, X, t, eps)
     T = reduction_basis(c)
     A_red, B_red, C_red = reduce_laws(T, A, Bv, C)

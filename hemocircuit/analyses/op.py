@@ -12,8 +12,6 @@ names the worst-balanced state.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import lsqr, splu
@@ -21,38 +19,47 @@ from scipy.sparse.linalg import lsqr, splu
 from .. import sparse as sparse_la
 from ..derivatives import dense_jacobian
 from ..errors import HemocircuitError, SolverError
+from ..provenance import clock, stamp
+from ..results import Result
 
 
-@dataclass
-class OperatingPoint:
-    circuit: object
-    x: np.ndarray  # (nx,) or (B, nx)
-    values: dict  # column -> value (single) or (B,) array
-    units: dict
-    method: str
-    residual: float
+class OperatingPoint(Result):
+    """The steady state: a one-row :class:`hemocircuit.results.Result` (a batch circuit: one
+    row per member, indexed by ``member``).  ``op["P(a)"]`` is a number (an array for a
+    batch); ``x`` the states, ``values`` {column: value}, ``method``, ``residual`` (scaled)."""
+
+    def __init__(self, circuit, x, values, units, method, residual):
+        single = np.ndim(x) == 1
+        cols = dict(values) if single else {"member": np.arange(np.shape(x)[0]), **values}
+        super().__init__(cols, units, index=[] if single else ["member"])
+        self.circuit, self.x, self.method, self.residual = circuit, x, method, residual
+        self.metadata["solver"] = {"method": method, "residual": residual}
+
+    @property
+    def values(self):
+        """{column: value} (numbers; arrays over the members of a batch)."""
+        single = not self.index
+        return {k: (float(v[0]) if single and v.dtype.kind == "f" else (v[0] if single else v))
+                for k, v in self.columns.items()}
 
     def __getitem__(self, key):
-        return self.values[key]
-
-    def as_flat_dict(self):
-        """{'P(a) [mmHg]': 78.67, ...} (same names as the CSV columns)."""
-        return {f"{k} [{self.units[k]}]": (float(v) if np.ndim(v) == 0 else np.asarray(v).tolist())
-                for k, v in self.values.items()}
+        col = super().__getitem__(key)
+        return col[0].item() if not self.index else col
 
 
 def residual(circuit, t, X, law_totals):
-    """f(x) with the conservation-law rows replaced by their constraints."""
+    """f(x) with the conservation-law rows replaced by their constraints.  law_totals: per
+    law its total (array), or a function of X whose zero the row is (a calibration)."""
     F = circuit.evaluate(t, X)
     if circuit.law_specs:
         vols = circuit.law_volumes(X)
         Bx = X.shape[0]
         for spec, total, vol in zip(circuit.law_specs, law_totals, vols):
+            if callable(total):  # a calibration being solved: its target replaces the row
+                F[:, spec["row"]] = total(X) * circuit.state_scales[spec["row"]]
+                continue
             rep = Bx // np.size(total) if np.size(total) else 1
-            if spec.get("_target") is not None:
-                F[:, spec["row"]] = spec["_target"](X) * circuit.state_scales[spec["row"]]
-            else:
-                F[:, spec["row"]] = (vol - np.repeat(np.atleast_1d(total), rep)) * 1.0
+            F[:, spec["row"]] = (vol - np.repeat(np.atleast_1d(total), rep)) * 1.0
     return F
 
 
@@ -68,12 +75,12 @@ def _jac(circuit, t, X, law_totals):
         # conservation-law rows: the stored volumes of the law's stores, or (calibration) the
         # pressure of its node
         reads = {}
-        for spec in circuit.law_specs:
-            if spec.get("_target") is not None:
+        for spec, total in zip(circuit.law_specs, law_totals):
+            if callable(total):
                 reads[spec["row"]] = ((), (circuit.nodes.index(spec["node"]),))
             else:
                 reads[spec["row"]] = (tuple(g.ids[i] for g, i, _, _ in spec["terms"]), ())
-        key = ("residual", tuple(spec.get("_target") is not None for spec in circuit.law_specs))
+        key = ("residual", tuple(callable(total) for total in law_totals))
         plan = circuit.jacobian_plan(key, fun, X, t, row_reads=reads)
         return sparse_la.coloured_jacobian(fun, X, circuit.state_scales, plan)
     nx = X.shape[1]
@@ -82,7 +89,7 @@ def _jac(circuit, t, X, law_totals):
 
 
 def _rep(totals, k):
-    return [None if t is None else np.repeat(np.atleast_1d(t), k) for t in totals]
+    return [t if t is None or callable(t) else np.repeat(np.atleast_1d(t), k) for t in totals]
 
 
 def newton(circuit, X, law_totals, t=0.0, tol=1e-10, max_iter=50, ptc=False):
@@ -179,6 +186,7 @@ def dc_guess(circuit, t=0.0, max_iter=200, tol=1e-12):
         X[:, g.sidx[i]] = g.comp.initial_states(plist[circuit.groups.index(g)], u)[:, i]
     anchors = {(id(s["anchor"][0]), s["anchor"][1]) for s in circuit.law_specs}
     relax = 1.0 if circuit.all_constant else 0.5
+    Xn_prev = None
     for it in range(max_iter):
         u, plist_b, stamps = _dc_u(circuit, t, X)
         Xn = X.copy()
@@ -191,6 +199,11 @@ def dc_guess(circuit, t=0.0, max_iter=200, tol=1e-12):
             free = np.array([(id(g), i) not in anchors for i in range(g.E)], dtype=bool)
             Xn[:, g.sidx[free]] = new[:, free]
         step = Xn - X
+        # the map's image stopped moving (the states do not feed back on the pressures, as
+        # when sources fix every node): it is the fixed point, no need to relax towards it
+        if Xn_prev is not None and np.max(np.abs(Xn - Xn_prev) / (np.abs(Xn) + circuit.state_scales)) < tol:
+            return Xn
+        Xn_prev = Xn
         X = X + relax * step
         if np.max(np.abs(step) / (np.abs(X) + circuit.state_scales)) < tol:
             break
@@ -201,28 +214,40 @@ def _dc_u(circuit, t, X):
     return circuit.dc_unknowns(t, X)
 
 
+def conserved_totals(circuit, t=0.0):
+    """Totals of the conservation laws of ``circuit`` ([array or None] per law): a volume
+    constraint's number, or a calibration's total solved with P(node) = target at its 'when'
+    values (on the steady variant).  Computed once per circuit (Circuit.cached)."""
+    sv = circuit.steady_variant()
+    return sv.cached(("conserved_totals", float(t)), lambda: _calibrate(sv, t))
+
+
 def _calibrate(circuit, t):
-    """Fix conserved totals given by calibrations: solve with P(node) = target at 'when'."""
+    totals = list(circuit.law_totals)
     for k, spec in enumerate(circuit.law_specs):
-        if spec["kind"] != "calibration" or circuit.law_totals[k] is not None:
+        if spec["kind"] != "calibration" or totals[k] is not None:
             continue
-        cal = circuit.copy()
-        cal.set_params(spec["when"])
+        cal = circuit.with_values(spec["when"])
         node_j = cal.nodes.index(spec["node"])
-        cspec = cal.law_specs[k]
+
         def target(X, cal=cal, node_j=node_j, spec=spec):
             u, _, _ = cal.evaluate(t, X, want="u")
             return (u[:, node_j] - spec["pressure"]) / 1.0
 
-        cspec["_target"] = target
-        totals = [None if j == k else cal.law_totals[j] for j in range(len(cal.law_specs))]
-        X0 = dc_guess(cal, t)
-        X, ok, res = _solve_with_fallbacks(cal, X0, totals, t)
-        if not ok:
-            raise SolverError(f"calibration of the conserved volume at node '{spec['node']}' "
-                              f"({spec['pressure']} mmHg when {spec['when']}) did not converge",
-                              where="computing the operating point")
-        circuit.law_totals[k] = cal.law_volumes(X)[k]
+        def solve(cal=cal, k=k, target=target, spec=spec, known=list(totals)):
+            X0 = dc_guess(cal, t)
+            X, ok, res = _solve_with_fallbacks(cal, X0, [target if j == k else known[j] for j in range(len(known))], t)
+            if not ok:
+                raise SolverError(f"calibration of the conserved volume at node '{spec['node']}' "
+                                  f"({spec['pressure']} mmHg when {spec['when']}) did not converge",
+                                  where="computing the operating point")
+            return cal.law_volumes(X)[k]
+
+        # the total depends only on the calibration circuit (its values with 'when' applied):
+        # sweeping a parameter that 'when' fixes reuses it
+        known = tuple(None if v is None else np.asarray(v).tobytes() for v in totals)
+        totals[k] = cal.structure.cached(("calibration", k, float(t), cal.parameters.fingerprint(), known), solve)
+    return totals
 
 
 def _solve_with_fallbacks(circuit, X0, totals, t):
@@ -242,15 +267,12 @@ def _source_stepping(circuit, totals, t):
     """Ramp every source's drive parameter (Component.drive: a pressure or flow source's value)
     from 30 % to 100 %, continuing the solution."""
     paths = [f"{e}.{g.comp.drive.value}" for g in circuit.groups if g.comp.drive is not None for e in g.ids]
-    base = {p: circuit.get_param(p) for p in paths}
+    base = {p: circuit.parameters.values[p] for p in paths}
     X = None
     ok = False
     res = np.inf
     for lam in np.linspace(0.3, 1.0, 15):
-        c = circuit.copy()
-        for p in paths:
-            c.set_param(p, base[p] * lam if c.B > 1 else float(base[p][0] * lam), prepare=False)
-        c.prepare()
+        c = circuit.with_values({p: base[p] * lam if circuit.B > 1 else float(base[p][0] * lam) for p in paths})
         X0 = dc_guess(c, t) if X is None else X
         X, ok, res = newton(c, X0, totals, t, ptc=True)
         if not ok:
@@ -260,11 +282,14 @@ def _source_stepping(circuit, totals, t):
 
 def operating_point(circuit, t: float = 0.0, x0=None) -> OperatingPoint:
     """Steady state of the circuit (every parameter set of a batch at once)."""
-    reporting = circuit
+    started = clock()
+    op = _operating_point(circuit, t, x0)
+    return stamp(op, "op", circuit, {"t": t, "x0": None if x0 is None else "given", "tol": 1e-10}, started)
+
+
+def _operating_point(circuit, t, x0):
+    totals = [np.atleast_1d(v) if v is not None else None for v in conserved_totals(circuit, t)]
     circuit = circuit.steady_variant()
-    _calibrate(circuit, t)
-    reporting.law_totals = circuit.law_totals
-    totals = [np.atleast_1d(v) if v is not None else None for v in circuit.law_totals]
     X0 = dc_guess(circuit, t) if x0 is None else np.atleast_2d(np.asarray(x0, float)).copy()
     X, ok, res = newton(circuit, X0, totals, t)
     method = "newton"
@@ -284,12 +309,8 @@ def operating_point(circuit, t: float = 0.0, x0=None) -> OperatingPoint:
     single = circuit.B == 1
     if single:
         vals = {k: float(v[0]) for k, v in circuit.outputs(t, X).items()}
-    else:
-        vals = {}
-        for k in range(circuit.B):
-            for key, v in circuit.member(k).outputs(t, X[k:k + 1]).items():
-                vals.setdefault(key, []).append(float(v[0]))
-        vals = {k: np.array(v) for k, v in vals.items()}
+    else:  # one row per member: outputs() evaluates the whole batch at once
+        vals = {k: np.array(v, dtype=float) for k, v in circuit.outputs(t, X).items()}
     return OperatingPoint(circuit, X[0] if single else X, vals, circuit.column_units(), method,
                           float(np.max(res)))
 

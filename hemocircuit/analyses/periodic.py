@@ -17,15 +17,33 @@ from __future__ import annotations
 import numpy as np
 
 from ..batch_integrator import integrate
+from ..derivatives import dense_jacobian, flow_steps
 from ..errors import HemocircuitError, SolverError
+from ..provenance import clock, stamp
+from ..results import Result
 
 
-class PeriodicOrbit:
+class PeriodicOrbit(Result):
+    """One period of the orbit as a :class:`hemocircuit.results.Result` indexed by ``time`` [s]
+    (401 points, both ends included), plus ``x0``, ``period``, ``x`` (states), ``multipliers``,
+    ``converged``, ``iterations``, ``residual``, ``forced`` (measures also in ``metadata``)."""
+
     def __init__(self, x0, period, t, x, multipliers, converged, iterations, residual, forced, columns, units):
-        self.x0, self.period, self.t, self.x = x0, period, t, x
+        super().__init__({"time": t, **columns}, {"time": "s", **units}, index=["time"])
+        self.x0, self.period, self.x = x0, period, x
         self.multipliers, self.converged, self.iterations = multipliers, converged, iterations
-        self.residual, self.forced, self.columns, self.units = residual, forced, columns, units
+        self.residual, self.forced = residual, forced
         self.n_laws = 0  # conserved quantities (each gives a trivial multiplier 1)
+
+    @property
+    def t(self):
+        return self.data["time"]
+
+    def time_average(self, name):
+        """Mean of a column over the period (trapezoidal rule in time; the end point, equal to
+        the start, is not counted twice)."""
+        y, t = self[name], self.t
+        return float(np.sum(0.5 * (y[1:] + y[:-1]) * np.diff(t)) / (t[-1] - t[0]))
 
     @property
     def nontrivial_multipliers(self):
@@ -68,8 +86,16 @@ def _laws(circuit):
     return np.array(rows).reshape(-1, circuit.nx)
 
 
-def shoot(circuit, x_guess, T_guess, forced=False, rtol=1e-9, tol=1e-8, max_iter=25, rel_step=1e-6):
-    """Newton shooting from (x_guess, T_guess).  Returns a PeriodicOrbit."""
+def shoot(circuit, x_guess, T_guess, forced=False, rtol=1e-9, tol=1e-8, max_iter=25, rel_step=1e-6, progress=None):
+    """Newton shooting from (x_guess, T_guess).  Returns a PeriodicOrbit.  ``progress``: a bar
+    of the Newton iterations (with the residual) on stderr (:mod:`hemocircuit.progress`)."""
+    from ..progress import bar
+    with bar(max_iter, "shooting", unit="iteration", progress=progress) as b:
+        return _shoot(circuit, x_guess, T_guess, forced, rtol, tol, max_iter, rel_step, b)
+
+
+def _shoot(circuit, x_guess, T_guess, forced, rtol, tol, max_iter, rel_step, pbar):
+    started = clock()
     c = circuit
     if c.B != 1:
         raise HemocircuitError("periodic orbits are computed one parameter set at a time")
@@ -86,12 +112,11 @@ def shoot(circuit, x_guess, T_guess, forced=False, rtol=1e-9, tol=1e-8, max_iter
     converged = False
     M = None
     for it in range(1, max_iter + 1):
-        h = rel_step * S
-        X = np.repeat(x0[None], nx + 1, axis=0)
-        X[1 + np.arange(nx), np.arange(nx)] += h
-        X_end, _ = _flow(c, X, np.full(nx + 1, T), rtol=rtol)
-        phi = X_end[0]
-        M = ((X_end[1:] - phi[None]) / h[:, None]).T  # d phi / d x0 (columns = perturbed states)
+        # monodromy d phi / d x0 by forward differences of the flow map (the derivatives
+        # service; steps rel_step * scale, above the integrator's error), one batched run
+        Mb, phi = dense_jacobian(lambda rows: _flow(c, rows, np.full(rows.shape[0], T), rtol=rtol)[0],
+                                 x0[None], S, steps=flow_steps(S, rel_step))
+        M, phi = Mb[0], phi[0]
         r_orbit = (phi - x0) / S
         rows = [r_orbit]
         J = [np.hstack([(M - np.eye(nx)) * (S[None, :] / S[:, None]), np.zeros((nx, 0 if forced else 1))])]
@@ -106,6 +131,7 @@ def shoot(circuit, x_guess, T_guess, forced=False, rtol=1e-9, tol=1e-8, max_iter
         R = np.concatenate(rows)
         JJ = np.vstack(J)
         res_norm = float(np.max(np.abs(R)))
+        pbar.update_to(it, residual=f"{res_norm:.2e}")
         if res_norm < tol:
             converged = True
             break
@@ -123,7 +149,10 @@ def shoot(circuit, x_guess, T_guess, forced=False, rtol=1e-9, tol=1e-8, max_iter
     orb = PeriodicOrbit(x0, T, t, xs, np.linalg.eigvals(M) if M is not None else np.zeros(0), converged, it,
                         res_norm, forced, cols, c.column_units())
     orb.n_laws = len(L)
-    return orb
+    orb.metadata["measures"] = {"period": T, "converged": converged, "iterations": it, "residual": res_norm,
+                                "nontrivial_multipliers": orb.nontrivial_multipliers, "orbitally_stable": orb.stable}
+    return stamp(orb, "periodic", circuit, {"forced": forced, "T_guess": float(T_guess), "rtol": rtol, "atol": rtol,
+                                            "tol": tol, "max_iter": max_iter, "rel_step": rel_step}, started)
 
 
 def guess_from_run(circuit, output=None, t_settle=400.0, dt=0.05, kick=1e-3, rtol=1e-6):
@@ -161,18 +190,15 @@ def register_cli(sub, common):
     sp.add_argument("--t-settle", type=float, default=400.0, help="settling run for the initial guess, s")
     sp.add_argument("--forced", help="source element with a built-in sine term: periodic steady state at "
                                      "its frequency")
-    sp.add_argument("--out", help="CSV of one period of the orbit")
+    sp.add_argument("--out", help="CSV of one period of the orbit (or .json)")
     sp.add_argument("--plot", help="PNG of the orbit")
     sp.set_defaults(func=cmd_periodic)
 
 
-def cmd_periodic(args):
-    from .. import io
-    from ..cli import _load
-
+def _periodic(args, c):
+    """The orbit (converged or not) and the output that found its period."""
     from ..outputs import default_outputs, drive_of, input_element
 
-    c, _ = _load(args)
     interest = default_outputs(c, "periodic", required=args.output is None)
     output = args.output or interest[0]
     if args.forced:
@@ -181,27 +207,39 @@ def cmd_periodic(args):
         if not drive.has_sine:
             raise HemocircuitError(f"--forced {src}: a '{comp.type_name}' has no built-in sine term")
         amp, freq = f"{src}.{drive.amplitude}", f"{src}.{drive.frequency}"
-        f = float(c.get_param(freq)[0])
-        if f <= 0 or float(c.get_param(amp)[0]) == 0:
+        f = float(c.parameters.values[freq][0])
+        if f <= 0 or float(c.parameters.values[amp][0]) == 0:
             raise HemocircuitError(f"--forced {src}: give it a sine term (--set {amp}=..., {freq}=...)")
         from .op import operating_point
-        c0 = c.copy()
-        c0.set_param(amp, 0.0)
+        c0 = c.with_values({amp: 0.0})
         orb = shoot(c, operating_point(c0).x, 1.0 / f, forced=True)
     else:
         x, T = guess_from_run(c, output, args.t_settle)
         orb = shoot(c, x, T)
-    y = orb.columns[output]
+    y = orb[output]
+    orb.metadata["measures"].update({f"min({output})": float(y.min()), f"max({output})": float(y.max()),
+                                     f"time_average({output})": orb.time_average(output)})
+    return orb, output, interest
+
+
+def compute_periodic(args, sets):
+    """One --grid member (:func:`hemocircuit.cli.computed`)."""
+    from ..cli import load_circuit
+    return _periodic(args, load_circuit(args.netlist, sets, args.protocol)[0])[0]
+
+
+def cmd_periodic(args):
+    from ..cli import _load, computed, report_grid, save_outputs
+
+    if args.grid:
+        return report_grid(args, computed(args, compute_periodic))
+    orb, output, interest = _periodic(args, _load(args)[0])
+    y = orb[output]
     print(f"{'converged' if orb.converged else 'NOT converged'} after {orb.iterations} Newton iterations "
           f"(residual {orb.residual:.2e}); period {orb.period:.6g} s")
-    print(f"{output}: min {y.min():.6g}, max {y.max():.6g}, mean {y.mean():.6g}")
+    print(f"{orb.label(output)}: min {y.min():.6g}, max {y.max():.6g}, time average {orb.time_average(output):.6g}")
     mu = orb.nontrivial_multipliers
     print("Floquet multipliers (non-trivial): " + ", ".join(f"{m:.4g}" for m in mu))
     print("orbitally stable" if orb.stable else "orbitally UNSTABLE")
-    if args.out:
-        io.write_csv(args.out, orb.columns, orb.units, first=("time", orb.t, "s"))
-        print(f"wrote {args.out}")
-    if args.plot:
-        io.plot_series(args.plot, orb.t, "time [s]", orb.columns, orb.units, title="periodic orbit",
-                       select=[output] + [k for k in interest if k in orb.columns and k != output])
-        print(f"wrote {args.plot}")
+    select = [output] + [k for k in interest if k in orb.columns and k != output]
+    save_outputs(args, orb, plot=lambda path: orb.plot(path, select=select, title="periodic orbit"))

@@ -27,6 +27,8 @@ operating point continued from the nearer bracket end:
 """
 from __future__ import annotations
 
+import argparse
+
 import sys
 
 import numpy as np
@@ -34,6 +36,8 @@ import numpy as np
 from ..errors import HemocircuitError, SolverError
 from .linearize import limit_flags, linearize
 from ..io import pyplot, save_figure
+from ..provenance import clock, stamp
+from ..results import Result
 
 RE_TOL = 1e-9
 IM_TOL = 1e-7
@@ -94,12 +98,12 @@ def equilibrium(c, x0=None, t=0.0, tol=1e-10):
     If x0 already balances (scaled residual below ``tol``, e.g. when the swept parameter does
     not move the equilibrium: zeta, omega_n, tau_Ca), it is returned as it is -- Newton started
     on a converged point can spend a long time in its line search at round-off level."""
-    from .op import operating_point, residual
+    from .op import conserved_totals, operating_point, residual
 
-    if x0 is not None and all(v is not None for v in c.law_totals):
+    if x0 is not None:
         sv = c.steady_variant()
-        totals = [np.atleast_1d(v) for v in c.law_totals]
         try:
+            totals = [np.atleast_1d(v) for v in conserved_totals(c, t)]
             F = residual(sv, t, np.asarray(x0, dtype=float)[None, :], totals)
             if np.all(np.isfinite(F)) and np.max(np.abs(F) / sv.state_scales) < tol:
                 return np.asarray(x0, dtype=float).copy()
@@ -115,13 +119,12 @@ def equilibrium(c, x0=None, t=0.0, tol=1e-10):
 
 def _solve_at(circuit, param, value, x0, t=0.0):
     """(circuit with param = value, its equilibrium continued from x0)."""
-    c = circuit.copy()
-    c.set_param(param, float(value))
+    c = circuit.with_values({param: float(value)})
     return c, equilibrium(c, x0, t)
 
 
 # ------------------------------------------------------------------------ result ----------
-class StabilityResult:
+class StabilityResult(Result):
     """Per sweep point: ``values``, ``eigenvalues`` (N, n) complex (NaN where the operating
     point failed), ``classification``, ``n_unstable``, ``abscissa`` (max Re), ``n_pairs``,
     ``pair`` (least-damped complex pair, NaN if none), ``pair_zeta``, ``pair_freq`` [Hz],
@@ -159,6 +162,11 @@ class StabilityResult:
             self.n_unstable[i], self.n_pairs[i], self.abscissa[i] = p["n_unstable"], p["n_pairs"], p["abscissa"]
             if p["pair"] is not None:
                 self.pair[i], self.pair_zeta[i], self.pair_freq[i] = p["pair"], p["pair_zeta"], p["pair_freq"]
+        cols, units = self._table()
+        super().__init__(cols, units, index=[param])
+        self.metadata["events"] = events
+        self.metadata["failed"] = [[v, why] for v, why in failed]
+        self.metadata["measures"] = {"hopf": self.hopf, "complex_ranges": self.complex_ranges()}
 
     @property
     def stable(self):
@@ -172,40 +180,33 @@ class StabilityResult:
     def complex_ranges(self):
         """[(start, end)] parameter intervals with at least one complex pair; ends located by
         bisection where a boundary lies inside the sweep (else the sweep's end)."""
-        has = self.n_pairs > 0
-        onsets = sorted(e["value"] for e in self.events if e["kind"] == "complex onset")
-        out = []
-        i, N = 0, len(has)
-        while i < N:
-            if not has[i]:
-                i += 1
-                continue
-            j = i
-            while j + 1 < N and has[j + 1]:
-                j += 1
-            lo, hi = self.values[i], self.values[j]
-            lo_b = [v for v in onsets if (i > 0 and min(self.values[i - 1], lo) <= v <= max(self.values[i - 1], lo))]
-            hi_b = [v for v in onsets if (j + 1 < N and min(hi, self.values[j + 1]) <= v <= max(hi, self.values[j + 1]))]
-            out.append((lo_b[0] if lo_b else lo, hi_b[0] if hi_b else hi))
-            i = j + 1
-        return out
+        onsets = [e["value"] for e in self.events if e["kind"] == "complex onset"]
+        return complex_ranges(self.values, self.n_pairs > 0, onsets)
 
-    def columns(self):
-        """Tidy columns for a CSV (swept parameter first, written by the caller)."""
-        cols = {"classification": np.array(self.classification, dtype=object),
-                "n_unstable": self.n_unstable, "max_real": self.abscissa, "n_complex_pairs": self.n_pairs,
-                "pair_real": self.pair.real, "pair_imag": self.pair.imag, "pair_zeta": self.pair_zeta,
-                "pair_freq": self.pair_freq,
+    def _table(self):
+        """Columns and units: the parameter, ``classification``, ``n_unstable``,
+        ``max_re(lambda)`` (spectral abscissa), ``n_complex_pairs``, the least-damped pair
+        (``re(pair)``, ``im(pair)``, ``zeta(pair)``, ``frequency(pair)``), ``at_limit``, and
+        every eigenvalue ``re(lambdaK)``, ``im(lambdaK)`` (largest real part first)."""
+        cols = {self.param: self.values, "classification": np.array(self.classification, dtype=object),
+                "n_unstable": self.n_unstable, "max_re(lambda)": self.abscissa, "n_complex_pairs": self.n_pairs,
+                "re(pair)": self.pair.real, "im(pair)": self.pair.imag, "zeta(pair)": self.pair_zeta,
+                "frequency(pair)": self.pair_freq,
                 "at_limit": np.array([";".join(a) for a in self.at_limit], dtype=object)}
+        units = {self.param: self.unit, "n_unstable": "1", "max_re(lambda)": "1/s", "n_complex_pairs": "1",
+                 "re(pair)": "1/s", "im(pair)": "rad/s", "zeta(pair)": "1", "frequency(pair)": "Hz"}
         for k in range(self.eigenvalues.shape[1]):
-            cols[f"re{k + 1}"] = self.eigenvalues[:, k].real
-            cols[f"im{k + 1}"] = self.eigenvalues[:, k].imag
-        units = {"max_real": "1/s", "pair_real": "1/s", "pair_imag": "rad/s", "pair_freq": "Hz",
-                 **{f"re{k + 1}": "1/s" for k in range(self.eigenvalues.shape[1])},
-                 **{f"im{k + 1}": "rad/s" for k in range(self.eigenvalues.shape[1])}}
+            cols[f"re(lambda{k + 1})"] = self.eigenvalues[:, k].real
+            cols[f"im(lambda{k + 1})"] = self.eigenvalues[:, k].imag
+            units[f"re(lambda{k + 1})"], units[f"im(lambda{k + 1})"] = "1/s", "rad/s"
         return cols, units
 
-    def summary(self):
+    def summary(self, max_cols=6, max_rows=12, show=None, where=None):
+        """The table (see :meth:`hemocircuit.results.Result.summary`) and the verdict: counts
+        per class, complex ranges, Hopf points and real crossings, states at a limit."""
+        return super().summary(max_cols, max_rows, show, where) + "\n" + self.verdict()
+
+    def verdict(self):
         lines = []
         ok = [c for c in self.classification if c != "failed"]
         counts = {k: ok.count(k) for k in CLASSES if ok.count(k)}
@@ -229,9 +230,29 @@ class StabilityResult:
         return "\n".join(lines)
 
 
+def complex_ranges(values, has_pair, onsets):
+    """[(start, end)] of the runs of sweep points with a complex pair; an end is the located
+    'complex onset' between the run's last point and its neighbour when there is one."""
+    out = []
+    i, N = 0, len(has_pair)
+    while i < N:
+        if not has_pair[i]:
+            i += 1
+            continue
+        j = i
+        while j + 1 < N and has_pair[j + 1]:
+            j += 1
+        lo, hi = values[i], values[j]
+        lo_b = [v for v in onsets if (i > 0 and min(values[i - 1], lo) <= v <= max(values[i - 1], lo))]
+        hi_b = [v for v in onsets if (j + 1 < N and min(hi, values[j + 1]) <= v <= max(hi, values[j + 1]))]
+        out.append((float(lo_b[0] if lo_b else lo), float(hi_b[0] if hi_b else hi)))
+        i = j + 1
+    return out
+
+
 # ------------------------------------------------------------------------ sweep -----------
 def stability_sweep(circuit, param=None, values=None, t=0.0, locate=True, xtol=None,
-                    progress=False) -> StabilityResult:
+                    progress=None) -> StabilityResult:
     """Eigen-analysis of the equilibria of ``circuit`` over ``param`` = ``values`` (array in the
     parameter's declared unit, or a range string '10:200:2 mmHg'), continuing the operating point
     from point to point.  ``param`` defaults to the netlist's input (a source's drive parameter,
@@ -241,6 +262,7 @@ def stability_sweep(circuit, param=None, values=None, t=0.0, locate=True, xtol=N
     from ..outputs import default_input, input_path
     from .dc import parse_range
 
+    started = clock()
     param = input_path(circuit, default_input(circuit) if param is None else param)
     if values is None:
         raise HemocircuitError(f"stability_sweep: give the values of {param} to sweep (e.g. '10:200:2 UNIT')")
@@ -248,29 +270,30 @@ def stability_sweep(circuit, param=None, values=None, t=0.0, locate=True, xtol=N
     vals = parse_range(values, unit) if isinstance(values, str) else np.atleast_1d(np.asarray(values, dtype=float))
     if circuit.B != 1:
         raise HemocircuitError("stability_sweep runs on a single circuit (the sweep is the batch)")
-    c = circuit.copy()
     points, failed = [], []
     x_prev = None
-    it = vals
-    if progress:
-        from tqdm import tqdm
-        it = tqdm(vals, desc="stability", leave=False)
-    for v in it:
-        try:
-            c.set_param(param, float(v))
-            x = equilibrium(c, x_prev, t)
-            pt = analyse_point(c, x, t)
-        except HemocircuitError as exc:
-            failed.append((float(v), str(exc)))
-            points.append(None)
-            continue
-        x_prev = x
-        points.append(pt)
+    from ..progress import bar
+    with bar(len(vals), "stability", unit="point", progress=progress) as b:
+        for v in vals:
+            b.update(1)
+            try:
+                c = circuit.with_values({param: float(v)})
+                x = equilibrium(c, x_prev, t)
+                pt = analyse_point(c, x, t)
+            except HemocircuitError as exc:
+                failed.append((float(v), str(exc)))
+                points.append(None)
+                continue
+            x_prev = x
+            points.append(pt)
     events = []
     if locate and len(vals) > 1:
         step = float(np.min(np.abs(np.diff(vals)))) if len(vals) > 1 else 1.0
-        events = _locate_events(c, param, vals, points, t, xtol or 1e-6 * step, 1e-3 * step)
-    return StabilityResult(param, unit, vals, points, events, failed, list(circuit.state_names))
+        events = _locate_events(circuit, param, vals, points, t, xtol or 1e-6 * step, 1e-3 * step)
+    res = StabilityResult(param, unit, vals, points, events, failed, list(circuit.state_names))
+    return stamp(res, "stability", circuit, {"param": param, "values": values if isinstance(values, str) else None,
+                                             "t": t, "locate": locate, "xtol": xtol, "re_tol": RE_TOL,
+                                             "im_tol": IM_TOL}, started)
 
 
 def _locate_events(circuit, param, vals, points, t, xtol, xtol_onset):
@@ -342,78 +365,93 @@ def _bisect(pred, a, b, pred_a, xtol):
 
 
 # ------------------------------------------------------------------------ plots -----------
-def plot_stability(path, res: StabilityResult, title=""):
+def plot_result(res, path, select=None, title=None):
     """Real parts of the eigenvalues against the parameter (symlog) and the eigenvalues in the
-    complex plane coloured by the parameter."""
+    complex plane coloured by the parameter; from the result's columns and events (a fresh or
+    a reloaded result)."""
     plt = pyplot()
 
+    param = res.index[0]
+    unit = res.units.get(param, "")
+    v = np.asarray(res[param], dtype=float)
+    K = sum(1 for k in res.keys() if k.startswith("re(lambda") and k != "re(lambda)")
+    E = np.stack([res[f"re(lambda{k + 1})"] + 1j * res[f"im(lambda{k + 1})"] for k in range(K)], axis=1) \
+        if K else np.zeros((len(v), 0), complex)
+    events = res.metadata.get("events", []) or []
+    onsets = [e["value"] for e in events if e.get("kind") == "complex onset"]
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(13, 5.2))
-    v = res.values
-    E = res.eigenvalues
     lin = max(float(np.nanmin(np.abs(E.real[E.real != 0]))) if np.any(E.real != 0) else 1e-3, 1e-4)
     lin = min(lin, 0.1)
-    for lo, hi in res.complex_ranges():
+    for lo, hi in complex_ranges(v, np.asarray(res["n_complex_pairs"]) > 0, onsets):
         ax1.axvspan(lo, hi, color="tab:orange", alpha=0.12, lw=0)
     for k in range(E.shape[1]):
         cp = np.abs(E[:, k].imag) > 0
         ax1.plot(v, E[:, k].real, ".", ms=3, color="tab:blue")
         ax1.plot(v[cp], E[cp, k].real, "o", ms=4, mfc="none", color="tab:orange")
-    for e in res.events:
-        if e["kind"] in ("hopf", "real crossing"):
+    for e in events:
+        if e.get("kind") in ("hopf", "real crossing"):
             ax1.axvline(e["value"], color="tab:red", lw=0.8, ls="--")
             ax1.annotate(f"{'Hopf' if e['kind'] == 'hopf' else 'crossing'} {e['value']:.4g}", (e["value"], 0),
                          fontsize=7, rotation=90, va="bottom", ha="right", color="tab:red")
     ax1.axhline(0, color="k", lw=0.7)
     ax1.set_yscale("symlog", linthresh=lin)
-    ax1.set_xlabel(f"{res.param} [{res.unit}]")
+    re_all = E.real[np.isfinite(E.real)]
+    if re_all.size:  # no empty decades: from the fastest decay to just above the largest real part
+        top = re_all.max() * 3 if re_all.max() > 0 else lin * 3
+        ax1.set_ylim(min(re_all.min() * 2, -lin), top)
+    ax1.set_xlabel(f"{param} [{unit}]")
     ax1.set_ylabel("Re(lambda) [1/s]  (orange: complex pair; shaded: complex range)")
     ax1.grid(alpha=0.3)
     sc = None
     for k in range(E.shape[1]):
         sc = ax2.scatter(E[:, k].real, E[:, k].imag, c=v, s=8, cmap="viridis")
     if sc is not None:
-        fig.colorbar(sc, ax=ax2, label=f"{res.param} [{res.unit}]")
+        fig.colorbar(sc, ax=ax2, label=f"{param} [{unit}]")
     ax2.axvline(0, color="k", lw=0.7)
     ax2.axhline(0, color="k", lw=0.4)
     ax2.set_xscale("symlog", linthresh=lin)
+    if re_all.size:
+        ax2.set_xlim(min(re_all.min() * 2, -lin), re_all.max() * 3 if re_all.max() > 0 else lin)
     ax2.set_xlabel("Re(lambda) [1/s]")
     ax2.set_ylabel("Im(lambda) [rad/s]")
     ax2.grid(alpha=0.3)
-    if title:
-        fig.suptitle(title)
+    fig.suptitle(title or f"{res._title()}: eigenvalues along {param}")
     save_figure(fig, path)
+    return str(path)
 
 
 # ------------------------------------------------------------------------ CLI -------------
-def cmd_stability(args):
-    from .. import io
-    from ..cli import _load, _range_spacing
+def _stability(args, c):
+    from ..cli import _range_spacing
+    param, rng = (s.strip() for s in args.sweep.split("=", 1))
+    return stability_sweep(c, param, _range_spacing(rng), locate=not args.no_locate)
 
-    c, _ = _load(args)
+
+def compute_stability(args, sets):
+    """One --grid member (:func:`hemocircuit.cli.computed`)."""
+    from ..cli import load_circuit
+    return _stability(args, load_circuit(args.netlist, sets, args.protocol)[0])
+
+
+def cmd_stability(args):
+    from ..cli import _load, computed, report_grid, save_outputs
+
     if not args.sweep or "=" not in args.sweep:
         raise HemocircuitError("stability needs --sweep ID.PARAM=START:STOP:STEP UNIT (e.g. Pa.value=10:200:2mmHg)")
-    param, rng = (s.strip() for s in args.sweep.split("=", 1))
-    res = stability_sweep(c, param, _range_spacing(rng), locate=not args.no_locate, progress=args.progress)
-    head = [f"{param} [{res.unit}]", "classification", "max Re [1/s]", "pair zeta", "pair f [Hz]", "at limit"]
-    print(f"{head[0]:>16}  {head[1]:>15}  {head[2]:>13}  {head[3]:>10}  {head[4]:>11}  {head[5]}")
-    for i, v in enumerate(res.values):
-        print(f"{v:>16.6g}  {res.classification[i]:>15}  {res.abscissa[i]:>13.5g}  {res.pair_zeta[i]:>10.4g}  "
-              f"{res.pair_freq[i]:>11.4g}  {';'.join(res.at_limit[i])}")
-    print(res.summary())
+    param = args.sweep.split("=", 1)[0].strip()
+    show = args.show or ["classification", "max_re(lambda)", "zeta(pair)", "frequency(pair)", "at_limit"]
+    if args.grid:
+        return report_grid(args, computed(args, compute_stability), show)
+    res = _stability(args, _load(args)[0])
+    print(res.summary(show=show, max_rows=0, where=args.out))
     for v, why in res.failed:
         print(f"failed at {param}={v:g}: {why}", file=sys.stderr)
-    if args.out:
-        cols, units = res.columns()
-        io.write_csv(args.out, cols, units, first=(param, res.values, res.unit))
-        print(f"wrote {args.out}")
-    if args.plot:
-        plot_stability(args.plot, res, title=f"{c.netlist.name}: eigenvalues along {param}")
-        print(f"wrote {args.plot}")
+    save_outputs(args, res)
 
 
 def register_cli(sub, common):
     sp = common(sub.add_parser("stability", help="eigenvalues of the equilibria along a sweep; Hopf points"))
     sp.add_argument("--sweep", help="ID.PARAM=START:STOP:STEP UNIT, e.g. Pa.value=10:200:2mmHg")
     sp.add_argument("--no-locate", action="store_true", help="do not locate Hopf points / complex onsets")
-    sp.add_argument("--progress", action="store_true", help="show a progress bar")
+    sp.add_argument("--progress", action="store_true", help=argparse.SUPPRESS)  # on by default now (--quiet: off)
     sp.set_defaults(func=cmd_stability)

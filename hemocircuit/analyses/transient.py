@@ -14,23 +14,35 @@ from scipy.integrate import solve_ivp
 
 from ..errors import SolverError
 from ..protocol import Protocol
+from ..provenance import clock, stamp
+from ..results import Result
 
 
-class TransientResult:
-    """Time series: ``t`` (T,), ``x`` (T, nx) states, ``columns`` {name: (T,) array}, ``units``."""
+class TransientResult(Result):
+    """Time series (a :class:`hemocircuit.results.Result` indexed by ``time`` [s]): ``t`` (T,),
+    ``x`` (T, nx) states (not written to files; the outputs are), ``columns`` {name: (T,)
+    array}, ``units``, ``state_names``, ``stats`` (solver statistics, ``metadata['solver']``)."""
 
     def __init__(self, t, x, columns, units, state_names, stats=None):
-        self.t, self.x, self.columns, self.units = t, x, columns, units
+        super().__init__({"time": t, **columns}, {"time": "s", **units}, index=["time"])
+        self.x = x
         self.state_names = state_names
         self.stats = stats or {}
 
-    def __getitem__(self, key):
-        if key in ("t", "time"):
-            return self.t
-        return self.columns[key]
+    @property
+    def t(self):
+        return self.data["time"]
 
-    def keys(self):
-        return ["time"] + list(self.columns)
+    @property
+    def stats(self):
+        return self.metadata["solver"]
+
+    @stats.setter
+    def stats(self, value):
+        self.metadata["solver"] = dict(value)
+
+    def __getitem__(self, key):
+        return super().__getitem__("time" if key == "t" else key)
 
 
 def _jac_for(c, method):
@@ -56,7 +68,7 @@ def _limit_events(circuit, limits):
 
 
 def simulate(circuit, t_end, dt=None, t0=0.0, x0=None, protocol=None, method="BDF", rtol=1e-6, atol=None,
-             max_step=np.inf, first_step=None, engine="auto", ic=None):
+             max_step=np.inf, first_step=None, engine="auto", ic=None, progress=None):
     """Integrate from t0 to t_end [s].
 
     x0: initial states (default: the operating point after the protocol's initial settings).
@@ -68,10 +80,34 @@ def simulate(circuit, t_end, dt=None, t0=0.0, x0=None, protocol=None, method="BD
     engine: 'compiled' (numba Rosenbrock-W ROS34PW2, hemocircuit.kernels), 'scipy'
         (solve_ivp with ``method``), or 'auto': compiled when every component type has a
         kernel and ``method`` is left at its default, scipy otherwise.
+    progress: a bar of the simulated time on stderr (default: :mod:`hemocircuit.progress`'s
+        setting, on for the command line unless --quiet).
+
+    Returns a :class:`TransientResult`.  A solver failure raises SolverError whose ``partial``
+    is the result up to the failure, marked ``metadata['status'] = 'partial'``.
     """
+    started = clock()
+    settings = {"t_end": t_end, "dt": dt, "t0": t0, "method": method, "engine": engine, "rtol": rtol,
+                "atol": atol, "max_step": None if max_step == np.inf else max_step, "first_step": first_step,
+                "ic": dict(ic) if ic else None, "x0": None if x0 is None else "given",
+                "protocol": protocol if isinstance(protocol, str) else getattr(protocol, "file", None)}
+    try:
+        res = _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step, first_step, engine, ic,
+                        progress)
+    except SolverError as exc:
+        if exc.partial is not None:
+            stamp(exc.partial, "tran", circuit, settings, started, status="partial")
+            exc.partial.metadata["error"] = str(exc)
+        raise
+    return stamp(res, "tran", circuit, settings, started)
+
+
+def _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step, first_step, engine, ic,
+              progress=None):
+    from ..progress import bar
     from .op import operating_point
 
-    c = circuit.copy()
+    c = circuit
     if isinstance(protocol, str):
         protocol = Protocol.load(protocol, c)
     if protocol is not None:
@@ -100,10 +136,13 @@ def simulate(circuit, t_end, dt=None, t0=0.0, x0=None, protocol=None, method="BD
             raise SolverError("this circuit cannot run compiled (a component type without a kernel, or "
                               "too many nodal unknowns); use engine='scipy'")
         if system is not None:
-            return _simulate_compiled(system, c, x, t0, t_end, dt, events, rtol, atol, max_step, first_step)
+            with bar(t_end - t0, "tran (simulated time)", unit="s", progress=progress) as pbar:
+                return _simulate_compiled(system, c, x, t0, t_end, dt, events, rtol, atol, max_step, first_step,
+                                          pbar)
     ts, xs, segs = [], [], []
     nfev = njev = nsteps = 0
     t_grid = None if dt is None else np.arange(t0, t_end + 0.5 * dt, dt)
+    pbar = bar(t_end - t0, "tran (simulated time)", unit="s", progress=progress).__enter__()
 
     def one_segment(t_a, t_b, x_a):
         nonlocal nfev, njev, nsteps
@@ -114,8 +153,13 @@ def simulate(circuit, t_end, dt=None, t0=0.0, x0=None, protocol=None, method="BD
                 tpts = np.concatenate([[t_a], tpts])
             if tpts[-1] < t_b:
                 tpts = np.concatenate([tpts, [t_b]])
+
+        def rhs(t, x):  # the bar follows the integrator's time
+            pbar.update_to(t - t0)
+            return c.rhs(t, x)
+
         try:
-            sol = solve_ivp(c.rhs, (t_a, t_b), x_a, method=method, t_eval=tpts, rtol=rtol, atol=atol_v,
+            sol = solve_ivp(rhs, (t_a, t_b), x_a, method=method, t_eval=tpts, rtol=rtol, atol=atol_v,
                             jac=_jac_for(c, method),
                             events=_limit_events(c, limits) or None, max_step=max_step,
                             first_step=first_step)
@@ -138,34 +182,36 @@ def simulate(circuit, t_end, dt=None, t0=0.0, x0=None, protocol=None, method="BD
         return _collect(c, ts, xs, segs)
 
     bounds = [t0] + [e[0] for e in events] + [t_end]
-    for k in range(len(bounds) - 1):
-        t_a, t_b = bounds[k], bounds[k + 1]
-        if k > 0:
-            c = c.copy()
-            events[k - 1][1].apply(c)
-        # restart at waveform breakpoints inside the segment
-        cuts = [t_a] + c.breakpoints(t_a, t_b) + [t_b]
-        for a, b in zip(cuts, cuts[1:]):
-            cur = a
-            while cur < b:
-                sol = one_segment(cur, b, x)
-                ts.append(sol.t)
-                xs.append(sol.y.T)
-                segs.append(c)
-                x = sol.y[:, -1].copy() if sol.y.size else x
-                if sol.status == 1:  # a hard limit was reached: put the state on it, reset its rate
-                    k_ev = min((j for j, e in enumerate(sol.t_events) if len(e)), key=lambda j: sol.t_events[j][0])
-                    cur = float(sol.t_events[k_ev][0])
-                    x = sol.y_events[k_ev][0].copy()
-                    idx, bound, reset = limits[k_ev]
-                    x[idx] = bound
-                    if reset is not None:
-                        x[reset] = max(x[reset], 0.0)
-                    ts.append(np.array([cur]))
-                    xs.append(x[None, :])
+    try:
+        for k in range(len(bounds) - 1):
+            t_a, t_b = bounds[k], bounds[k + 1]
+            if k > 0:
+                c = events[k - 1][1].apply(c)
+            # restart at waveform breakpoints inside the segment
+            cuts = [t_a] + c.breakpoints(t_a, t_b) + [t_b]
+            for a, b in zip(cuts, cuts[1:]):
+                cur = a
+                while cur < b:
+                    sol = one_segment(cur, b, x)
+                    ts.append(sol.t)
+                    xs.append(sol.y.T)
                     segs.append(c)
-                else:
-                    cur = b
+                    x = sol.y[:, -1].copy() if sol.y.size else x
+                    if sol.status == 1:  # a hard limit was reached: put the state on it, reset its rate
+                        k_ev = min((j for j, e in enumerate(sol.t_events) if len(e)), key=lambda j: sol.t_events[j][0])
+                        cur = float(sol.t_events[k_ev][0])
+                        x = sol.y_events[k_ev][0].copy()
+                        idx, bound, reset = limits[k_ev]
+                        x[idx] = bound
+                        if reset is not None:
+                            x[reset] = max(x[reset], 0.0)
+                        ts.append(np.array([cur]))
+                        xs.append(x[None, :])
+                        segs.append(c)
+                    else:
+                        cur = b
+    finally:
+        pbar.close()
     res = _collect(c, ts, xs, segs)
     res.stats = {"nfev": nfev, "njev": njev, "nsteps": nsteps, "method": method}
     return res
@@ -192,9 +238,11 @@ def _collect(c_last, ts, xs, segs):
     return TransientResult(t, x, columns, c_last.column_units(), c_last.state_names)
 
 
-def _simulate_compiled(system, c, x, t0, t_end, dt, events, rtol, atol, max_step, first_step):
+def _simulate_compiled(system, c, x, t0, t_end, dt, events, rtol, atol, max_step, first_step, bar=None):
     """simulate() on the compiled engine: one kernel call per protocol segment (hard limits and
-    source breakpoints are handled inside the kernel)."""
+    source breakpoints are handled inside the kernel); with a progress ``bar`` shown, a segment
+    is integrated in about 50 pieces so that the bar moves (each piece starts with the mean
+    step of the piece before)."""
     from ..kernels.system import CompiledSystem
 
     if dt is None:
@@ -211,8 +259,7 @@ def _simulate_compiled(system, c, x, t0, t_end, dt, events, rtol, atol, max_step
     for k in range(len(bounds) - 1):
         t_a, t_b = bounds[k], bounds[k + 1]
         if k > 0:
-            c = c.copy()
-            events[k - 1][1].apply(c)
+            c = events[k - 1][1].apply(c)
             # an event may change waveforms, options or expressions: the layout follows the
             # circuit (cheap; the compiled engine itself is reused)
             system = CompiledSystem.of(c)
@@ -223,8 +270,7 @@ def _simulate_compiled(system, c, x, t0, t_end, dt, events, rtol, atol, max_step
             continue
         tpts = t_grid[(t_grid > t_a) & (t_grid < t_b)]
         tpts = np.concatenate([[t_a], tpts, [t_b]])
-        X, st = system.integrate(tpts, x, system.params(c)[0], rtol=rtol, atol=atol,
-                                 breaks=c.breakpoints(t_a, t_b), h0=h0, hmax=max_step)
+        X, st = _integrate_pieces(system, c, tpts, x, rtol, atol, h0, max_step, bar, t0)
         for key in stats:
             stats[key] += st[key]
         good = np.all(np.isfinite(X), axis=1)
@@ -239,3 +285,32 @@ def _simulate_compiled(system, c, x, t0, t_end, dt, events, rtol, atol, max_step
     res = _collect(c, ts, xs, segs)
     res.stats = {**stats, "method": "ROS34PW2 (compiled)"}
     return res
+
+
+def _integrate_pieces(system, c, tpts, x, rtol, atol, h0, max_step, bar, t0):
+    """One kernel call over ``tpts``; with a shown ``bar``, ~50 calls over consecutive pieces."""
+    shown = bar is not None and getattr(bar, "_t", None) is not None
+    n_pieces = min(50, (len(tpts) - 1) // 20) if shown else 1  # pieces of >= 20 output points
+    if n_pieces <= 1:
+        out = system.integrate(tpts, x, system.params(c)[0], rtol=rtol, atol=atol,
+                               breaks=c.breakpoints(tpts[0], tpts[-1]), h0=h0, hmax=max_step)
+        if bar is not None:
+            bar.update_to(tpts[-1] - t0)
+        return out
+    cuts = np.unique(np.linspace(0, len(tpts) - 1, n_pieces + 1).round().astype(int))
+    Xs, stats = [x[None, :]], None
+    for a, b in zip(cuts[:-1], cuts[1:]):
+        X, st = system.integrate(tpts[a:b + 1], x, system.params(c)[0], rtol=rtol, atol=atol,
+                                 breaks=c.breakpoints(tpts[a], tpts[b]), h0=h0, hmax=max_step)
+        Xs.append(X[1:])
+        stats = dict(st) if stats is None else {**st, **{k: stats[k] + st[k] for k in
+                                                       ("steps", "rejected", "nfev", "limit_events") if k in st}}
+        bar.update_to(tpts[b] - t0)
+        if st["status"] < 0:
+            break
+        x = X[-1].copy()
+        h0 = (tpts[b] - tpts[a]) / max(st["steps"], 1)
+    X = np.concatenate(Xs)
+    if len(X) < len(tpts):  # stopped by a failure: the rest is NaN, as for one call
+        X = np.vstack([X, np.full((len(tpts) - len(X), X.shape[1]), np.nan)])
+    return X, stats

@@ -222,7 +222,9 @@ JAC_REUSE = 6  # accepted steps per Jacobian (a W-method stays consistent with a
 FD_REL = 1e-7  # finite-difference step, relative to max(|x|, the state's scale): hemocircuit.derivatives' rule
 
 
-@njit(cache=True, nogil=True)
+# inlined (numba IR) into integrate, its one caller: numba links a callee's machine code into
+# every caller and LLVM optimises it again there, so each call level costs compile time
+@njit(cache=True, nogil=True, inline="always")
 def jacobian_into(t, x, f0, P, lay, work, scales, J, ft, xt, ftmp):
     """Forward-difference Jacobian J (nx, nx) and df/dt ft (nx,) at (t, x) with f0 = f(t, x).
     Returns the number of evaluations, or -1 if one failed (singular nodal system)."""
@@ -323,7 +325,8 @@ def hermite_root(y0, d0, y1, d1):
     return hi
 
 
-@njit(cache=True, nogil=True)
+# inlined into integrate_batch, its one caller (see jacobian_into): one level less to compile
+@njit(cache=True, nogil=True, inline="always")
 def integrate(t_out, x0, P, lay, scales, lim_i, lim_b, lim_r, breaks, rtol, atol, h0, hmax, max_steps, out):
     """Integrate from t_out[0] to t_out[-1], writing the states at every t_out into out (T, nx).
 

@@ -1,0 +1,183 @@
+"""Immutable circuits and parameter sets (hemocircuit/parameters.py, Circuit.with_values):
+values in declared units, read-only arrays, new objects for every change, member slicing and
+stacking, bounds errors naming element and parameter, and analyses that leave the circuit
+they are given unchanged."""
+import numpy as np
+import pytest
+
+import hemocircuit as hc
+from hemocircuit.errors import HemocircuitError, NetlistError
+from hemocircuit.parameters import ParameterSet
+from hemocircuit.units import Q_
+
+RC2 = """
+elements:
+  - {id: Ps, type: pressure_source, nodes: [in, ground], value: 50 mmHg}
+  - {id: R1, type: resistor,   nodes: [in, a],     R: 2 mmHg*s/mL}
+  - {id: C1, type: compliance, nodes: [a, ground], C: 0.5 mL/mmHg}
+  - {id: R2, type: resistor,   nodes: [a, b],      R: 4 mmHg*s/mL}
+  - {id: C2, type: compliance, nodes: [b, ground], C: 0.25 mL/mmHg}
+"""
+
+
+@pytest.fixture
+def rc(write):
+    return hc.load(write(RC2))
+
+
+def _snapshot(c):
+    return {p: np.array(v) for p, v in c.parameters.values.items()}, [
+        {n: np.array(a) for n, a in g.p.items()} for g in c.groups]
+
+
+def _same(c, snap):
+    vals, groups = snap
+    assert {p: np.array(v) for p, v in c.parameters.values.items()}.keys() == vals.keys()
+    for p, v in c.parameters.values.items():
+        np.testing.assert_array_equal(v, vals[p], err_msg=p)
+    for g, ref in zip(c.groups, groups):
+        for n, a in ref.items():
+            np.testing.assert_array_equal(g.p[n], a, err_msg=n)
+
+
+def test_values_in_declared_units_and_read_only(rc):
+    ps = rc.parameters
+    assert ps.B == 1
+    assert ps.values["R1.R"].tolist() == [2.0] and ps.unit("R1.R") == "mmHg*s/mL"
+    assert ps.values["C2.C"].tolist() == [0.25]
+    with pytest.raises(ValueError):
+        ps.values["R1.R"][0] = 3.0  # a returned array cannot be written
+    with pytest.raises(ValueError):
+        rc.groups[0].p[next(iter(rc.groups[0].p))][0, 0] = 1.0  # nor the evaluator's arrays
+    assert "R1.R" in ps.values and "Ps.value" in ps.values and len(ps.values) == len(list(ps.values))
+
+
+def test_with_values_makes_a_new_circuit_and_keeps_the_original(rc):
+    snap = _snapshot(rc)
+    q0 = rc.operating_point()["Q(R1)"]
+    c2 = rc.with_values({"Ps.value": "100 cmH2O", "R1.R": 4, "C1.C": Q_(500, "uL/mmHg")})
+    assert c2 is not rc and c2.structure is rc.structure  # the structure is shared
+    assert c2.parameters.values["Ps.value"][0] == pytest.approx(100 * 98.0665 / 133.322387415, rel=1e-8)
+    assert c2.parameters.values["R1.R"][0] == 4.0 and c2.parameters.values["C1.C"][0] == pytest.approx(0.5)
+    _same(rc, snap)
+    assert rc.operating_point()["Q(R1)"] == q0  # the original evaluates as before
+    # steady flow through a capacitor branch is zero; the pressures follow the new source
+    op = c2.operating_point()
+    assert op["P(a)"] == pytest.approx(100 * 98.0665 / 133.322387415, rel=1e-8) and abs(op["Q(R1)"]) < 1e-9
+    assert rc.with_values({}) is rc
+
+
+def test_bounds_and_path_errors_name_element_and_parameter(rc):
+    snap = _snapshot(rc)
+    cases = [({"R1.R": -1.0}, "R1", "'R'"), ({"R1.R": "0 mmHg*s/mL"}, "R1", "not physical"),
+             ({"C2.C": "1 mmHg"}, "C2", "dimension"), ({"R1.Q": 1.0}, "R1", "no parameter 'Q'"),
+             ({"Zz.R": 1.0}, "Zz", "no element 'Zz'")]
+    for mapping, element, frag in cases:
+        with pytest.raises(NetlistError, match=frag) as ei:
+            rc.with_values(mapping)
+        assert ei.value.element == element
+    b = rc.batch(3)
+    with pytest.raises(NetlistError, match="not physical") as ei:  # one bad member is enough
+        b.with_values({"R2.R": np.array([1.0, -2.0, 3.0])})
+    assert ei.value.element == "R2"
+    with pytest.raises(NetlistError, match="one value per member") as ei:
+        b.with_values({"R2.R": np.array([1.0, 2.0])})
+    assert ei.value.element == "R2"
+    # a rejected mapping changes nothing, also its valid entries
+    with pytest.raises(NetlistError):
+        rc.with_values({"R1.R": 7.0, "R2.R": -1.0})
+    _same(rc, snap)
+
+
+def test_members_slicing_and_stack_round_trip(rc):
+    b = rc.batch(3).with_values({"R1.R": np.array([1.0, 2.0, 3.0]), "Ps.value": "60 mmHg"})
+    ps = b.parameters
+    assert ps.B == 3 and ps.values["R1.R"].tolist() == [1.0, 2.0, 3.0]
+    assert ps.values["Ps.value"].tolist() == [60.0] * 3
+    one = ps[1]
+    assert one.B == 1 and one.values["R1.R"].tolist() == [2.0]
+    assert ps[[2, 0]].values["R1.R"].tolist() == [3.0, 1.0]
+    assert ps[1:].values["R1.R"].tolist() == [2.0, 3.0]
+    assert ps[np.array([0, 0, 2])].values["R1.R"].tolist() == [1.0, 1.0, 3.0]  # repeats allowed
+    members = list(ps.members())
+    assert [m.values["R1.R"][0] for m in members] == [1.0, 2.0, 3.0]
+    assert ParameterSet.stack(members) == ps
+    assert ParameterSet.stack([ps[2], ps[:2]]).values["R1.R"].tolist() == [3.0, 1.0, 2.0]
+    with pytest.raises(IndexError):
+        ps[3]
+    # circuits: member k and subset evaluate like a single circuit with those values
+    for k, R in enumerate([1.0, 2.0, 3.0]):
+        single = rc.with_values({"R1.R": R, "Ps.value": "60 mmHg"})
+        x = np.array([10.0, 5.0])
+        np.testing.assert_allclose(b.member(k).rhs(0.0, x), single.rhs(0.0, x), rtol=1e-14)
+        np.testing.assert_allclose(b.subset([k]).rhs(0.0, x[None])[0], single.rhs(0.0, x), rtol=1e-14)
+    assert b.subset([0, 2]) is b.subset([0, 2])  # cached view
+    assert b.subset([0, 2]).parameters.values["R1.R"].tolist() == [1.0, 3.0]
+    with pytest.raises(HemocircuitError):
+        b.batch(2)
+
+
+def test_stack_rejects_other_structures_and_other_waveforms(rc, write):
+    other = hc.load(write(RC2))
+    with pytest.raises(NetlistError, match="different circuit structures"):
+        ParameterSet.stack([rc.parameters, other.parameters])
+    wave = rc.with_values({"Ps.value": {"sine": {"offset": "50 mmHg", "amplitude": "5 mmHg",
+                                                  "frequency": "1 Hz"}}})
+    assert wave.parameters.waveform("Ps.value") is not None and rc.parameters.waveform("Ps.value") is None
+    with pytest.raises(NetlistError, match="waveforms"):
+        ParameterSet.stack([rc.parameters, wave.parameters])
+    # a quantity replaces the waveform again
+    assert wave.with_values({"Ps.value": "50 mmHg"}).parameters.waveform("Ps.value") is None
+
+
+def test_with_parameters_checks_the_structure(rc, write):
+    other = hc.load(write(RC2))
+    with pytest.raises(HemocircuitError, match="another circuit structure"):
+        rc.with_parameters(other.parameters)
+    assert rc.with_parameters(rc.parameters) is rc
+    ps = rc.parameters.with_values({"R2.R": 8.0})
+    assert rc.with_parameters(ps).parameters is ps
+
+
+def test_analyses_do_not_change_the_circuit_they_are_given(rc):
+    from hemocircuit.analyses.linearize import linearize
+    from hemocircuit.protocol import Protocol
+
+    snap = _snapshot(rc)
+    rc.operating_point()
+    rc.dc_sweep("Ps.value", [40.0, 50.0, 60.0])
+    linearize(rc, input="Ps", outputs=["Q(R1)"])
+    rc.ac_response("Ps", ["Q(R1)"], [0.01, 0.1])
+    rc.stability_sweep("R1.R", [1.0, 2.0], locate=False)
+    rc.frequency_response([0.5], outputs=["P(b)"], input="Ps", scheduler="serial", max_periods=8)
+    proto = Protocol.from_dict({"t_end": "2 s", "initial": {"R2.R": "3 mmHg*s/mL"},
+                                "events": [{"at": "1 s", "set": {"Ps.value": "70 mmHg"}}]}, None, rc)
+    rc.simulate(2.0, protocol=proto, dt=0.5)
+    _same(rc, snap)
+    b = rc.batch(2).with_values({"R1.R": np.array([1.0, 3.0])})
+    bsnap = _snapshot(b)
+    b.operating_point()
+    linearize(b)
+    b.subset([1])
+    _same(b, bsnap)
+
+
+def test_steady_variant_shares_values_and_is_cached(rc):
+    sv = rc.steady_variant()
+    assert sv is rc.steady_variant()
+    assert sv.parameters is rc.parameters
+
+
+def test_pickled_circuit_drops_private_caches(rc):
+    import pickle
+
+    b = rc.batch(3).with_values({"R1.R": np.array([1.0, 2.0, 3.0])})
+    sub = b.subset([0, 2])
+    b.cached("probe", lambda: 1)
+    back = pickle.loads(pickle.dumps(b))
+    assert back.parameters.schema is back.structure.schema  # one structure after unpickling
+    assert {k: v.tolist() for k, v in back.parameters.values.items()} == \
+        {k: v.tolist() for k, v in b.parameters.values.items()}
+    assert back.cached("probe", lambda: 2) == 2  # memo not carried
+    x = np.array([[10.0, 5.0]] * 2)
+    np.testing.assert_array_equal(pickle.loads(pickle.dumps(sub)).rhs(0.0, x), sub.rhs(0.0, x))
