@@ -9,5 +9,12 @@ from .blood_vessel_crl import BloodVesselCRL
 from .coronary_bc import CoronaryBC
 from .rcr_bc import RCRBC
 from .resistance_bc import ResistanceBC
+from .valve_tanh import ValveTanh
+from .piecewise_valve import PiecewiseValve
+from .chamber_elastance_inductor import ChamberElastanceInductor
+from .linear_elastance_chamber import LinearElastanceChamber
+from .closed_loop_rcr import ClosedLoopRCR
+from .closed_loop_heart_pulmonary import ClosedLoopHeartAndPulmonary
 
-__all__ = ["BloodVessel", "BloodVesselCRL", "CoronaryBC", "RCRBC", "ResistanceBC"]
+__all__ = ["BloodVessel", "BloodVesselCRL", "ChamberElastanceInductor", "ClosedLoopHeartAndPulmonary", "ClosedLoopRCR",
+           "CoronaryBC", "LinearElastanceChamber", "PiecewiseValve", "RCRBC", "ResistanceBC", "ValveTanh"]

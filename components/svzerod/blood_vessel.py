@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hemocircuit.component import Component, Observable, Option, Param, State
+from hemocircuit.component import Component, Observable, Option, Param, State, Storage
 
 from ._common import C_UNIT, L_UNIT, R_UNIT, S_UNIT, jit, k_stenosis_linearised, stenosis_linearised
 
@@ -70,8 +70,27 @@ class _Vessel(Component):
         return s
 
     def observables(self):
-        return (Observable("Q_in", "mL/s", "flow into the inlet"),
-                Observable("Q_out", "mL/s", "flow out of the outlet"))
+        v = (Observable("V", "mL", "volume of the capacitor", state_only=True),) if self.cap else ()
+        return v + (Observable("Q_in", "mL/s", "flow into the inlet"),
+                    Observable("Q_out", "mL/s", "flow out of the outlet"))
+
+    def storages(self):
+        """The capacitor is a volume store (closed loops conserve the blood volume); its
+        terminals are those of the edge that carries its flow to the reference."""
+        if not self.cap:
+            return ()
+        return (Storage(*self._store_edge(), volume="V", state="V"),)
+
+    def _store_edge(self):
+        return ("in", "ref")
+
+    def _restore_kept(self, keep, orig, A_loc, b_loc):
+        """Stores anchoring a conservation law keep their normal stamp in the DC guess."""
+        kept = np.asarray(keep, dtype=bool)
+        if self.cap and kept.any():
+            A_loc[:, kept] = orig[0][:, kept]
+            b_loc[:, kept] = orig[1][:, kept]
+        return A_loc, b_loc
 
     def kernel_options(self):
         return np.array([int(self.cap), int(self.ind)], dtype=np.int64)
@@ -92,7 +111,12 @@ class BloodVessel(_Vessel):
     def edges(self):
         if not self.cap:
             return (("in", "out", "flow" if self.ind else "conductive"),)
-        return (("in", "ref", "conductive"), ("out", "ref", "flow" if self.ind else "pressure"))
+        if self.ind:  # R + C from in to the reference, L on to out
+            return (("in", "ref", "conductive"), ("in", "out", "flow"))
+        return (("in", "out", "conductive"), ("out", "ref", "pressure"))  # R, then C at out
+
+    def _store_edge(self):
+        return ("in", "ref") if self.ind else ("out", "ref")
 
     def stamp(self, p, x, u, t, src=None):
         R, S = p["R_poiseuille"], p["stenosis_coefficient"]
@@ -140,16 +164,17 @@ class BloodVessel(_Vessel):
 
     def observe(self, p, x, u, t, src=None):
         if u is None:
-            return {}
+            return {"V": x[..., 0]} if self.cap else {}
         if self.cap:
             q_out = x[..., 1] if self.ind else -u[..., 4]
-            return {"Q_in": u[..., 3], "Q_out": q_out}
+            return {"V": x[..., 0], "Q_in": u[..., 3], "Q_out": q_out}
         q = x[..., 0] if self.ind else u[..., 3]
         return {"Q_in": q, "Q_out": q}
 
     def dc_stamp(self, p, A_loc, b_loc, keep):
         """Steady state without stenosis: the capacitor open, the inductor a short."""
         R = p["R_poiseuille"]
+        orig = (A_loc.copy(), b_loc.copy())
         A_loc[...] = 0.0
         b_loc[...] = 0.0
         if self.cap and self.ind:   # branch (in, ref) becomes in -> out through R
@@ -165,7 +190,7 @@ class BloodVessel(_Vessel):
         else:
             A_loc[..., 0, 3], A_loc[..., 1, 3] = 1.0, -1.0
             A_loc[..., 3, 0], A_loc[..., 3, 1], A_loc[..., 3, 3] = 1.0, -1.0, -R
-        return A_loc, b_loc
+        return self._restore_kept(keep, orig, A_loc, b_loc)
 
     def initial_states(self, p, u, flows=None, x=None):
         out = np.zeros(u.shape[:2] + (len(self.states()),))
@@ -180,8 +205,8 @@ class BloodVessel(_Vessel):
 
     def kernel(self):
         from hemocircuit.kernels import Kernel
-        from hemocircuit.kernels.stateless import no_observables
-        return Kernel(stamp=vessel_stamp, derivs=vessel_derivs, observe=no_observables, observables=())
+        return Kernel(stamp=vessel_stamp, derivs=vessel_derivs, observe=vessel_observe,
+                      observables=("V",) if self.cap else ())
 
 
 # --- compiled path (hemocircuit.kernels contract) -------------------------------------------
@@ -233,3 +258,9 @@ def vessel_derivs(p, x, u, t, iopt, dx):
     elif iopt[1] != 0:
         q = x[0]
         dx[0] = (u[0] - u[1] - (R + S * abs(q)) * q) / p[2]
+
+
+@jit
+def vessel_observe(p, x, iopt, out):
+    if iopt[0] != 0:
+        out[0] = x[0]

@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from ._common import jit, k_stenosis_linearised, stenosis_linearised
-from .blood_vessel import BloodVessel, _Vessel, vessel_derivs, vessel_stamp
+from .blood_vessel import BloodVessel, _Vessel, vessel_derivs, vessel_observe, vessel_stamp
 
 
 class BloodVesselCRL(_Vessel):
@@ -28,6 +28,9 @@ class BloodVesselCRL(_Vessel):
         if self.cap:
             return (("in", "ref"),) if self.ind else (("in", "ref"), ("in", "out"))
         return BloodVessel.branches(self)
+
+    def _store_edge(self):
+        return BloodVessel._store_edge(self) if not self.cap else ("in", "ref")
 
     def edges(self):
         if not self.cap:
@@ -69,15 +72,16 @@ class BloodVesselCRL(_Vessel):
         if not self.cap:
             return BloodVessel.observe(self, p, x, u, t, src)
         if u is None:
-            return {}
+            return {"V": x[..., 0]}
         q_out = x[..., 1] if self.ind else u[..., 4]
-        return {"Q_in": u[..., 3] + q_out, "Q_out": q_out}
+        return {"V": x[..., 0], "Q_in": u[..., 3] + q_out, "Q_out": q_out}
 
     def dc_stamp(self, p, A_loc, b_loc, keep):
         """Steady state without stenosis: the capacitor open, the inductor a short."""
         if not self.cap:
             return BloodVessel.dc_stamp(self, p, A_loc, b_loc, keep)
         R = p["R_poiseuille"]
+        orig = (A_loc.copy(), b_loc.copy())
         A_loc[...] = 0.0
         b_loc[...] = 0.0
         A_loc[..., 3, 3] = 1.0  # capacitor flow 0
@@ -87,7 +91,7 @@ class BloodVesselCRL(_Vessel):
         else:
             A_loc[..., 0, 4], A_loc[..., 1, 4] = 1.0, -1.0
             A_loc[..., 4, 0], A_loc[..., 4, 1], A_loc[..., 4, 4] = 1.0, -1.0, -R
-        return A_loc, b_loc
+        return self._restore_kept(keep, orig, A_loc, b_loc)
 
     def initial_states(self, p, u, flows=None, x=None):
         if not self.cap:
@@ -100,8 +104,8 @@ class BloodVesselCRL(_Vessel):
 
     def kernel(self):
         from hemocircuit.kernels import Kernel
-        from hemocircuit.kernels.stateless import no_observables
-        return Kernel(stamp=crl_stamp, derivs=crl_derivs, observe=no_observables, observables=())
+        return Kernel(stamp=crl_stamp, derivs=crl_derivs, observe=vessel_observe,
+                      observables=("V",) if self.cap else ())
 
 
 # --- compiled path: p = [R_poiseuille, C, L, stenosis_coefficient], iopt = [capacitive, inductive]

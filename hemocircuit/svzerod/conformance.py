@@ -99,6 +99,7 @@ def simulate_case(model, rtol=1e-9, timed_runs=1):
     from ..analyses.op import operating_point
     from ..analyses.transient import simulate
     from ..circuit import load
+    from ..ic import apply_ic
 
     T, N, ncyc = model.period, model.points, model.n_cycles
     dt = T / (N - 1)
@@ -111,7 +112,12 @@ def simulate_case(model, rtol=1e-9, timed_runs=1):
     best = np.inf
     for _ in range(max(1, timed_runs)):
         t0 = time.perf_counter()
-        x0 = operating_point(cm).x
+        if model.initial and (model.closed or not model.sim.get("steady_initial", True)):
+            # their start: the initial condition (0 where not given); a closed loop keeps the
+            # blood volume of that start whatever their steady_initial does
+            x0 = apply_ic(c, np.zeros(c.nx), model.initial)
+        else:
+            x0 = operating_point(cm).x
         if c.nx == 0:  # no states: the outputs are algebraic functions of time
             t = np.arange(0, (N - 1) * ncyc + 1) * dt
             res = c.outputs(t, np.zeros((t.size, 0)))
@@ -137,20 +143,14 @@ def compare(model, res, keep, t_out, theirs):
     errs = {"P": (0.0, ""), "Q": (0.0, "")}
     missing = []
     for name, (tt, yy) in theirs.items():
-        if name.startswith("valve_status") or name not in model.columns and not name.startswith(("pressure", "flow")) \
-                and ":" in name and name.split(":")[0] not in ("Vc",):
-            pass
         col = model.columns.get(name)
         if col is None:
             if not name.startswith("valve_status"):
                 missing.append(name)
             continue
         ours = np.asarray(res[col], float)[keep]
-        kind = "Q" if ("flow" in name) else "P"
-        scale_units = 1.0
-        if kind == "P":
-            scale_units = _pressure_factor(model)
-        ours = ours * scale_units
+        kind = "Q" if ("flow" in name) else "P"  # chamber volumes count with the pressures
+        ours = ours * _unit_factor(model, "Q" if kind == "Q" else ("V" if name.startswith("Vc:") else "P"))
         if mean_only:
             o, y = np.array([ours.mean()]), yy
         else:
@@ -171,11 +171,19 @@ def compare(model, res, keep, t_out, theirs):
     return errs["P"][0], errs["Q"][0], worst, note
 
 
-def _pressure_factor(model):
-    """Factor from mmHg (ours) to the model's pressure unit (theirs)."""
+def _unit_factor(model, kind):
+    """Factor from our unit (mmHg, mL/s, mL) to the model's (theirs) for P, Q or V."""
     from ..units import parse_quantity
 
-    return parse_quantity("1 mmHg", model.units["P"])
+    return parse_quantity({"P": "1 mmHg", "Q": "1 mL/s", "V": "1 mL"}[kind], model.units[kind])
+
+
+def case_units(cfg):
+    """Unit system of a case: 'SI' when its top-level comments say m^3 (their Regazzoni
+    models), else 'cgs' (their convention).  Models in mmHg need no special case: every
+    pressure-carrying parameter scales together, so 'cgs' gives the same numbers."""
+    text = " ".join(str(v) for k, v in cfg.items() if k.startswith("_"))
+    return "SI" if re.search(r"m\^3|m\*\*3", text) else "cgs"
 
 
 def run_case(case_path, against="converged", timed_runs=1, rtol=1e-9):
@@ -184,7 +192,8 @@ def run_case(case_path, against="converged", timed_runs=1, rtol=1e-9):
     r = CaseResult(name)
     r.theirs = their_times(os.path.join(folder, "README.md")).get(name, "")
     try:
-        model = import_svzerod(case_path)
+        with open(case_path) as fh:
+            model = import_svzerod(case_path, units=case_units(json.load(fh)))
         r.types = model.block_types
         r.tol_p, r.tol_q = tolerances(name, model)
         res, keep, t_out, wall = simulate_case(model, rtol=rtol, timed_runs=timed_runs)

@@ -32,13 +32,19 @@ from ..errors import NetlistError
 UNIT_SYSTEMS = {
     "cgs": {"P": "dyn/cm**2", "Q": "mL/s", "V": "mL", "t": "s"},
     "mmHg": {"P": "mmHg", "Q": "mL/s", "V": "mL", "t": "s"},
+    "SI": {"P": "Pa", "Q": "m**3/s", "V": "m**3", "t": "s"},
 }
 
 SIM_DEFAULTS = {"steady_initial": True, "output_all_cycles": False, "output_variable_based": False,
                 "output_mean_only": False, "output_derivative": False, "output_interval": 1,
                 "absolute_tolerance": 1e-8}
 
-SUPPORTED_BC = ("FLOW", "PRESSURE", "RESISTANCE", "RCR", "CORONARY")
+SUPPORTED_BC = ("FLOW", "PRESSURE", "RESISTANCE", "RCR", "CORONARY", "ClosedLoopRCR")
+SUPPORTED_VALVES = ("ValveTanh", "PiecewiseValve")
+SUPPORTED_CHAMBERS = ("ChamberElastanceInductor", "LinearElastanceChamber")
+SUPPORTED_CLOSED_LOOP = ("ClosedLoopHeartAndPulmonary",)
+#: their block names of the heart and its two junctions (SimulationParameters.cpp, create_closed_loop)
+HEART, HEART_IN, HEART_OUT = "CLH", "J_heart_inlet", "J_heart_outlet"
 SUPPORTED_VESSELS = ("BloodVessel", "BloodVesselCRL")
 
 
@@ -56,6 +62,8 @@ class SvzModel:
     vessels: list = field(default_factory=list)  # vessel names (their per-block output)
     units: dict = field(default_factory=dict)
     mean_netlist: dict | None = None  # time series at their means (their steady_initial)
+    initial: dict = field(default_factory=dict)  # {ID.STATE: quantity}: their initial_condition
+    closed: bool = False  # a closed loop (no boundary condition to ground): volume conserved
 
     @property
     def n_cycles(self):
@@ -88,10 +96,13 @@ class _Importer:
             raise _err(f"unknown unit system {units!r}; choose one of {sorted(UNIT_SYSTEMS)}", path=path)
         self.u = UNIT_SYSTEMS[units]
         P = self.u["P"]
-        self.uR, self.uC, self.uL = f"{P}*s/mL", f"mL/({P})", f"{P}*s**2/mL"
-        self.uS = f"{P}*s**2/mL**2"
+        V, Q = self.u["V"], self.u["Q"]
+        self.uR, self.uC, self.uL = f"({P})/({Q})", f"({V})/({P})", f"({P})/({Q})*s"
+        self.uS = f"({P})/({Q})**2"
+        self.uE = f"({P})/({V})"
         self.extra_cycles = extra_cycles
         self.elements, self.columns, self.types = [], {}, set()
+        self.chamber_elements = []
         self.ids = {}
 
     # --- helpers ------------------------------------------------------------------------
@@ -162,15 +173,7 @@ class _Importer:
         self.sim = sim
         self.n_cycles = int(sim["number_of_cardiac_cycles"])
         self.period, self.period_block = None, None
-        if cfg.get("closed_loop_blocks"):
-            b = cfg["closed_loop_blocks"][0]
-            raise _err(f"block '{b.get('closed_loop_type', '?')}': closed-loop blocks are not supported yet",
-                       b.get("closed_loop_type"), path)
-        for key in ("chambers", "valves"):
-            for b in cfg.get(key) or []:
-                raise _err(f"block '{b.get('name', '?')}': type {b.get('type')!r} is not supported yet "
-                           f"(supported: vessels {SUPPORTED_VESSELS}, junctions, BCs {SUPPORTED_BC})",
-                           b.get("name"), path)
+        P = self.u["P"]
 
         vessels = cfg.get("vessels") or []
         by_id = {}
@@ -181,8 +184,24 @@ class _Importer:
                                v.get("vessel_name"), path)
             by_id[v["vessel_id"]] = v["vessel_name"]
         bcs = {b.get("bc_name"): b for b in cfg.get("boundary_conditions") or []}
+        valves = {b.get("name"): b for b in cfg.get("valves") or []}
+        chambers = {b.get("name"): b for b in cfg.get("chambers") or []}
+        for kind, blocks, types in (("valve", valves, SUPPORTED_VALVES), ("chamber", chambers, SUPPORTED_CHAMBERS)):
+            for name, b in blocks.items():
+                if b.get("type") not in types:
+                    raise _err(f"{kind} '{name}': unknown or unsupported type {b.get('type')!r} "
+                               f"(supported: {', '.join(types)})", name, path)
+        heart = None
+        for b in cfg.get("closed_loop_blocks") or []:
+            typ = b.get("closed_loop_type")
+            if typ not in SUPPORTED_CLOSED_LOOP:
+                raise _err(f"closed-loop block {typ!r}: unknown or unsupported closed_loop_type "
+                           f"(supported: {', '.join(SUPPORTED_CLOSED_LOOP)})", typ, path)
+            if heart is not None:
+                raise _err("only one ClosedLoopHeartAndPulmonary block is allowed (as in svZeroDSolver)", HEART, path)
+            heart = b
 
-        # connections (upstream block, downstream block)
+        # connections (upstream block, downstream block), as their SimulationParameters.cpp builds them
         conns = []
         for v in vessels:
             bc = v.get("boundary_conditions") or {}
@@ -205,6 +224,22 @@ class _Importer:
             junctions[name] = (jt, ins, outs, j)
             conns += [(i, name) for i in ins] + [(name, o) for o in outs]
             self.types.add(jt if jt != "internal_junction" else "NORMAL_JUNCTION")
+        for name, b in valves.items():
+            prm = b.get("params") or {}
+            for key in ("upstream_block", "downstream_block"):
+                if key not in prm:
+                    raise _err(f"valve '{name}': missing params.{key}", name, path)
+            conns += [(prm["upstream_block"], name), (name, prm["downstream_block"])]
+        closed_bcs = [n for n, b in bcs.items() if b.get("bc_type") == "ClosedLoopRCR"
+                      and (b.get("bc_values") or {}).get("closed_loop_outlet") is True]
+        if heart is not None:
+            self.types.add("ClosedLoopHeartAndPulmonary")
+            for jn, ins, outs in ((HEART_IN, closed_bcs, [HEART]), (HEART_OUT, [HEART], list(heart.get("outlet_blocks") or []))):
+                junctions[jn] = ("NORMAL_JUNCTION", ins, outs, {})
+                conns += [(i, jn) for i in ins] + [(jn, o) for o in outs]
+        elif closed_bcs:
+            raise _err(f"boundary condition '{closed_bcs[0]}': closed_loop_outlet needs a ClosedLoopHeartAndPulmonary "
+                       "block in 'closed_loop_blocks'", closed_bcs[0], path)
 
         def node(a, b):
             for x in (a, b):
@@ -216,11 +251,41 @@ class _Importer:
         for a, b in conns:
             outlet.setdefault(a, []).append(b)
             inlet.setdefault(b, []).append(a)
-        known = set(by_id.values()) | set(bcs) | set(junctions)
+        known = set(by_id.values()) | set(bcs) | set(junctions) | set(valves) | set(chambers) | (
+            {HEART} if heart is not None else set())
         for a, b in conns:
             for x in (a, b):
                 if x not in known:
                     raise _err(f"connection {a} -> {b}: no block named '{x}'", x, path)
+
+        def two_port(kind, name):
+            ins, outs = inlet.get(name, []), outlet.get(name, [])
+            if len(ins) != 1 or len(outs) != 1:
+                raise _err(f"{kind} '{name}': needs exactly one upstream and one downstream block, has "
+                           f"{ins or 'none'} and {outs or 'none'}", name, path)
+            return node(ins[0], name), node(name, outs[0])
+
+        # their initial_condition: values by variable name (pressure_all / flow_all defaults)
+        ic_cfg = cfg.get("initial_condition") or {}
+        if not isinstance(ic_cfg, dict):
+            raise _err("'initial_condition' must be a mapping variable name -> value", path=path)
+
+        def ic(name, default=0.0):
+            if name in ic_cfg:
+                return float(ic_cfg[name])
+            if name.startswith(("pressure:", "P_c:")) and "pressure_all" in ic_cfg:
+                return float(ic_cfg["pressure_all"])
+            if name.startswith("flow:") and "flow_all" in ic_cfg:
+                return float(ic_cfg["flow_all"])
+            return default
+
+        V, Q = self.u["V"], self.u["Q"]
+        self.initial, self.store_volume = {}, 0.0
+
+        def start(eid, state, value, unit, store=False):
+            self.initial[f"{eid}.{state}"] = _fmt(value, unit)
+            if store:
+                self.store_volume += value
 
         # vessels
         q_in, q_out = {}, {}
@@ -234,16 +299,19 @@ class _Importer:
             R = self.value(name, vals, "R_poiseuille")
             C, L = float(vals.get("C", 0.0)), float(vals.get("L", 0.0))
             S = float(vals.get("stenosis_coefficient", 0.0))
-            ins, outs = inlet.get(name, []), outlet.get(name, [])
-            if len(ins) != 1 or len(outs) != 1:
-                raise _err(f"vessel '{name}': needs exactly one upstream and one downstream block, has "
-                           f"{ins or 'none'} and {outs or 'none'}", name, path)
+            n_in, n_out = two_port("vessel", name)
+            up, down = inlet[name][0], outlet[name][0]
             eid = self.id_of(name)
-            self.add(eid, "blood_vessel" if typ == "BloodVessel" else "blood_vessel_crl",
-                     [node(ins[0], name), node(name, outs[0]), "ground"],
+            self.add(eid, "blood_vessel" if typ == "BloodVessel" else "blood_vessel_crl", [n_in, n_out, "ground"],
                      R_poiseuille=_fmt(R, self.uR), C=_fmt(C, self.uC), L=_fmt(L, self.uL),
                      stenosis_coefficient=_fmt(S, self.uS), capacitive=C != 0.0, inductive=L != 0.0)
             q_in[name], q_out[name] = f"{eid}.Q_in", f"{eid}.Q_out"
+            p0, qi, qo = ic(f"pressure:{up}:{name}"), ic(f"flow:{up}:{name}"), ic(f"flow:{name}:{down}")
+            if C != 0.0:  # their capacitor pressure: P_in (CRL), P_in - (R + S|Q_in|) Q_in (BloodVessel)
+                pc = p0 if typ == "BloodVesselCRL" else p0 - (float(R) + S * abs(qi)) * qi
+                start(eid, "V", C * pc, V, store=True)
+            if L != 0.0:
+                start(eid, "Q_out", qo, Q)
 
         # junctions with resistances: one vessel per outlet
         for name, (jt, ins, outs, j) in junctions.items():
@@ -264,24 +332,86 @@ class _Importer:
                          R_poiseuille=_fmt(R, self.uR), L=_fmt(L, self.uL), stenosis_coefficient=_fmt(S, self.uS),
                          inductive=float(L) != 0.0)
                 q_in[name + "->" + o] = f"{eid}.Q_out"
+                if float(L) != 0.0:
+                    start(eid, "Q_out", ic(f"flow:{name}:{o}"), Q)
+
+        # valves
+        for name, b in valves.items():
+            typ, prm = b["type"], b.get("params") or {}
+            self.types.add(typ)
+            eid = self.id_of(name)
+            kw = {k: _fmt(self.value(name, prm, k), self.uR) for k in ("Rmin", "Rmax")}
+            if typ == "ValveTanh":
+                kw["steepness"] = _fmt(self.value(name, prm, "Steepness"), f"1/({P})")
+            self.add(eid, "valve_tanh" if typ == "ValveTanh" else "piecewise_valve", list(two_port("valve", name)), **kw)
+            q_in[name] = q_out[name] = f"{eid}.Q"
+
+        # chambers
+        for name, b in chambers.items():
+            typ, vals = b["type"], b.get("values") or {}
+            self.types.add(typ)
+            eid = self.id_of(name)
+            act = self.activation(name, b.get("activation_function"))
+            if typ == "ChamberElastanceInductor":
+                kw = {k: _fmt(self.value(name, vals, k), self.uE) for k in ("Emax", "Emin")}
+                kw.update({k: _fmt(self.value(name, vals, k), V) for k in ("Vrd", "Vrs")})
+                kw["Impedance"] = _fmt(self.value(name, vals, "Impedance"), self.uL)
+                ctype = "chamber_elastance_inductor"
+            else:
+                kw = {k: _fmt(self.value(name, vals, k), self.uE) for k in ("Emax", "Epass")}
+                kw["Vrest"] = _fmt(self.value(name, vals, "Vrest"), V)
+                ctype = "linear_elastance_chamber"
+            self.chamber_elements.append((eid, act))
+            self.add(eid, ctype, list(two_port("chamber", name)) + ["ground"], **kw, **act)
+            q_in[name], q_out[name] = f"{eid}.Q_in", f"{eid}.Q_out"
+            start(eid, "Vc", ic(f"Vc:{name}"), V, store=True)
+            if typ == "ChamberElastanceInductor":
+                start(eid, "Q_out", ic(f"flow:{name}:{outlet[name][0]}"), Q)
+
+        # the closed-loop heart
+        if heart is not None:
+            prm = heart.get("parameters") or {}
+            eid = self.id_of(HEART)
+            hp = self.heart_values(prm)
+            period = heart.get("cardiac_cycle_period")
+            if not isinstance(period, (int, float)) or isinstance(period, bool) or period <= 0:
+                raise _err("ClosedLoopHeartAndPulmonary: 'cardiac_cycle_period' must be a positive number", HEART, path)
+            self.note_period(float(period), HEART)
+            self.add(eid, "closed_loop_heart_pulmonary", [node(HEART_IN, HEART), node(HEART, HEART_OUT), "ground"],
+                     period=_fmt(period, "s"), **hp)
+            q_in[HEART], q_out[HEART] = f"{eid}.Q_in", f"{eid}.Q_out"
+            for st in ("V_RA", "V_RV", "V_LA", "V_LV"):
+                start(eid, st, ic(f"{st}:{HEART}"), V, store=True)
+            for st in ("Q_RA", "Q_RV", "Q_LA", "Q_LV"):
+                start(eid, st, ic(f"{st}:{HEART}"), Q)
+            start(eid, "V_pul", float(prm["Cp"]) * ic(f"P_pul:{HEART}"), V)
+            start(eid, "V_ao", float(prm["Cpa"]) * ic(f"pressure:{HEART}:{HEART_OUT}"), V, store=True)
 
         # boundary conditions
         flow_col = {}
+        self.closed = not any(b.get("bc_type") != "ClosedLoopRCR" for b in bcs.values())
         for name, b in bcs.items():
             typ = b.get("bc_type")
             self.types.add(typ)
             vals = b.get("bc_values")
             if not isinstance(vals, dict):
                 raise _err(f"boundary condition '{name}': missing 'bc_values'", name, path)
+            eid = self.id_of(name)
+            if typ == "ClosedLoopRCR":
+                n_in, n_out = two_port("boundary condition", name)
+                C = self.value(name, vals, "C")
+                self.add(eid, "closed_loop_rcr", [n_in, n_out, "ground"], Rp=_fmt(self.value(name, vals, "Rp"), self.uR),
+                         C=_fmt(C, self.uC), Rd=_fmt(self.value(name, vals, "Rd"), self.uR))
+                q_in[name], q_out[name] = f"{eid}.Q_in", f"{eid}.Q_out"
+                start(eid, "V", float(C) * ic(f"P_c:{name}"), V, store=True)
+                continue
             ins, outs = inlet.get(name, []), outlet.get(name, [])
             if len(ins) + len(outs) != 1:
                 raise _err(f"boundary condition '{name}': connected to {len(ins) + len(outs)} blocks, needs 1",
                            name, path)
             nd = node(name, outs[0]) if outs else node(ins[0], name)
-            eid = self.id_of(name)
-            P = self.u["P"]
             if typ == "FLOW":
-                q, _ = self.series(name, vals, "Q", "mL/s", steady)
+                q, _ = self.series(name, vals, "Q", Q, steady)
                 self.add(eid, "flow_source", ["ground", nd] if outs else [nd, "ground"], value=q)
                 flow_col[name] = f"Q({eid})"
             elif typ == "PRESSURE":
@@ -292,9 +422,10 @@ class _Importer:
                 self.add(eid, "resistance_bc", [nd, "ground"], R=_fmt(self.value(name, vals, "R"), self.uR), Pd=pd)
             elif typ == "RCR":
                 pd, _ = self.series(name, vals, "Pd", P, steady) if "Pd" in vals else (_fmt(0.0, P), 0.0)
+                C = self.value(name, vals, "C")
                 self.add(eid, "rcr_bc", [nd, "ground"], Rp=_fmt(self.value(name, vals, "Rp"), self.uR),
-                         C=_fmt(self.value(name, vals, "C"), self.uC), Rd=_fmt(self.value(name, vals, "Rd"), self.uR),
-                         Pd=pd)
+                         C=_fmt(C, self.uC), Rd=_fmt(self.value(name, vals, "Rd"), self.uR), Pd=pd)
+                start(eid, "V", float(C) * ic(f"P_c:{name}"), V)
             elif typ == "CORONARY":
                 pim, _ = self.series(name, vals, "Pim", P, steady)
                 self.add(eid, "coronary_bc", [nd, "ground"],
@@ -305,12 +436,16 @@ class _Importer:
                 raise _err(f"boundary condition '{name}': unknown or unsupported bc_type {typ!r} "
                            f"(supported: {', '.join(SUPPORTED_BC)})", name, path)
 
-        # cardiac period: from the time series, else simulation_parameters, else 1 s (Solver.cpp)
+        # cardiac period: from the time series or the heart, else simulation_parameters, else 1 s
         sp = sim.get("cardiac_period")
         if sp is not None and self.period is not None and float(sp) != self.period:
             raise _err(f"simulation_parameters: cardiac_period {sp!r} s differs from the period "
-                       f"{self.period!r} s of block '{self.period_block}'s time series", self.period_block, path)
+                       f"{self.period!r} s of block '{self.period_block}'", self.period_block, path)
         period = self.period if self.period is not None else (float(sp) if sp is not None else 1.0)
+        for eid, act in self.chamber_elements:  # activation functions use the model's period
+            for e in self.elements:
+                if e["id"] == eid:
+                    e["period"] = _fmt(period, "s")
 
         # their output names -> our columns
         cols = {}
@@ -331,6 +466,11 @@ class _Importer:
                 fc = None
             if fc is not None:
                 cols[f"flow:{a}:{b}"] = fc
+        for name in chambers:
+            cols[f"Vc:{name}"] = f"V({self.ids[name]})"  # a volume store
+        for name, b in bcs.items():
+            if b.get("bc_type") in ("RCR", "ClosedLoopRCR"):
+                cols[f"P_c:{name}"] = f"{self.ids[name]}.P_c"
         for v in vessels:
             name = v["vessel_name"]
             cols[f"{name}:flow_in"] = q_in[name]
@@ -339,7 +479,49 @@ class _Importer:
             cols[f"{name}:pressure_out"] = f"P({node(name, outlet[name][0])})"
         self.columns = cols
         self.period_value = period
+        self.law_node = node(HEART_IN, HEART) if heart is not None else (
+            self.elements[0]["nodes"][0] if self.elements else None)
         return [v["vessel_name"] for v in vessels]
+
+    def activation(self, name, af):
+        """Their activation_function mapping -> the chamber's option and parameters."""
+        from hemocircuit.components.svzerod.activation import ACT_PARAMS, KINDS, USED
+
+        if not isinstance(af, dict) or not isinstance(af.get("type"), str):
+            raise _err(f"chamber '{name}': needs 'activation_function' with a 'type' ({', '.join(KINDS)})",
+                       name, self.path)
+        kind = af["type"]
+        if kind not in KINDS:
+            raise _err(f"chamber '{name}': activation function {kind!r} is not supported "
+                       f"(supported: {', '.join(KINDS)})", name, self.path)
+        unknown = sorted(k for k in af if k != "type" and not k.startswith("_") and k not in USED[kind])
+        if unknown:
+            raise _err(f"chamber '{name}': unknown parameter(s) {unknown} for activation {kind} "
+                       f"(it takes {', '.join(USED[kind])})", name, self.path)
+        units = dict(ACT_PARAMS)
+        out = {"activation": kind}
+        for k in USED[kind]:
+            v = self.value(name, af, k)
+            out[k] = _fmt(v, "s") if units[k] == "s" else float(v)
+        return out
+
+    def heart_values(self, prm):
+        """Their ClosedLoopHeartAndPulmonary parameters with units of this unit system."""
+        from hemocircuit.components.svzerod.closed_loop_heart_pulmonary import _P
+
+        P, V = self.u["P"], self.u["V"]
+        ours = {"mmHg*s/mL": self.uR, "mmHg*s**2/mL": self.uL, "mL/mmHg": self.uC, "mmHg/mL": self.uE,
+                "mmHg": P, "mL": V, "1/mL": f"1/({V})"}
+        out = {}
+        for k, (unit, _) in _P.items():
+            if k == "period":
+                continue
+            v = self.value(HEART, prm, k)
+            out[k] = float(v) if unit == "dimensionless" else _fmt(v, ours[unit])
+        unknown = sorted(k for k in prm if not k.startswith("_") and k not in _P)
+        if unknown:
+            raise _err(f"ClosedLoopHeartAndPulmonary: unknown parameter(s) {unknown}", HEART, self.path)
+        return out
 
 
 def _read(path_or_cfg):
@@ -372,11 +554,15 @@ def import_svzerod(path_or_cfg, units: str = "cgs", extra_cycles: int = 1) -> Sv
                        "number_of_time_pts_per_cardiac_cycle": int(sim["number_of_time_pts_per_cardiac_cycle"])},
     }
     netlist = {**header, "elements": imp.elements}
+    if imp.closed:  # the conserved blood volume is that of their initial condition
+        netlist["constraints"] = [{"node": imp.law_node, "volume": _fmt(imp.store_volume, imp.u["V"])}]
     steady = _Importer(cfg, path, units, extra_cycles)
     steady.run(steady=True)
     mean_netlist = {**header, "name": header["name"] + "_mean", "elements": steady.elements}
+    if imp.closed:
+        mean_netlist["constraints"] = netlist["constraints"]
     return SvzModel(name, netlist, imp.period_value, sim, imp.columns, sorted(imp.types), vessels,
-                    imp.u, mean_netlist)
+                    imp.u, mean_netlist, imp.initial, imp.closed)
 
 
 def write_netlist(netlist: dict, out_path: str):
