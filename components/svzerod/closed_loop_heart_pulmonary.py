@@ -16,8 +16,8 @@ Equations (SimVascular/svZeroDSolver src/model/ClosedLoopHeartPulmonary.cpp, ``u
 AA: their atrial activation (the ``wrapping_cosine`` of activation.py with Tsa, tpwave); F(t):
 their 25-mode Fourier series of ventricular elastance, NOT normalised (as in this block).
 Valves: v = 0 (closed) while P_upstream <= P_downstream and Q <= 0, else 1; their post_solve
-sets a closed valve's Q to 0.  Here a closed valve's dQ/dt is 0, so Q stays >= 0 up to
-the integrator's step at closing (the flow it carries, v Q, is 0 while closed).
+sets a closed valve's Q to 0.  Here a closed valve's dQ/dt is 0 and Q >= 0 is a hard limit
+(the integration stops where Q reaches 0 and puts it there), the same semantics.
 Note (theirs, kept): the left atrium fills with the right ventricle's outflow v_RV Q_RV; the
 pulmonary RC only sets the back-pressure P_pul.  So the blood volume is
 V_RA + V_RV + V_LA + V_LV + Cpa P_out (not Cp P_pul), which is what the stores declare.
@@ -174,6 +174,11 @@ class ClosedLoopHeartAndPulmonary(Component):
             "right ventricular outflow (pulmonary valve)", "pulmonary capacitor charge Cp P_pul",
             "left atrial volume", "left atrial outflow (mitral)", "left ventricular volume",
             "left ventricular outflow (aortic valve)", "aortic capacitor volume Cpa P_out")))
+
+    def hard_limits(self):
+        """A valve's flow never falls below 0 (their post_solve zeroes a closed valve's flow):
+        the integration stops there and holds it on 0 while the valve stays closed."""
+        return tuple((q, 0.0, None) for q in ("Q_RA", "Q_RV", "Q_LA", "Q_LV"))
 
     def storages(self):
         return (Storage("in", "ref", "V_heart"), Storage("out", "ref", "V_ao", state="V_ao"))

@@ -64,6 +64,7 @@ class SvzModel:
     mean_netlist: dict | None = None  # time series at their means (their steady_initial)
     initial: dict = field(default_factory=dict)  # {ID.STATE: quantity}: their initial_condition
     closed: bool = False  # a closed loop (no boundary condition to ground): volume conserved
+    initial_given: dict = field(default_factory=dict)  # the states their initial_condition sets
 
     @property
     def n_cycles(self):
@@ -270,8 +271,11 @@ class _Importer:
         if not isinstance(ic_cfg, dict):
             raise _err("'initial_condition' must be a mapping variable name -> value", path=path)
 
+        hits = []  # set when a value comes from their initial_condition (not a default)
+
         def ic(name, default=0.0):
             if name in ic_cfg:
+                hits.append(name)
                 return float(ic_cfg[name])
             if name.startswith(("pressure:", "P_c:")) and "pressure_all" in ic_cfg:
                 return float(ic_cfg["pressure_all"])
@@ -280,10 +284,13 @@ class _Importer:
             return default
 
         V, Q = self.u["V"], self.u["Q"]
-        self.initial, self.store_volume = {}, 0.0
+        self.initial, self.initial_given, self.store_volume = {}, {}, 0.0
 
         def start(eid, state, value, unit, store=False):
             self.initial[f"{eid}.{state}"] = _fmt(value, unit)
+            if hits:
+                self.initial_given[f"{eid}.{state}"] = _fmt(value, unit)
+                hits.clear()
             if store:
                 self.store_volume += value
 
@@ -562,7 +569,7 @@ def import_svzerod(path_or_cfg, units: str = "cgs", extra_cycles: int = 1) -> Sv
     if imp.closed:
         mean_netlist["constraints"] = netlist["constraints"]
     return SvzModel(name, netlist, imp.period_value, sim, imp.columns, sorted(imp.types), vessels,
-                    imp.u, mean_netlist, imp.initial, imp.closed)
+                    imp.u, mean_netlist, imp.initial, imp.closed, imp.initial_given)
 
 
 def write_netlist(netlist: dict, out_path: str):
