@@ -47,11 +47,19 @@ USED = {"half_cosine": ("t_active", "t_twitch"),
 POSITIVE = ("t_twitch", "contract_duration", "relax_duration", "tau_1", "tau_2", "m1", "m2", "Tsa", "tpwave")
 
 
+#: defaults: the values of their test cases (chamber_elastance_inductor, piecewise_Chamber_and_Valve
+#: ventricle, closed_loop_two_hill LV, closedLoopHeart_singleVessel atria)
+_DEFAULTS = {"t_active": 0.2, "t_twitch": 0.3, "contract_start": 0.207, "relax_start": 0.29625,
+             "contract_duration": 0.08925, "relax_duration": 0.26975, "t_shift": 0.207, "tau_1": 0.18551724137931036,
+             "tau_2": 0.31172413793103454, "m1": 1.32, "m2": 27.4, "Tsa": 0.40742, "tpwave": 8.976868}
+
+
 def act_parameters():
-    """Component parameter declarations of the activation functions (defaults 0)."""
-    out = {"period": Param("s", lower=0.0, lower_open=True, doc="cardiac period T")}
+    """Component parameter declarations of the activation functions (defaults: _DEFAULTS)."""
+    out = {"period": Param("s", default="1 s", lower=0.0, lower_open=True, doc="cardiac period T")}
     for name, unit in ACT_PARAMS:
-        out[name] = Param(unit, default=f"0 {unit}" if unit != "dimensionless" else "0",
+        d = _DEFAULTS[name]
+        out[name] = Param(unit, default=f"{d} {unit}" if unit != "dimensionless" else str(d),
                           doc=f"activation parameter (used by {', '.join(k for k in KINDS if name in USED[k])})")
     return out
 
