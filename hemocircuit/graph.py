@@ -136,6 +136,9 @@ def conservation_laws(elements, comps):
                 terms.append((eid, i, +1))
             elif plus in group and minus not in group:
                 terms.append((eid, i, -1))
+        if terms and all(sign < 0 for _, _, sign in terms):
+            # a closed loop of stores to ground: state the total as a positive sum
+            terms = [(eid, i, +1) for eid, i, _ in terms]
         if terms:
             laws.append(ConservationLaw(frozenset(group), terms))
     return laws
