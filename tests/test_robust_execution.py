@@ -33,6 +33,15 @@ outputs: {default: [Q(R2)]}
 """
 
 
+def _rc_ladder(n):
+    """RC with n more R-C segments between node a and R2 (n + 1 states)."""
+    segs = "".join(f"  - {{id: L{k}, type: resistor, nodes: [{'a' if k == 0 else f'n{k - 1}'}, n{k}], "
+                   f"R: 0.1 mmHg*s/mL}}\n  - {{id: C{k}x, type: compliance, nodes: [n{k}, ground], C: 0.1 mL/mmHg}}\n"
+                   for k in range(n))
+    return RC.replace("nodes: [a, ground],  R: 1", f"nodes: [n{n - 1}, ground],  R: 1").replace("input: Ps",
+                                                                                              segs + "input: Ps")
+
+
 def _csv(path):
     return Result.load(path)
 
@@ -268,9 +277,11 @@ def _cli(args, cwd):
 @pytest.mark.parametrize("sig, code", [(signal.SIGTERM, 143), (signal.SIGINT, 130)])
 def test_signal_stops_the_workers_and_keeps_the_finished_members(tmp_path, sig, code):
     """Two members on two workers: a 0.01 Hz sine finishes at once, a 2000 Hz one would take
-    minutes.  The signal: exit 128 + signum, no worker left, the finished member in
-    env.partial.csv (status partial), the other marked not run."""
-    (tmp_path / "rc.yaml").write_text(RC)
+    minutes (a 12-segment RC ladder: each of its steps is slow enough that the integrator's
+    step limit is not reached in the seconds before the signal).  The signal: exit 128 +
+    signum, no worker left, the finished member in env.partial.csv (status partial), the
+    other marked not run."""
+    (tmp_path / "rc.yaml").write_text(_rc_ladder(12))
     out = tmp_path / "env.csv"
     p = _cli(["envelope", "rc.yaml", "--sweep", "Ps.frequency=0.01,2000 Hz", "--set", "Ps.amplitude=10mmHg",
               "--output", "Q(R2)", "--t-end", "2000", "--dt", "1", "--workers", "2", "--out", str(out)], tmp_path)
@@ -295,7 +306,7 @@ def test_signal_stops_the_workers_and_keeps_the_finished_members(tmp_path, sig, 
     assert res.status == "partial" and res.metadata["interrupted"] == signal.Signals(sig).name
     assert res["error"][0] == "" and res["error"][1] == "not run (interrupted)"
     # the finished member: steady Q(R2) = 80 mmHg / (R1 + R2) = 26.67 mL/s
-    assert res["steady(Q(R2))"][0] == pytest.approx(80.0 / 3.0, rel=1e-9)
+    assert res["steady(Q(R2))"][0] == pytest.approx(80.0 / (2.0 + 12 * 0.1 + 1.0), rel=1e-9)  # mmHg / total R
 
 
 @pytest.mark.skipif(not os.path.isdir("/proc"), reason="needs /proc")
