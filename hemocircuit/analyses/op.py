@@ -225,16 +225,24 @@ def _sparse_step(Js, F, dt=None, skip=None):
     return dX
 
 
-def dc_guess(circuit, t=0.0, max_iter=200, tol=1e-12):
-    """States from the DC network (stores open, inductors shorted), fixed-point iterated."""
+def default_states(circuit):
+    """Every element's ``default_states`` (B, nx): where the DC guess starts."""
     B = circuit.B
     X = np.zeros((B, circuit.nx))
-    if circuit.nx == 0:
-        return X
-    plist = circuit.group_params()
-    for g, p in zip(circuit.groups, plist):
+    for g, p in zip(circuit.groups, circuit.group_params()):
         if g.S:
             X[:, g.sidx] = np.broadcast_to(g.comp.default_states(p), (B, g.E, g.S))
+    return X
+
+
+def dc_guess(circuit, t=0.0, max_iter=200, tol=1e-12, start=None):
+    """States from the DC network (stores open, inductors shorted), fixed-point iterated from
+    the elements' default states (``start``: those, if already computed)."""
+    B = circuit.B
+    if circuit.nx == 0:
+        return np.zeros((B, 0))
+    X = default_states(circuit) if start is None else np.array(start, float)
+    plist = circuit.group_params()
     # anchors of conservation laws start at the calibration pressure (or 10 mmHg)
     for spec in circuit.law_specs:
         g, i = spec["anchor"]
@@ -424,20 +432,35 @@ def _solve(circuit, t, x0):
     return circuit, X, ok, res, method, failures
 
 
-def _dc_guess_members(circuit, t):
+def _dc_guess_members(circuit, t, start=None):
     """The DC guess of every member: (X0 (B, nx), {member: (message, None)} for members whose
     DC network cannot be solved).  The nodal solve raises for a whole batch; a failing batch
     is bisected (the DC guess is cheap) so that the other members keep theirs."""
-    try:
-        return dc_guess(circuit, t), {}
-    except HemocircuitError as exc:
-        if circuit.B == 1:
-            return np.full((1, circuit.nx), np.nan), {0: (f"DC guess: {exc}", None)}
-    X0 = np.full((circuit.B, circuit.nx), np.nan)
+    B = circuit.B
+    X0 = np.full((B, circuit.nx), np.nan)
     failures = {}
+    if B > 1:  # members whose elements have no default states (e.g. an arteriole without a
+        # steady state at 60 mmHg) make the DC network singular: set them aside at once
+        start = default_states(circuit) if start is None else start
+        bad = ~np.all(np.isfinite(start), axis=1)
+        if bad.any():
+            for k in np.nonzero(bad)[0]:
+                failures[int(k)] = ("DC guess: the elements' default states are not finite (e.g. no "
+                                    "steady state of a component at its default pressure)", None)
+            good = np.nonzero(~bad)[0]
+            if len(good):
+                Xg, fg = _dc_guess_members(circuit.subset(good), t, start[good])
+                X0[good] = Xg
+                failures.update({int(good[k]): v for k, v in fg.items()})
+            return X0, failures
+    try:
+        return dc_guess(circuit, t, start=start), {}
+    except HemocircuitError as exc:
+        if B == 1:
+            return np.full((1, circuit.nx), np.nan), {0: (f"DC guess: {exc}", None)}
     half = circuit.B // 2
     for idx in (np.arange(half), np.arange(half, circuit.B)):
-        Xi, fi = _dc_guess_members(circuit.subset(idx), t)
+        Xi, fi = _dc_guess_members(circuit.subset(idx), t, None if start is None else start[idx])
         X0[idx] = Xi
         failures.update({int(idx[k]): v for k, v in fi.items()})
     return X0, failures
