@@ -224,3 +224,25 @@ def test_a_parameter_set_without_operating_point_gives_nan_not_an_error(tmp_path
     vals["art.q1"] = np.array([KUO91_PASSIVE["art.q1"], 1e-30])   # no stiffness: no equilibrium in range
     rms = problem.rms_error(vals)
     assert rms[0] < 1e-6 and np.isnan(rms[1])
+
+
+def test_nearby_sets_of_a_batch_are_warm_started_and_equal_cold_solves(monkeypatch):
+    """A constellation star (a point and 0.1 % steps of it) in one batch: the steps start from
+    the point's solution (one cold solve for the star), the results equal separate cold solves."""
+    from hemocircuit.fitting import experiments
+
+    keys = np.array([[1.0, 2.0], [1.001, 2.0], [1.0, 2.002], [1.5, 2.0], [1.5, 2.001], [1.0, 2.0005]])
+    assert list(experiments.nearby_anchors(keys)) == [0, 0, 0, 3, 3, 0]
+    problem = load_problem(ARTERIOLE, EXAMPLES / "kuo91_1_passive.yaml")
+    base = {k: np.array([v, v * 1.001, v, v]) for k, v in KUO91_PASSIVE.items()}
+    base["art.q2"][2] *= 1.001
+    base["art.q1"][3] *= 1.5                                    # a far set: its own cold solve
+    calls = []
+    solve = experiments.solve_steady
+    monkeypatch.setattr(experiments, "solve_steady", lambda c, X0=None: calls.append((c.B, X0 is None)) or solve(c, X0))
+    batch = problem.rms_error(base)
+    n = problem.datasets[0].experiment.n
+    assert calls == [(2 * n, True), (2 * n, False)]             # anchors cold, the two steps warm
+    monkeypatch.setattr(experiments, "nearby_anchors", lambda keys, rel=0.02: np.arange(len(keys)))
+    cold = problem.rms_error(base)                              # every set cold
+    assert np.all(np.isfinite(batch)) and batch == pytest.approx(cold, rel=1e-9, abs=1e-9)

@@ -136,15 +136,36 @@ def test_failing_samples_are_excluded_and_reported():
     assert r.failures[0][0].startswith("point ")
 
 
-def test_failing_operating_point_is_bisected_out():
+def test_failing_operating_point_is_reported_per_member_and_only_it_runs_the_fallbacks(monkeypatch):
+    from hemocircuit.analyses import op as op_module
+    from hemocircuit.errors import SolverError
+
+    seen = []
+    for name in ("_ptc", "_source_stepping"):
+        stage = getattr(op_module, name)
+        monkeypatch.setattr(op_module, name, lambda c, *a, _s=stage, _n=name: seen.append((_n, c.B)) or _s(c, *a))
     c = load(NETLIST)
     f1 = np.full(7, 9.34e-6)
-    f1[4] = 1e-2  # the upper bound of tabBounds: no operating point for this arteriole
+    f1[4] = 1e-2  # the upper bound of tabBounds: the DC network of this member is singular
     X, vals, errors = operating_points(_with_values(c, {"art.f1": f1}))
     assert [e is None for e in errors] == [True] * 4 + [False] + [True] * 2
-    assert "operating point" in errors[4] and np.isnan(vals["art.r"][4])
+    assert "DC guess" in errors[4] and np.isnan(vals["art.r"][4]) and np.all(np.isnan(X[4]))
     single = c.operating_point()["art.r"]
     assert np.allclose(np.delete(vals["art.r"], 4), single, rtol=1e-10)
+    assert seen == []  # Newton solved the six others; nothing else ran
+    # at 20 cmH2O, pCa_L 10 % less negative: Newton, then both fallbacks fail (the wall
+    # collapses); the fallbacks run on that member alone, the batch keeps the others
+    low = c.with_values({"Pup.value": "20 cmH2O", "Pdown.value": "20 cmH2O"})
+    batch = _with_values(low, {"art.pCa_L": -8.5 * np.array([1.0, 1.1, 0.9, 1.05])})
+    X, vals, errors = operating_points(batch)
+    assert [e is None for e in errors] == [True, True, False, True]
+    assert "worst-balanced state" in errors[2]
+    assert seen == [("_ptc", 1), ("_source_stepping", 1)]
+    for k in (0, 1, 3):
+        assert vals["art.r"][k] == pytest.approx(batch.member(k).operating_point()["art.r"], rel=1e-10)
+    # operating_point (all or nothing) names the failed member
+    with pytest.raises(SolverError, match=r"batch member 2 \(1 of 4 members failed: 2\)"):
+        op_module.operating_point(batch)
 
 
 # ---------------------------------------------------------------- spec errors ----------

@@ -93,75 +93,131 @@ def _rep(totals, k):
 
 
 def newton(circuit, X, law_totals, t=0.0, tol=1e-10, max_iter=50, ptc=False):
-    """Damped Newton (or pseudo-transient continuation) on the batch X (B, nx)."""
+    """Damped Newton (or pseudo-transient continuation) on the batch X (B, nx).
+
+    Returns (X, ok, residual): ``ok`` True if every member converged (see
+    :func:`newton_members` for the per-member flags)."""
+    X, ok, res = newton_members(circuit, X, law_totals, t, tol, max_iter, ptc)
+    return X, bool(np.all(ok)), res
+
+
+def newton_members(circuit, X, law_totals, t=0.0, tol=1e-10, max_iter=50, ptc=False):
+    """Damped Newton (or pseudo-transient continuation) on the batch X (B, nx), convergence
+    tracked per member: (X, ok (B,), scaled residual (B,)).  A member that converges is
+    frozen and a member whose residual becomes non-finite is dropped (ok False); the others go
+    on.  Once half of the members still iterating have finished, the rest continue as a
+    smaller batch (a subset circuit), so that a few slow or failing members do not cost the
+    whole batch's Jacobians (not on the sparse path, whose Jacobian plan is per circuit, nor
+    while a calibration is being solved, whose target evaluates the whole batch)."""
     X = X.copy()
     B, nx = X.shape
     if nx == 0:  # a purely resistive circuit: nothing to solve
-        return X, True, np.zeros(B)
+        return X, np.ones(B, bool), np.zeros(B)
     scales = circuit.state_scales
-    dt = np.full(B, 1e-3)
-    done = np.zeros(B, bool)
+    compact = not getattr(circuit, "sparse", False) and not any(callable(v) for v in law_totals)
+    dt_all = np.full(B, 1e-3)
+    at_floor = np.zeros(B, int)        # ptc: consecutive iterations at the smallest time step
+    ok = np.zeros(B, bool)
+    res = np.full(B, np.inf)
+    act = np.arange(B)                 # members still iterating
+    c, totals = circuit, law_totals
     for it in range(max_iter if not ptc else 400):
+        Xa, dt = X[act], dt_all[act]
+        Ba = len(act)
         try:
-            J, F = _jac(circuit, t, X, law_totals)
-        except HemocircuitError:
-            return X, False, np.full(B, np.inf)
+            J, F = _jac(c, t, Xa, totals)
+        except HemocircuitError:  # raised for the whole (sub)batch: no member can be attributed
+            return X, ok, res
         norm = np.max(np.abs(F) / scales, axis=1)
-        if not np.all(np.isfinite(F)):
-            return X, False, norm
-        if not ptc and np.all(norm < 1e-13):  # already at the residual floor: nothing to improve
-            return X, True, norm
-        if isinstance(J, list):  # sparse path
-            dX = _sparse_step(J, F, dt if ptc else None)
+        dead = ~np.all(np.isfinite(F), axis=1)
+        if isinstance(J, list):
+            dead |= np.array([not np.all(np.isfinite(j.data)) for j in J])
         else:
+            dead |= ~np.all(np.isfinite(J), axis=(1, 2))
+        floor = ~dead & (norm < 1e-13) & (not ptc)   # at the residual floor: nothing to improve
+        live = ~dead & ~floor & (at_floor[act] < 25)
+        if not live.any():
+            ok[act[floor]], res[act] = True, norm
+            return X, ok, res
+        Fs = np.where(live[:, None], F, 0.0)
+        if isinstance(J, list):  # sparse path
+            dX = _sparse_step(J, Fs, dt if ptc else None, skip=~live)
+        else:
+            M = np.where(live[:, None, None], J, np.eye(nx)[None])  # the others: dX = 0
             if ptc:
-                M = np.eye(nx)[None] / dt[:, None, None] - J
-            else:
-                M = J
-            if not np.all(np.isfinite(M)):  # extreme parameter values: the Jacobian overflowed
-                return X, False, norm
-            try:
-                dX = np.linalg.solve(M, -F[..., None])[..., 0]
-            except np.linalg.LinAlgError:
-                try:
-                    dX = np.linalg.lstsq(M[0], -F[0], rcond=None)[0][None] if B == 1 else np.zeros_like(X)
-                except np.linalg.LinAlgError:  # SVD did not converge: no step from here
-                    return X, False, norm
-        step_small = np.max(np.abs(dX) / (np.abs(X) + scales), axis=1) < tol
+                M = np.where(live[:, None, None], np.eye(nx)[None] / dt[:, None, None] - J, M)
+            dX = _dense_step(M, Fs)
+        step_small = np.max(np.abs(dX) / (np.abs(Xa) + scales), axis=1) < tol
         # line search on the scaled residual
-        lam = np.ones(B)
+        lam = np.ones(Ba)
+        nn = norm.copy()
         for _ in range(12):
-            Xn = X + lam[:, None] * dX
+            Xn = Xa + lam[:, None] * dX
             try:
-                Fn = residual(circuit, t, Xn, law_totals)
+                Fn = residual(c, t, Xn, totals)
                 nn = np.max(np.abs(Fn) / scales, axis=1)
             except HemocircuitError:  # a trial point outside the physical domain
-                nn = np.full(B, np.inf)
+                nn = np.full(Ba, np.inf)
             # near the residual floor (rounding) no decrease can be demanded: take the step
-            bad = ~np.isfinite(nn) | ((nn > norm * (1 - 1e-4 * lam)) & ~ptc & (norm > 1e-9))
+            bad = live & (~np.isfinite(nn) | ((nn > norm * (1 - 1e-4 * lam)) & ~ptc & (norm > 1e-9)))
             if not bad.any():
                 break
             lam = np.where(bad, lam * 0.5, lam)
-        X = X + lam[:, None] * dX
+        X[act] = Xa + np.where(live, lam, 0.0)[:, None] * dX
         if ptc:
             dt = np.where(np.isfinite(nn) & (nn < norm), dt * 2.0, dt * 0.5)
-            dt = np.clip(dt, 1e-6, 1e12)
-        done = step_small & ((lam == 1.0) | (norm < 1e-9))
-        if np.all(done) and (not ptc or np.all(dt > 1e6)):
-            Fn = residual(circuit, t, X, law_totals)
-            return X, True, np.max(np.abs(Fn) / scales, axis=1)
-    Fn = residual(circuit, t, X, law_totals)
-    nn = np.max(np.abs(Fn) / scales, axis=1)
-    return X, bool(np.all(nn < 1e-8)), nn
+            dt_all[act] = np.clip(dt, 1e-6, 1e12)
+            # stagnation: a member whose pseudo-time step has stayed at its floor for 25 steps
+            # moves by ~1e-6 f per step and will not reach a steady state (measured on an
+            # arteriole without equilibrium: it crept along its collapse for all 400 steps)
+            at_floor[act] = np.where(dt_all[act] <= 1e-6, at_floor[act] + 1, 0)
+            live &= at_floor[act] < 25
+        done = live & step_small & ((lam == 1.0) | (norm < 1e-9))
+        if ptc:
+            done &= dt_all[act] > 1e6
+        res[act] = np.where(live, nn, norm)
+        ok[act[done | floor]] = True
+        remaining = live & ~ok[act]   # without compaction, finished members take steps of ~0
+        if not remaining.any():
+            return X, ok, res
+        if compact and remaining.sum() <= Ba // 2:
+            act = act[remaining]
+            c, totals = circuit.subset(act), _subset_totals(law_totals, act)
+    # out of iterations: a member whose residual is at the tolerance still counts
+    ok[act] |= np.isfinite(res[act]) & (res[act] < 1e-8)
+    return X, ok, res
 
 
-def _sparse_step(Js, F, dt=None):
+def _dense_step(M, F):
+    """Solve M dX = -F for every member; if the batched LU fails (a singular member), member
+    by member: a singular member takes the least-squares step if it is alone, else none."""
+    try:
+        return np.linalg.solve(M, -F[..., None])[..., 0]
+    except np.linalg.LinAlgError:
+        pass
+    dX = np.zeros_like(F)
+    for b in range(F.shape[0]):
+        try:
+            dX[b] = np.linalg.solve(M[b], -F[b])
+        except np.linalg.LinAlgError:
+            if F.shape[0] == 1:
+                try:
+                    dX[b] = np.linalg.lstsq(M[b], -F[b], rcond=None)[0]
+                except np.linalg.LinAlgError:  # SVD did not converge (extreme values): no step
+                    pass
+    return dX
+
+
+def _sparse_step(Js, F, dt=None, skip=None):
     """Newton (dt None) or pseudo-transient (I/dt - J) steps, one sparse LU per member; a
-    singular member falls back to least squares (LSQR) if it is alone, else takes no step."""
+    singular member falls back to least squares (LSQR) if it is alone, else takes no step.
+    Members flagged in ``skip`` take no step."""
     B, nx = F.shape
     dX = np.zeros_like(F)
     eye = sp.identity(nx, format="csc") if dt is not None else None
     for b in range(B):
+        if skip is not None and skip[b]:
+            continue
         M = Js[b] if dt is None else (eye / dt[b] - Js[b])
         M = sp.csc_matrix(M)
         try:
@@ -172,16 +228,24 @@ def _sparse_step(Js, F, dt=None):
     return dX
 
 
-def dc_guess(circuit, t=0.0, max_iter=200, tol=1e-12):
-    """States from the DC network (stores open, inductors shorted), fixed-point iterated."""
+def default_states(circuit):
+    """Every element's ``default_states`` (B, nx): where the DC guess starts."""
     B = circuit.B
     X = np.zeros((B, circuit.nx))
-    if circuit.nx == 0:
-        return X
-    plist = circuit.group_params()
-    for g, p in zip(circuit.groups, plist):
+    for g, p in zip(circuit.groups, circuit.group_params()):
         if g.S:
             X[:, g.sidx] = np.broadcast_to(g.comp.default_states(p), (B, g.E, g.S))
+    return X
+
+
+def dc_guess(circuit, t=0.0, max_iter=200, tol=1e-12, start=None):
+    """States from the DC network (stores open, inductors shorted), fixed-point iterated from
+    the elements' default states (``start``: those, if already computed)."""
+    B = circuit.B
+    if circuit.nx == 0:
+        return np.zeros((B, 0))
+    X = default_states(circuit) if start is None else np.array(start, float)
+    plist = circuit.group_params()
     # anchors of conservation laws start at the calibration pressure (or 10 mmHg)
     for spec in circuit.law_specs:
         g, i = spec["anchor"]
@@ -256,39 +320,94 @@ def _calibrate(circuit, t):
 
 
 def _solve_with_fallbacks(circuit, X0, totals, t):
-    X, ok, res = newton(circuit, X0, totals, t)
-    method = "newton"
-    if not ok:
-        X, ok, res = newton(circuit, X0, totals, t, ptc=True)
-        method = "pseudo-transient"
-        if ok:
-            X, ok, res = newton(circuit, X, totals, t)
-    if not ok:
-        X, ok, res, method = _source_stepping(circuit, totals, t)
-    return X, ok, res if not ok else res
+    """(X, ok, residual) with ok True only if every member converged (calibration solves)."""
+    X, ok, res, _ = solve_members(circuit, X0, totals, t)
+    return X, bool(np.all(ok)), res
 
 
-def _source_stepping(circuit, totals, t):
-    """Ramp every source's drive parameter (Component.drive: a pressure or flow source's value)
-    from 30 % to 100 %, continuing the solution."""
-    paths = [f"{e}.{g.comp.drive.value}" for g in circuit.groups if g.comp.drive is not None for e in g.ids]
-    base = {p: circuit.parameters.values[p] for p in paths}
-    X = None
-    ok = False
-    res = np.inf
-    for lam in np.linspace(0.3, 1.0, 15):
-        c = circuit.with_values({p: base[p] * lam if circuit.B > 1 else float(base[p][0] * lam) for p in paths})
-        X0 = dc_guess(c, t) if X is None else X
-        X, ok, res = newton(c, X0, totals, t, ptc=True)
-        if not ok:
+def _subset_totals(totals, idx):
+    return [v if v is None or callable(v) or np.size(v) == 1 else np.asarray(v)[idx] for v in totals]
+
+
+def solve_members(circuit, X0, totals, t):
+    """Newton on the whole batch, then the fallbacks (pseudo-transient continuation, then
+    source stepping) on the members that did not converge only, so that a failing member
+    costs its own fallbacks, not the batch's.  Returns (X (B, nx), ok (B,), residual (B,),
+    method (B,) of 'newton' / 'pseudo-transient' / 'source-stepping' / 'failed').
+
+    A calibration being solved (a callable total evaluates the whole batch) runs the
+    fallbacks on the whole batch."""
+    B = circuit.B
+    X, ok, res = newton_members(circuit, X0, totals, t)
+    method = np.where(ok, "newton", "failed").astype(object)
+    whole = any(callable(v) for v in totals)
+    for name, stage in (("pseudo-transient", _ptc), ("source-stepping", _source_stepping)):
+        if ok.all():
             break
-    return X, ok, res, "source-stepping"
+        idx = np.arange(B) if whole else np.nonzero(~ok)[0]
+        Xs, oks, rs = stage(circuit.subset(idx) if len(idx) < B else circuit, X0[idx],
+                            totals if len(idx) == B else _subset_totals(totals, idx), t)
+        if whole and not oks.all():
+            continue
+        won = idx[oks]
+        X[won], res[won], ok[won], method[won] = Xs[oks], rs[oks], True, name
+    return X, ok, res, method
+
+
+def _ptc(circuit, X0, totals, t):
+    """Pseudo-transient continuation, then Newton from where it ended (members it solved)."""
+    X, ok, res = newton_members(circuit, X0, totals, t, ptc=True)
+    if ok.any():
+        idx = np.nonzero(ok)[0]
+        sub = circuit.subset(idx) if len(idx) < circuit.B else circuit
+        Xp, okp, rp = newton_members(sub, X[idx], totals if len(idx) == circuit.B else _subset_totals(totals, idx), t)
+        X[idx], ok[idx], res[idx] = Xp, okp, rp
+    return X, ok, res
+
+
+def _source_stepping(circuit, X0, totals, t):
+    """Ramp every source's drive parameter (Component.drive: a pressure or flow source's value)
+    from 30 % to 100 %, continuing the solution from the DC guess at 30 % (X0 is not used);
+    a member that fails at a step drops out."""
+    paths = [f"{e}.{g.comp.drive.value}" for g in circuit.groups if g.comp.drive is not None for e in g.ids]
+    B = circuit.B
+    base = {p: np.broadcast_to(np.asarray(circuit.parameters.values[p], float), (B,)) for p in paths}
+    alive = np.arange(B)
+    X = np.full((B, circuit.nx), np.nan)
+    ok = np.zeros(B, bool)
+    res = np.full(B, np.inf)
+    whole = any(callable(v) for v in totals)
+    for k, lam in enumerate(np.linspace(0.3, 1.0, 15)):
+        sub = circuit.subset(alive) if len(alive) < B else circuit
+        c = sub.with_values({p: base[p][alive] * lam if sub.B > 1 else float(base[p][alive[0]] * lam)
+                             for p in paths})
+        Xa = dc_guess(c, t) if k == 0 else X[alive]
+        Xa, oka, ra = newton_members(c, Xa, totals if len(alive) == B else _subset_totals(totals, alive), t, ptc=True)
+        X[alive], res[alive] = Xa, ra
+        if whole and not oka.all():
+            return X, ok, res
+        alive = alive[oka]
+        if len(alive) == 0:
+            return X, ok, res
+    ok[alive] = True
+    return X, ok, res
 
 
 def operating_point(circuit, t: float = 0.0, x0=None) -> OperatingPoint:
-    """Steady state of the circuit (every parameter set of a batch at once)."""
+    """Steady state of the circuit (every parameter set of a batch at once).  Raises
+    SolverError if any member has no operating point (:func:`operating_points` keeps the
+    others)."""
     started = clock()
-    op = _operating_point(circuit, t, x0)
+    cs, X, ok, res, method, failures = _solve(circuit, t, x0)
+    if not ok.all():
+        bad = np.nonzero(~ok)[0]
+        b = bad[0]
+        message, state = failures[b]
+        if circuit.B > 1:
+            shown = ", ".join(str(k) for k in bad[:10]) + (" ..." if len(bad) > 10 else "")
+            message += f" in batch member {b} ({len(bad)} of {circuit.B} members failed: {shown})"
+        raise SolverError(message, state=state, where="computing the operating point")
+    op = _result(cs, t, X, res, method)
     _check_plausible(op, circuit)
     return stamp(op, "op", circuit, {"t": t, "x0": None if x0 is None else "given", "tol": 1e-10}, started)
 
@@ -306,64 +425,130 @@ def _check_plausible(op, circuit):
     plausibility.add_warnings(op, findings)
 
 
-def _operating_point(circuit, t, x0):
+def _solve(circuit, t, x0):
+    """Every member's operating point: (steady circuit, X (B, nx), ok (B,), residual (B,),
+    method (B,), failures {member: (message, state dict or None)})."""
     totals = [np.atleast_1d(v) if v is not None else None for v in conserved_totals(circuit, t)]
     circuit = circuit.steady_variant()
-    X0 = dc_guess(circuit, t) if x0 is None else np.atleast_2d(np.asarray(x0, float)).copy()
-    X, ok, res = newton(circuit, X0, totals, t)
-    method = "newton"
-    if not ok:
-        X2, ok, res = _solve_with_fallbacks(circuit, X0, totals, t)
-        X, method = X2, "fallback"
-    if not ok:
-        try:
-            F = residual(circuit, t, X, totals)
-        except HemocircuitError as exc:  # the last iterate left the model's domain
-            raise SolverError(f"no operating point found (Newton, pseudo-transient continuation and source "
-                              f"stepping failed; the last iterate is outside the model's domain: {exc})",
-                              where="computing the operating point") from None
-        scaled = np.abs(F) / circuit.state_scales
-        b, j = np.unravel_index(np.nanargmax(np.where(np.isfinite(scaled), scaled, np.inf)), scaled.shape)
-        raise SolverError(f"no operating point found (Newton, pseudo-transient continuation and source "
-                          f"stepping failed); worst-balanced state '{circuit.state_names[j]}' with "
-                          f"d/dt = {F[b, j]:.3g} {circuit.state_units[j]}/s"
-                          + (f" in batch member {b}" if circuit.B > 1 else ""),
-                          state=circuit.state_dict(X[b]), where="computing the operating point")
+    B = circuit.B
+    failures = {}
+    if x0 is None:
+        X0, failures = _dc_guess_members(circuit, t)
+    else:
+        X0 = np.atleast_2d(np.asarray(x0, float)).copy()
+    X = np.full((B, circuit.nx), np.nan)
+    ok, res = np.zeros(B, bool), np.full(B, np.inf)
+    method = np.full(B, "failed", dtype=object)
+    idx = np.array([k for k in range(B) if k not in failures], dtype=int)
+    if len(idx):
+        sub = circuit.subset(idx) if len(idx) < B else circuit
+        X[idx], ok[idx], res[idx], method[idx] = solve_members(sub, X0[idx], _subset_totals(totals, idx), t)
+    bad = np.array([k for k in np.nonzero(~ok)[0] if k not in failures], dtype=int)
+    if len(bad):
+        failures.update(_explain(circuit, t, X, totals, bad))
+    return circuit, X, ok, res, method, failures
+
+
+def _dc_guess_members(circuit, t, start=None):
+    """The DC guess of every member: (X0 (B, nx), {member: (message, None)} for members whose
+    DC network cannot be solved).  The nodal solve raises for a whole batch; a failing batch
+    is bisected (the DC guess is cheap) so that the other members keep theirs."""
+    B = circuit.B
+    X0 = np.full((B, circuit.nx), np.nan)
+    failures = {}
+    if B > 1:  # members whose elements have no default states (e.g. an arteriole without a
+        # steady state at 60 mmHg) make the DC network singular: set them aside at once
+        start = default_states(circuit) if start is None else start
+        bad = ~np.all(np.isfinite(start), axis=1)
+        if bad.any():
+            for k in np.nonzero(bad)[0]:
+                failures[int(k)] = ("DC guess: the elements' default states are not finite (e.g. no "
+                                    "steady state of a component at its default pressure)", None)
+            good = np.nonzero(~bad)[0]
+            if len(good):
+                Xg, fg = _dc_guess_members(circuit.subset(good), t, start[good])
+                X0[good] = Xg
+                failures.update({int(good[k]): v for k, v in fg.items()})
+            return X0, failures
+    try:
+        return dc_guess(circuit, t, start=start), {}
+    except HemocircuitError as exc:
+        if B == 1:
+            return np.full((1, circuit.nx), np.nan), {0: (f"DC guess: {exc}", None)}
+    half = circuit.B // 2
+    for idx in (np.arange(half), np.arange(half, circuit.B)):
+        Xi, fi = _dc_guess_members(circuit.subset(idx), t, None if start is None else start[idx])
+        X0[idx] = Xi
+        failures.update({int(idx[k]): v for k, v in fi.items()})
+    return X0, failures
+
+
+def _explain(circuit, t, X, totals, bad):
+    """{member: (message naming its worst-balanced state, state dict)} for members in ``bad``."""
+    out = {}
+    head = "no operating point found (Newton, pseudo-transient continuation and source stepping failed)"
+    sub = circuit.subset(bad) if len(bad) < circuit.B else circuit
+    try:
+        F = residual(sub, t, X[bad], _subset_totals(totals, bad))
+    except HemocircuitError:
+        return {int(b): (head, None) for b in bad}
+    for i, b in enumerate(bad):
+        scaled = np.abs(F[i]) / circuit.state_scales
+        if not np.any(np.isfinite(X[b])):
+            out[int(b)] = (head, None)
+            continue
+        j = int(np.nanargmax(np.where(np.isfinite(scaled), scaled, np.inf)))
+        out[int(b)] = (f"{head}; worst-balanced state '{circuit.state_names[j]}' with "
+                       f"d/dt = {F[i, j]:.3g} {circuit.state_units[j]}/s", circuit.state_dict(X[b]))
+    return out
+
+
+def _result(circuit, t, X, res, method):
+    """The OperatingPoint of solved states X (all members converged)."""
     # outputs from the steady variant (collapsed stores report V = 0), laws shared
     single = circuit.B == 1
     if single:
         vals = {k: float(v[0]) for k, v in circuit.outputs(t, X).items()}
     else:  # one row per member: outputs() evaluates the whole batch at once
         vals = {k: np.array(v, dtype=float) for k, v in circuit.outputs(t, X).items()}
-    return OperatingPoint(circuit, X[0] if single else X, vals, circuit.column_units(), method,
+    label = "newton" if all(m == "newton" for m in method) else "fallback"
+    return OperatingPoint(circuit, X[0] if single else X, vals, circuit.column_units(), label,
                           float(np.max(res)))
 
 
-def operating_points(circuit):
+def operating_points(circuit, t: float = 0.0, x0=None):
     """Operating points of every member of a batch circuit, failures kept per member.
 
-    Returns (X (B, nx) with NaN rows for failed members, {column: (B,) array}, [error or None]).
-    The whole batch is solved together; if that fails, member by member, so one bad
-    parameter set does not lose the others.
+    Returns (X (B, nx) with NaN rows for failed members, {column: (B,) array, NaN for failed
+    members}, [error message or None] per member).  Newton runs on the whole batch and the
+    fallbacks on the members it did not solve (:func:`solve_members`); a member whose DC
+    network cannot be solved is found by bisecting the DC guess.  If the batch still raises as
+    a whole (an error that names no member), it is bisected.
     """
     B = circuit.B
     try:
-        op = operating_point(circuit)
-        X = np.atleast_2d(op.x)
-        vals = {k: np.broadcast_to(np.atleast_1d(v), (B,)).copy() for k, v in op.values.items()}
-        return X, vals, [None] * B
-    except HemocircuitError:
-        pass
-    X = np.full((B, circuit.nx), np.nan)
-    vals, errors = {}, []
-    for k in range(B):
-        try:
-            op = operating_point(circuit.subset([k]))
-        except HemocircuitError as exc:
-            errors.append(f"operating point: {exc}")
-            continue
-        errors.append(None)
-        X[k] = np.atleast_2d(op.x)[0]
-        for key, v in op.values.items():
-            vals.setdefault(key, np.full(B, np.nan))[k] = float(np.atleast_1d(v)[0])
+        cs, X, ok, res, method, failures = _solve(circuit, t, x0)
+    except HemocircuitError as exc:
+        if B == 1:
+            return np.full((1, circuit.nx), np.nan), {}, [f"operating point: {exc}"]
+        X = np.full((B, circuit.nx), np.nan)
+        vals, errors = {}, []
+        for idx in (np.arange(B // 2), np.arange(B // 2, B)):
+            Xi, v, e = operating_points(circuit.subset(idx), t, None if x0 is None else np.atleast_2d(x0)[idx])
+            X[idx] = Xi
+            for k, a in v.items():
+                vals.setdefault(k, np.full(B, np.nan))[idx] = a
+            errors += e
+        return X, vals, errors
+    errors = [None if ok[b] else f"operating point: {failures[b][0]}" for b in range(B)]
+    X[~ok] = np.nan
+    vals = {}
+    idx = np.nonzero(ok)[0]
+    if len(idx):
+        sub = cs.subset(idx) if len(idx) < B else cs
+        out = sub.outputs(t, X[idx])
+        for k, v in out.items():
+            col = np.full(B, np.nan)
+            col[idx] = np.broadcast_to(np.asarray(v, float), (len(idx),))
+            vals[k] = col
     return X, vals, errors

@@ -44,22 +44,24 @@ def observed_unit(circuit, observe):
 def solve_steady(circuit, X0=None):
     """Operating points of every member of a batch circuit: (X (B, nx), {column: (B,)}, ok (B,)).
 
-    Warm start from X0 (B, nx) if given; if that fails, a cold start (members that fail even
-    then are NaN, not fatal)."""
-    from ..analyses.op import operating_point, operating_points
+    Warm start from X0 (B, nx) if given, else the DC guess; Newton on the whole batch, the
+    fallbacks only on the members it did not solve (members that fail are NaN, not fatal).
+    A warm start that fails for some members is retried cold for those members."""
+    from ..analyses.op import operating_points
 
     B = circuit.B
-    if X0 is not None:
-        try:
-            op = operating_point(circuit, x0=X0)
-            vals = {k: np.broadcast_to(np.atleast_1d(v), (B,)).astype(float) for k, v in op.values.items()}
-            return np.atleast_2d(op.x), vals, np.ones(B, bool)
-        except HemocircuitError:
-            pass
-    X, vals, errors = operating_points(circuit)
+    X, vals, errors = operating_points(circuit, x0=X0)
+    ok = np.array([e is None for e in errors], dtype=bool)
+    if X0 is not None and not ok.all():
+        idx = np.nonzero(~ok)[0]
+        Xc, vc, ec = operating_points(circuit.subset(idx) if len(idx) < B else circuit)
+        X[idx] = Xc
+        for k, v in vc.items():
+            vals.setdefault(k, np.full(B, np.nan))[idx] = v
+        ok[idx] = [e is None for e in ec]
     # every member failed: no column was filled
     vals = {k: vals.get(k, np.full(B, np.nan)) for k in circuit.column_units()}
-    return X, vals, np.array([e is None for e in errors], dtype=bool)
+    return X, vals, ok
 
 
 class WarmStarts:
@@ -99,6 +101,28 @@ class WarmStarts:
         del self.items[self.size:]
 
 
+def nearby_anchors(keys, rel=0.02, window=32):
+    """Within one batch of parameter sets (keys (B, p)): ``anchor[i]`` = the index of an
+    earlier set whose parameters all differ from set i's by less than ``rel`` (relative), or i
+    itself (an anchor, solved cold).  Greedy in batch order, comparing with the ``window``
+    most recent anchors: the batches this serves keep related sets together (a sensitivity
+    star: a point and its one-at-a-time steps; a Jacobian: a point and its perturbations)."""
+    B = len(keys)
+    anchor = np.arange(B)
+    recent = []
+    for i in range(B):
+        if recent:
+            ref = keys[recent]
+            d = np.max(np.abs(keys[i] - ref) / np.maximum(np.abs(ref), 1e-300), axis=1, initial=0.0)
+            j = int(np.argmin(d))
+            if d[j] < rel:
+                anchor[i] = recent[j]
+                continue
+        recent.append(i)
+        del recent[:-window]
+    return anchor
+
+
 class SteadyExperiment:
     """Operating points at the data rows' inputs (``op``; ``dc`` is a one-input sweep)."""
 
@@ -118,13 +142,48 @@ class SteadyExperiment:
         c = _with_values(self.base, mapping, B * n)
         keys = WarmStarts.keys(assign, epochs, B)
         warm = self._warm.lookup(keys)
-        X, vals, ok = solve_steady(c, None if warm is None else np.concatenate(warm, axis=0))
+        if warm is not None:
+            X, vals, ok = solve_steady(c, np.concatenate(warm, axis=0))
+        else:
+            X, vals, ok = self._solve_anchored(c, keys, B)
         y = _observed(c, self.observe, vals, self.spec_file, self.key).reshape(B, n).copy()
         good = ok.reshape(B, n).all(axis=1) & np.all(np.isfinite(y), axis=1)
         y[~good] = np.nan
         if B == 1 and good[0]:
             self._warm.store(keys[0], X.reshape(n, -1))
         return y
+
+    def _solve_anchored(self, c, keys, B):
+        """Sets within ``WarmStarts.rel`` of an earlier set of the batch (nearby_anchors) start
+        from that set's solution; the others (and those whose anchor failed) start cold.
+        Measured on the arteriole: a warm-started operating point costs 1/15 of a cold one
+        (whose DC guess solves the steady state on a radius grid)."""
+        n = self.n
+        anchor = nearby_anchors(keys, self._warm.rel)
+        rows = lambda sets: (np.asarray(sets)[:, None] * n + np.arange(n)).ravel()  # noqa: E731
+        cold = np.nonzero(anchor == np.arange(B))[0]
+        if len(cold) == B:
+            return solve_steady(c)
+        X = np.full((B * n, c.nx), np.nan)
+        ok = np.zeros(B * n, bool)
+        vals = {}
+
+        def solve(sets, X0=None):
+            r = rows(sets)
+            Xs, vs, oks = solve_steady(c.subset(r), X0)
+            X[r], ok[r] = Xs, oks
+            for k, v in vs.items():
+                vals.setdefault(k, np.full(B * n, np.nan))[r] = v
+
+        solve(cold)
+        set_ok = ok.reshape(B, n).all(axis=1)
+        warm = np.nonzero((anchor != np.arange(B)) & set_ok[anchor])[0]
+        if len(warm):
+            solve(warm, X[rows(anchor[warm])])
+        orphans = np.nonzero((anchor != np.arange(B)) & ~set_ok[anchor])[0]
+        if len(orphans):
+            solve(orphans)
+        return X, {k: vals.get(k, np.full(B * n, np.nan)) for k in c.column_units()}, ok
 
 
 class TransientExperiment:

@@ -149,31 +149,13 @@ def _split_settings(circuit, at):
 
 def operating_points(c):
     """Operating points of every member of batch circuit ``c``: (X (B, nx) with NaN rows,
-    {column: (B,)}, [error or None] * B).
+    {column: (B,)}, [error or None] * B) -- :func:`hemocircuit.analyses.op.operating_points`
+    (Newton on the whole batch, the fallbacks only on the members it did not solve)."""
+    from ..analyses.op import operating_points as op_points
 
-    The whole batch is solved at once; if that fails, it is bisected, so that one bad
-    parameter set costs O(log B) batched solves instead of B single ones."""
-    from ..analyses.op import operating_point
-
-    B = c.B
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)
-            op = operating_point(c)
-        vals = {k: np.broadcast_to(np.asarray(v, dtype=float), (B,)).copy() for k, v in op.values.items()}
-        return np.atleast_2d(op.x).copy(), vals, [None] * B
-    except HemocircuitError as exc:
-        if B == 1:
-            return np.full((1, c.nx), np.nan), {}, [f"operating point: {exc}"]
-    X = np.full((B, c.nx), np.nan)
-    vals, errors = {}, []
-    for idx in (np.arange(B // 2), np.arange(B // 2, B)):
-        Xi, v, e = operating_points(c.subset(idx))
-        X[idx] = Xi
-        for k, a in v.items():
-            vals.setdefault(k, np.full(B, np.nan))[idx] = a
-        errors += e
-    return X, vals, errors
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return op_points(c)
 
 
 class OpObjective(CircuitObjective):
