@@ -113,7 +113,8 @@ def test_envelope_failing_member_and_the_other_one_correct():
     c = hc.load(str(PAYNE))
     op = c.operating_point()
     r = envelope(c, ("art.l0", [BAD_L0, GOOD_L0]), outputs=["Q(Rla)"], t_end=2.0, dt=0.1, scheduler="serial")
-    assert "non-finite" in r["error"][0] and r["error"][1] == ""
+    # the arteriole has no finite state there ("non-finite" / "not finite", by where op finds it)
+    assert "finite" in r["error"][0] and r["error"][1] == ""
     assert r.status == "partial" and len(r.metadata["failed"]) == 1
     assert r["steady(Q(Rla))"][1] == pytest.approx(op["Q(Rla)"], rel=1e-8)
     assert np.isnan(r["steady(Q(Rla))"][0])
