@@ -583,6 +583,7 @@ def bench_freq(a, hc_kw):
     with Clock() as ck_hc:
         rows = fr(c, freqs, outputs=["Q(Rla)", "Q(Rsv)"], grid=[("art.tau_Ca", [f"{v:g} s" for v in taus])],
                   workers=a.workers, **kw)
+    rows = _freq_rows(rows, ["Q(Rla)", "Q(Rsv)"])
     t_hc = ck_hc.wall
     log(f"  hemocircuit frequency_response: {t_hc:.1f} s (cpu incl. workers {ck_hc.cpu:.1f} s)")
     rr, t_compile = rr_load(os.path.join(a.peers, "brain_artcomp.ant"))
@@ -622,6 +623,21 @@ def bench_freq(a, hc_kw):
                roadrunner_unsettled=sum(1 for v in rr_res.values() if not v[0]["settled"]), rows_hc_rr=table)
     log(f"  amplitude max rel diff {worst_amp:.3g} at {worst_at}, phase max diff {worst_ph:.3g} deg")
     return res
+
+
+def _freq_rows(res, outs):
+    """A FreqResult (one row per grid member x frequency) as one dict per (member, frequency,
+    output), the layout the comparison below reads."""
+    if isinstance(res, list):
+        return res
+    rows = []
+    for i in range(res.n_rows):
+        for o in outs:
+            rows.append({"art.tau_Ca": res["art.tau_Ca"][i], "frequency [Hz]": res["frequency"][i], "output": o,
+                         "rel_amplitude": res[f"rel_amplitude({o})"][i],
+                         "phase [deg]": res[f"phase({o}/{res.input})"][i], "periods": res["periods"][i],
+                         "settled": bool(res["settled"][i]), "error": res["error"][i] if "error" in res else ""})
+    return rows
 
 
 # ---- HOOK: compiled evaluator --------------------------------------------------------------

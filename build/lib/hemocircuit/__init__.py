@@ -1,0 +1,30 @@
+"""hemocircuit: lumped-parameter (0D) hemodynamic circuits.
+
+    import hemocircuit as hc
+    c = hc.load("netlists/payne06_passive.yaml")
+    op = c.operating_point()          # steady state
+    sw = c.dc_sweep("Pa.value", "20:200:5 mmHg")
+    tr = c.simulate(t_end=100)        # transient
+    tr.save("run.csv"); hc.Result.load("run.csv")   # results: columns with units, provenance
+
+Circuit units: pressure mmHg, flow mL/s, volume mL, time s (see hemocircuit.units).
+"""
+from .errors import HemocircuitError, NetlistError, SolverError, TopologyError  # noqa: F401
+
+__version__ = "0.1.0"
+
+_LAZY = {"Circuit", "assemble", "load"}
+
+
+def __getattr__(name):
+    """The circuit API is imported on first use, so that ``hemocircuit --help`` and other light
+    commands do not pay for numpy, scipy, pint and numba (PEP 562)."""
+    if name in _LAZY:
+        from . import circuit  # (it attaches the analysis methods to Circuit)
+
+        return getattr(circuit, name)
+    if name == "Result":  # every analysis's result; Result.load(path) reads a result file
+        from .results import Result
+
+        return Result
+    raise AttributeError(f"module 'hemocircuit' has no attribute {name!r}")

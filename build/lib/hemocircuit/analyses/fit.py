@@ -1,0 +1,58 @@
+"""Parameter estimation: ``hemocircuit fit NETLIST SPEC.yaml`` (docs/fitting.md).
+
+Weighted least squares of the spec's datasets over the spec's parameters (multi-start
+trust-region reflective least squares, batched finite-difference Jacobians), then a report:
+values with units and standard errors, correlations, rms per dataset, bound flags, the fit
+plotted over the data and a fitted netlist fragment (hemocircuit.fitting.report).
+"""
+from __future__ import annotations
+
+import os
+
+
+def default_out(spec_path):
+    """<spec folder>/output/<spec name>/ : where a later stage's ``start_from`` finds it."""
+    spec_path = os.path.abspath(str(spec_path))
+    return os.path.join(os.path.dirname(spec_path), "output", os.path.splitext(os.path.basename(spec_path))[0])
+
+
+def fit(netlist, spec, out=None, sets=None, protocol=None, settings=None, workers=None, plot=True,
+        progress=False):
+    """Fit ``spec`` (path of a fit spec) on ``netlist``; write the report into ``out`` (default
+    :func:`default_out`).  ``settings`` override the spec's settings (starts, seed, max_nfev,
+    ...).  Returns (problem, result dict, {kind: path written})."""
+    from ..fitting import load_problem
+    from ..fitting.optimizer import fit_problem
+    from ..fitting.report import write
+
+    problem = load_problem(netlist, spec, sets, protocol)
+    result = fit_problem(problem, settings, workers=workers, progress=progress)
+    paths = write(problem, result, out or default_out(spec), plot_png=plot)
+    return problem, result, paths
+
+
+def cmd_fit(args):
+    from ..cli import _sets
+    from ..fitting.report import text
+
+    settings = {k: v for k, v in (("starts", args.starts), ("seed", args.seed), ("max_nfev", args.max_nfev))
+                if v is not None}
+    problem, result, paths = fit(args.netlist, args.spec, args.out, _sets(args.set), args.protocol, settings,
+                                 args.workers, plot=not args.no_plot, progress=args.progress)
+    print(text(problem, result))
+    for kind, path in paths.items():
+        print(f"wrote {kind}: {path}")
+
+
+def register_cli(sub, common):
+    sp = common(sub.add_parser("fit", help="estimate parameters from data (fit spec YAML; docs/fitting.md)"),
+                outputs=False, grid=False)
+    sp.add_argument("spec", help="fit spec YAML: parameters with bounds, datasets, settings")
+    sp.add_argument("--out", help="output folder (default: <spec folder>/output/<spec name>/)")
+    sp.add_argument("--starts", type=int, help="number of Latin-hypercube starts (overrides the spec)")
+    sp.add_argument("--seed", type=int, help="seed of the Latin hypercube (overrides the spec)")
+    sp.add_argument("--max-nfev", type=int, help="evaluations per start (overrides the spec)")
+    sp.add_argument("--workers", type=int, help="parallel processes for the starts (default: all cores)")
+    sp.add_argument("--no-plot", action="store_true", help="do not draw fit.png")
+    sp.add_argument("--progress", action="store_true", help="show a progress bar over the starts")
+    sp.set_defaults(func=cmd_fit)

@@ -1,0 +1,245 @@
+"""Periodic orbits by shooting: limit cycles (autonomous) and periodic steady states (forced).
+
+Autonomous (e.g. the vasomotion limit cycle): unknowns (x0, T); equations
+    phi_T(x0) - x0 = 0,   (x0 - x_s) . f(x_s) = 0   (phase: x0 on the section through x_s),
+plus one row per conservation law (the conserved total is kept).  Newton with the monodromy
+matrix M = d phi_T / d x0 from finite differences; the nx+1 perturbed trajectories are
+integrated together as ONE vectorised batch.  Floquet multipliers are the eigenvalues of M:
+one is 1 (the flow direction), one per conservation law is 1; the orbit is orbitally stable
+when every other multiplier lies inside the unit circle.
+Forced (a source with a sine term of frequency f): T = 1/f is fixed and phi_T(x0) = x0 gives
+the periodic steady state directly instead of simulating many cycles.
+The initial guess comes from a settling run (as in the envelope analysis).
+Scaled coordinates (x / state_scale) keep states of very different size comparable.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..batch_integrator import integrate
+from ..derivatives import dense_jacobian, flow_steps
+from ..errors import HemocircuitError, SolverError
+from ..provenance import clock, stamp
+from ..results import Result
+
+
+class PeriodicOrbit(Result):
+    """One period of the orbit as a :class:`hemocircuit.results.Result` indexed by ``time`` [s]
+    (401 points, both ends included), plus ``x0``, ``period``, ``x`` (states), ``multipliers``,
+    ``converged``, ``iterations``, ``residual``, ``forced`` (measures also in ``metadata``)."""
+
+    def __init__(self, x0, period, t, x, multipliers, converged, iterations, residual, forced, columns, units):
+        super().__init__({"time": t, **columns}, {"time": "s", **units}, index=["time"])
+        self.x0, self.period, self.x = x0, period, x
+        self.multipliers, self.converged, self.iterations = multipliers, converged, iterations
+        self.residual, self.forced = residual, forced
+        self.n_laws = 0  # conserved quantities (each gives a trivial multiplier 1)
+
+    @property
+    def t(self):
+        return self.data["time"]
+
+    def time_average(self, name):
+        """Mean of a column over the period (trapezoidal rule in time; the end point, equal to
+        the start, is not counted twice)."""
+        y, t = self[name], self.t
+        return float(np.sum(0.5 * (y[1:] + y[:-1]) * np.diff(t)) / (t[-1] - t[0]))
+
+    @property
+    def nontrivial_multipliers(self):
+        """Multipliers without the trivial ones (flow direction, conservation laws), by |mu|."""
+        mu = np.array(sorted(self.multipliers, key=lambda z: -abs(z)))
+        n_triv = 0 if self.forced else 1
+        n_triv += self.n_laws
+        # drop the n_triv multipliers closest to 1
+        idx = np.argsort(np.abs(mu - 1.0))[:n_triv]
+        return np.delete(mu, idx)
+
+    @property
+    def stable(self):
+        nt = self.nontrivial_multipliers
+        return bool(np.all(np.abs(nt) < 1.0))
+
+
+def _flow(circuit, X0, T, t0=0.0, rtol=1e-9, n_out=2):
+    """phi over time T for a batch of starting states X0 (n, nx) of the SAME circuit."""
+    n = X0.shape[0]
+    bc = circuit if n == 1 else circuit.batch(n)
+    grid = t0 + np.linspace(0.0, 1.0, n_out)[None, :] * np.atleast_1d(T)[:, None] * np.ones((n, 1))
+    r = integrate(bc, X0, grid, rtol=rtol, atol=rtol)
+    if not np.all(r.ok):
+        raise SolverError(f"shooting integration failed: {[m for m in r.message if m][:1]}")
+    return r.x[:, -1, :], r
+
+
+def _laws(circuit):
+    """Gradient rows of the conserved volumes (linear in the store volumes)."""
+    rows = []
+    x = np.zeros((1, circuit.nx))
+    for k, _ in enumerate(circuit.law_specs):
+        g = np.zeros(circuit.nx)
+        for j in range(circuit.nx):
+            e = np.zeros((1, circuit.nx))
+            e[0, j] = 1.0
+            g[j] = circuit.law_volumes(x + e)[k][0] - circuit.law_volumes(x)[k][0]
+        rows.append(g)
+    return np.array(rows).reshape(-1, circuit.nx)
+
+
+def shoot(circuit, x_guess, T_guess, forced=False, rtol=1e-9, tol=1e-8, max_iter=25, rel_step=1e-6, progress=None):
+    """Newton shooting from (x_guess, T_guess).  Returns a PeriodicOrbit.  ``progress``: a bar
+    of the Newton iterations (with the residual) on stderr (:mod:`hemocircuit.progress`)."""
+    from ..progress import bar
+    with bar(max_iter, "shooting", unit="iteration", progress=progress) as b:
+        return _shoot(circuit, x_guess, T_guess, forced, rtol, tol, max_iter, rel_step, b)
+
+
+def _shoot(circuit, x_guess, T_guess, forced, rtol, tol, max_iter, rel_step, pbar):
+    started = clock()
+    c = circuit
+    if c.B != 1:
+        raise HemocircuitError("periodic orbits are computed one parameter set at a time")
+    nx = c.nx
+    S = c.state_scales
+    x0 = np.asarray(x_guess, dtype=float).copy()
+    T = float(T_guess)
+    x_s = x0.copy()
+    f_s = c.rhs(0.0, x_s) * 1.0
+    n_hat = (f_s / S) / max(np.linalg.norm(f_s / S), 1e-300)  # section normal, scaled
+    L = _laws(c)
+    law0 = L @ x0 if L.size else np.zeros(0)
+    res_norm = np.inf
+    converged = False
+    M = None
+    for it in range(1, max_iter + 1):
+        # monodromy d phi / d x0 by forward differences of the flow map (the derivatives
+        # service; steps rel_step * scale, above the integrator's error), one batched run
+        Mb, phi = dense_jacobian(lambda rows: _flow(c, rows, np.full(rows.shape[0], T), rtol=rtol)[0],
+                                 x0[None], S, steps=flow_steps(S, rel_step))
+        M, phi = Mb[0], phi[0]
+        r_orbit = (phi - x0) / S
+        rows = [r_orbit]
+        J = [np.hstack([(M - np.eye(nx)) * (S[None, :] / S[:, None]), np.zeros((nx, 0 if forced else 1))])]
+        if not forced:
+            fT = c.rhs(T, phi) / S
+            J[0][:, -1] = fT
+            rows.append(np.array([n_hat @ ((x0 - x_s) / S)]))
+            J.append(np.hstack([n_hat[None, :], np.zeros((1, 1))]))
+        if L.size:
+            rows.append((L @ x0 - law0) / 1.0)
+            J.append(np.hstack([L * S[None, :], np.zeros((len(L), 0 if forced else 1))]))
+        R = np.concatenate(rows)
+        JJ = np.vstack(J)
+        res_norm = float(np.max(np.abs(R)))
+        pbar.update_to(it, residual=f"{res_norm:.2e}")
+        if res_norm < tol:
+            converged = True
+            break
+        dz = np.linalg.lstsq(JJ, -R, rcond=None)[0]
+        x0 = x0 + dz[:nx] * S
+        if not forced:
+            T = T + dz[-1]
+            if T <= 0:
+                raise SolverError("shooting: the period became non-positive; give a better initial guess")
+    # one more integration for the orbit itself (dense) and the final multipliers
+    _, r = _flow(c, x0[None], np.array([T]), rtol=rtol, n_out=401)
+    t = r.t[0]
+    xs = r.x[0]
+    cols = c.outputs(t, xs)
+    orb = PeriodicOrbit(x0, T, t, xs, np.linalg.eigvals(M) if M is not None else np.zeros(0), converged, it,
+                        res_norm, forced, cols, c.column_units())
+    orb.n_laws = len(L)
+    orb.metadata["measures"] = {"period": T, "converged": converged, "iterations": it, "residual": res_norm,
+                                "nontrivial_multipliers": orb.nontrivial_multipliers, "orbitally_stable": orb.stable}
+    return stamp(orb, "periodic", circuit, {"forced": forced, "T_guess": float(T_guess), "rtol": rtol, "atol": rtol,
+                                            "tol": tol, "max_iter": max_iter, "rel_step": rel_step}, started)
+
+
+def guess_from_run(circuit, output=None, t_settle=400.0, dt=0.05, kick=1e-3, rtol=1e-6):
+    """(x on an upward mean crossing of ``output``, period estimate) from a settling run
+    (a single run: the scipy LSODA transient is the faster integrator for one member).
+    ``output`` defaults to the first of the netlist's ``outputs:`` for 'periodic'."""
+    from ..outputs import default_outputs
+    from .op import operating_point
+    from .envelope import _law_states, _period
+    if output is None:
+        output = default_outputs(circuit, "periodic")[0]
+    op = operating_point(circuit)
+    x0 = np.array(op.x, dtype=float)
+    free = [j for j in range(circuit.nx) if j not in _law_states(circuit)]
+    x0[free] += kick * circuit.state_scales[free]
+    res = circuit.simulate(t_settle, dt=dt, x0=x0, method="LSODA", rtol=rtol, atol=rtol)
+    grid = res.t
+    n_win = len(grid) // 3
+    X = res.x[-n_win:]
+    y = res[output][-n_win:]
+    if np.ptp(y) < 1e-6 * max(abs(np.mean(y)), 1e-300):
+        raise SolverError(f"no oscillation of {output} after {t_settle:g} s: the equilibrium is stable here "
+                          "(nothing to shoot for); see 'hemocircuit stability'")
+    T = _period(grid[-n_win:], y)
+    z = y - y.mean()
+    up = np.nonzero((z[:-1] < 0) & (z[1:] >= 0))[0]
+    return X[up[-1] + 1], T
+
+
+def register_cli(sub, common):
+    sp = common(sub.add_parser("periodic", help="limit cycle (or forced periodic steady state) by shooting"),
+                outputs=False)
+    sp.add_argument("--output", help="output used to find the period (default: the first of the netlist's "
+                                     "'outputs:' for periodic)")
+    sp.add_argument("--t-settle", type=float, default=400.0, help="settling run for the initial guess, s")
+    sp.add_argument("--forced", help="source element with a built-in sine term: periodic steady state at "
+                                     "its frequency")
+    sp.add_argument("--out", help="CSV of one period of the orbit (or .json)")
+    sp.add_argument("--plot", help="PNG of the orbit")
+    sp.set_defaults(func=cmd_periodic)
+
+
+def _periodic(args, c):
+    """The orbit (converged or not) and the output that found its period."""
+    from ..outputs import default_outputs, drive_of, input_element
+
+    interest = default_outputs(c, "periodic", required=args.output is None)
+    output = args.output or interest[0]
+    if args.forced:
+        src = input_element(c, args.forced)
+        comp, drive = drive_of(c, src)
+        if not drive.has_sine:
+            raise HemocircuitError(f"--forced {src}: a '{comp.type_name}' has no built-in sine term")
+        amp, freq = f"{src}.{drive.amplitude}", f"{src}.{drive.frequency}"
+        f = float(c.parameters.values[freq][0])
+        if f <= 0 or float(c.parameters.values[amp][0]) == 0:
+            raise HemocircuitError(f"--forced {src}: give it a sine term (--set {amp}=..., {freq}=...)")
+        from .op import operating_point
+        c0 = c.with_values({amp: 0.0})
+        orb = shoot(c, operating_point(c0).x, 1.0 / f, forced=True)
+    else:
+        x, T = guess_from_run(c, output, args.t_settle)
+        orb = shoot(c, x, T)
+    y = orb[output]
+    orb.metadata["measures"].update({f"min({output})": float(y.min()), f"max({output})": float(y.max()),
+                                     f"time_average({output})": orb.time_average(output)})
+    return orb, output, interest
+
+
+def compute_periodic(args, sets):
+    """One --grid member (:func:`hemocircuit.cli.computed`)."""
+    from ..cli import load_circuit
+    return _periodic(args, load_circuit(args.netlist, sets, args.protocol, getattr(args, "allow_path", None))[0])[0]
+
+
+def cmd_periodic(args):
+    from ..cli import _load, computed, report_grid, save_outputs
+
+    if args.grid:
+        return report_grid(args, computed(args, compute_periodic))
+    orb, output, interest = _periodic(args, _load(args)[0])
+    y = orb[output]
+    print(f"{'converged' if orb.converged else 'NOT converged'} after {orb.iterations} Newton iterations "
+          f"(residual {orb.residual:.2e}); period {orb.period:.6g} s")
+    print(f"{orb.label(output)}: min {y.min():.6g}, max {y.max():.6g}, time average {orb.time_average(output):.6g}")
+    mu = orb.nontrivial_multipliers
+    print("Floquet multipliers (non-trivial): " + ", ".join(f"{m:.4g}" for m in mu))
+    print("orbitally stable" if orb.stable else "orbitally UNSTABLE")
+    select = [output] + [k for k in interest if k in orb.columns and k != output]
+    save_outputs(args, orb, plot=lambda path: orb.plot(path, select=select, title="periodic orbit"))

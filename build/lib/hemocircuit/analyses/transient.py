@@ -1,0 +1,364 @@
+"""Transient simulation: stiff integration, restarted at every scheduled discontinuity.
+
+Discontinuities are protocol events (parameter changes), source waveform breakpoints and
+hard state limits (e.g. the Ca floor of second-order Ca dynamics: integration stops there,
+the state is put on the limit, the rate state reset to zero, and integration continues).
+The solver gets the batched finite-difference Jacobian of the circuit.
+Results are named time series (see :class:`TransientResult`); a solver failure raises
+SolverError carrying the time, the state and the part computed so far.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+from .. import plausibility
+from ..errors import Interrupted, SolverError
+from ..protocol import Protocol
+from ..provenance import clock, stamp
+from ..results import Result
+
+
+class TransientResult(Result):
+    """Time series (a :class:`hemocircuit.results.Result` indexed by ``time`` [s]): ``t`` (T,),
+    ``x`` (T, nx) states (not written to files; the outputs are), ``columns`` {name: (T,)
+    array}, ``units``, ``state_names``, ``stats`` (solver statistics, ``metadata['solver']``)."""
+
+    def __init__(self, t, x, columns, units, state_names, stats=None):
+        super().__init__({"time": t, **columns}, {"time": "s", **units}, index=["time"])
+        self.x = x
+        self.state_names = state_names
+        self.stats = stats or {}
+
+    @property
+    def t(self):
+        return self.data["time"]
+
+    @property
+    def stats(self):
+        return self.metadata["solver"]
+
+    @stats.setter
+    def stats(self, value):
+        self.metadata["solver"] = dict(value)
+
+    def __getitem__(self, key):
+        return super().__getitem__("time" if key == "t" else key)
+
+
+def _jac_for(c, method):
+    """The Jacobian callable for solve_ivp.  Large circuits (c.sparse) give a scipy.sparse
+    matrix from coloured finite differences, which BDF and Radau factorise with splu; LSODA
+    takes dense matrices only."""
+    if method not in ("BDF", "Radau", "LSODA"):
+        return None
+    if method == "LSODA" and getattr(c, "sparse", False):
+        return lambda t, x: c.jacobian(t, x).toarray()
+    return c.jacobian
+
+
+def _limit_events(circuit, limits):
+    evs = []
+    for idx, bound, _ in limits:
+        def ev(t, x, idx=idx, bound=bound):
+            return x[idx] - bound
+        ev.terminal = True
+        ev.direction = -1
+        evs.append(ev)
+    return evs
+
+
+def simulate(circuit, t_end, dt=None, t0=0.0, x0=None, protocol=None, method="BDF", rtol=1e-6, atol=None,
+             max_step=np.inf, first_step=None, engine="auto", ic=None, progress=None):
+    """Integrate from t0 to t_end [s].
+
+    x0: initial states (default: the operating point after the protocol's initial settings).
+    dt: output interval [s] (default: the solver's own steps; the compiled engine, which has
+        no step list, then reports 1001 evenly spaced times).
+    protocol: a Protocol (or path to a protocol YAML) with initial settings and timed events.
+    ic: {ID.STATE: value} states to override in that start (x0 or the operating point), e.g.
+        {'Cv.V': '20 mL'}; units allowed, plain numbers are in the state's unit (hemocircuit.ic).
+    engine: 'compiled' (numba Rosenbrock-W ROS34PW2, hemocircuit.kernels), 'scipy'
+        (solve_ivp with ``method``), or 'auto': compiled when every component type has a
+        kernel and ``method`` is left at its default, scipy otherwise.
+    progress: a bar of the simulated time on stderr (default: :mod:`hemocircuit.progress`'s
+        setting, on for the command line unless --quiet).
+
+    Returns a :class:`TransientResult`; implausible values (:mod:`hemocircuit.plausibility`)
+    are listed in ``metadata['warnings']``.  A solver failure (or a non-finite value) raises
+    SolverError, and SIGINT/SIGTERM :class:`~hemocircuit.errors.Interrupted`; the ``partial``
+    of either is the result up to that point, marked ``metadata['status'] = 'partial'``.
+    """
+    started = clock()
+    settings = {"t_end": t_end, "dt": dt, "t0": t0, "method": method, "engine": engine, "rtol": rtol,
+                "atol": atol, "max_step": None if max_step == np.inf else max_step, "first_step": first_step,
+                "ic": dict(ic) if ic else None, "x0": None if x0 is None else "given",
+                "protocol": protocol if isinstance(protocol, str) else getattr(protocol, "file", None)}
+    try:
+        res = _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step, first_step, engine, ic,
+                        progress)
+    except SolverError as exc:
+        if exc.partial is not None:
+            stamp(exc.partial, "tran", circuit, settings, started, status="partial")
+            exc.partial.metadata["error"] = str(exc)
+        raise
+    except KeyboardInterrupt as exc:  # SIGINT/SIGTERM: the series up to the last finished piece
+        part = getattr(exc, "partial", None)
+        if part is not None:
+            stamp(part, "tran", circuit, settings, started, status="partial")
+            part.metadata["members_done"] = (f"t = {part.t[0]:g} .. {part.t[-1]:g} s of {settings['t_end']} s "
+                                             f"computed" if part.n_rows else "nothing computed")
+        raise Interrupted.of(exc, partial=part) from None
+    findings = plausibility.check(circuit, res.columns, t=res.t)
+    bad = plausibility.errors(findings)
+    if bad:
+        raise SolverError("implausible solution: " + "; ".join(map(str, bad)),
+                          partial=stamp(res, "tran", circuit, settings, started, status="partial"))
+    plausibility.add_warnings(res, findings)
+    return stamp(res, "tran", circuit, settings, started)
+
+
+def _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step, first_step, engine, ic,
+              progress=None):
+    from ..progress import bar
+    from .op import operating_point
+
+    c = circuit
+    if isinstance(protocol, str):
+        protocol = Protocol.load(protocol, c)
+    if protocol is not None:
+        c = protocol.apply_initial(c)
+        if t_end is None:
+            t_end = protocol.t_end
+    if t_end is None:
+        raise SolverError("no end time given (t_end or a protocol's t_end)")
+    if c.B != 1:
+        raise SolverError("simulate() runs one parameter set; use hemocircuit.batch for many")
+    x = operating_point(c, t=t0).x if x0 is None else np.asarray(x0, dtype=float).copy()
+    if ic:
+        from ..ic import apply_ic
+        x = apply_ic(c, x, ic)
+    events = sorted([(ev.at, ev) for ev in (protocol.events if protocol else []) if t0 < ev.at < t_end],
+                    key=lambda e: e[0])
+    limits = c.hard_limits()
+    scales = c.state_scales
+    atol_v = (atol if atol is not None else rtol * 1e-3) * scales
+    if engine not in ("auto", "compiled", "scipy"):
+        raise SolverError(f"engine {engine!r}: choose 'auto', 'compiled' or 'scipy'")
+    if engine != "scipy" and (engine == "compiled" or method == "BDF"):
+        from ..kernels.system import CompiledSystem
+        system = CompiledSystem.of(c)
+        if system is None and engine == "compiled":
+            raise SolverError("this circuit cannot run compiled (a component type without a kernel, or "
+                              "too many nodal unknowns); use engine='scipy'")
+        if system is not None:
+            with bar(t_end - t0, "tran (simulated time)", unit="s", progress=progress) as pbar:
+                return _simulate_compiled(system, c, x, t0, t_end, dt, events, rtol, atol, max_step, first_step,
+                                          pbar)
+    ts, xs, segs = [], [], []
+    nfev = njev = nsteps = 0
+    t_grid = None if dt is None else np.arange(t0, t_end + 0.5 * dt, dt)
+    pbar = bar(t_end - t0, "tran (simulated time)", unit="s", progress=progress).__enter__()
+
+    def one_segment(c, t_a, t_b, x_a):
+        nonlocal nfev, njev, nsteps
+        tpts = None
+        if t_grid is not None:
+            tpts = t_grid[(t_grid >= t_a) & (t_grid <= t_b)]
+            if tpts.size == 0 or tpts[0] > t_a:
+                tpts = np.concatenate([[t_a], tpts])
+            if tpts[-1] < t_b:
+                tpts = np.concatenate([tpts, [t_b]])
+
+        def rhs(t, x):  # the bar follows the integrator's time
+            pbar.update_to(t - t0)
+            return c.rhs(t, x)
+
+        try:
+            sol = solve_ivp(rhs, (t_a, t_b), x_a, method=method, t_eval=tpts, rtol=rtol, atol=atol_v,
+                            jac=_jac_for(c, method),
+                            events=_limit_events(c, limits) or None, max_step=max_step,
+                            first_step=first_step)
+        except Exception as exc:  # a failing right-hand side or linear solve
+            raise SolverError(f"integration failed: {exc}", time=t_a, state=c.state_dict(x_a),
+                              partial=_partial()) from None
+        nfev += sol.nfev
+        njev += sol.njev
+        nsteps += len(sol.t)
+        if sol.status == -1 or not np.all(np.isfinite(sol.y)):
+            tf = float(sol.t[-1]) if len(sol.t) else t_a
+            xf = sol.y[:, -1] if sol.y.size else x_a
+            raise SolverError(f"integrator {method} failed: {sol.message}", time=tf, state=c.state_dict(xf),
+                              partial=_partial())
+        return sol
+
+    def _partial():
+        if not ts:
+            return None
+        return _collect(c, ts, xs, segs)
+
+    bounds = [t0] + [e[0] for e in events] + [t_end]
+    try:
+        _scipy_segments(c, x, bounds, events, limits, one_segment, ts, xs, segs)
+    except KeyboardInterrupt as exc:
+        raise Interrupted.of(exc, partial=_partial()) from None
+    finally:
+        pbar.close()
+    res = _collect(segs[-1] if segs else c, ts, xs, segs)
+    res.stats = {"nfev": nfev, "njev": njev, "nsteps": nsteps, "method": method}
+    return res
+
+
+def _scipy_segments(c, x, bounds, events, limits, one_segment, ts, xs, segs):
+    """Integrate the protocol segments (solve_ivp), appending to ts, xs, segs."""
+    for k in range(len(bounds) - 1):
+        t_a, t_b = bounds[k], bounds[k + 1]
+        if k > 0:
+            c = events[k - 1][1].apply(c)
+        # restart at waveform breakpoints inside the segment
+        cuts = [t_a] + c.breakpoints(t_a, t_b) + [t_b]
+        for a, b in zip(cuts, cuts[1:]):
+            cur = a
+            while cur < b:
+                sol = one_segment(c, cur, b, x)
+                ts.append(sol.t)
+                xs.append(sol.y.T)
+                segs.append(c)
+                x = sol.y[:, -1].copy() if sol.y.size else x
+                if sol.status == 1:  # a hard limit was reached: put the state on it, reset its rate
+                    k_ev = min((j for j, e in enumerate(sol.t_events) if len(e)), key=lambda j: sol.t_events[j][0])
+                    cur = float(sol.t_events[k_ev][0])
+                    x = sol.y_events[k_ev][0].copy()
+                    idx, bound, reset = limits[k_ev]
+                    x[idx] = bound
+                    if reset is not None:
+                        x[reset] = max(x[reset], 0.0)
+                    ts.append(np.array([cur]))
+                    xs.append(x[None, :])
+                    segs.append(c)
+                else:
+                    cur = b
+
+
+def _collect(c_last, ts, xs, segs):
+    """Stack segments (dropping duplicated boundary points) and compute outputs per segment."""
+    t_all, x_all, cols = [], [], {}
+    for t, x, c in zip(ts, xs, segs):
+        if t.size == 0:
+            continue
+        if t_all and t_all[-1].size and t[0] <= t_all[-1][-1]:
+            # keep the later value at a restart time (after an event)
+            t_all[-1], x_all[-1] = t_all[-1][:-1], x_all[-1][:-1]
+            for k in cols:
+                cols[k][-1] = cols[k][-1][:-1]
+        for k, v in c.outputs(t, x).items():
+            cols.setdefault(k, []).append(np.asarray(v))
+        t_all.append(t)
+        x_all.append(x)
+    t = np.concatenate(t_all) if t_all else np.zeros(0)
+    x = np.concatenate(x_all) if x_all else np.zeros((0, c_last.nx))
+    columns = {k: np.concatenate(cols.pop(k)) for k in list(cols)}  # each part freed once copied
+    return TransientResult(t, x, columns, c_last.column_units(), c_last.state_names)
+
+
+def _simulate_compiled(system, c, x, t0, t_end, dt, events, rtol, atol, max_step, first_step, bar=None):
+    """simulate() on the compiled engine: kernel calls per protocol segment (hard limits and
+    source breakpoints are handled inside the kernel), in pieces (:func:`_compiled_segment`):
+    at most PIECE_STEPS steps each and, with a progress ``bar`` shown, about 50 per segment."""
+    from ..kernels.system import CompiledSystem
+
+    if dt is None:
+        t_grid = np.linspace(t0, t_end, 1001)
+    else:
+        t_grid = np.arange(t0, t_end + 0.5 * dt, dt)
+        t_grid = t_grid[t_grid <= t_end + 1e-9 * max(1.0, abs(t_end))]
+        if t_grid[-1] < t_end:
+            t_grid = np.append(t_grid, t_end)
+    bounds = [t0] + [e[0] for e in events] + [t_end]
+    ts, xs, segs = [], [], []
+    stats = {"steps": 0, "rejected": 0, "nfev": 0, "limit_events": 0}
+    h0 = 1e-3 if first_step is None else first_step
+    for k in range(len(bounds) - 1):
+        t_a, t_b = bounds[k], bounds[k + 1]
+        if k > 0:
+            c = events[k - 1][1].apply(c)
+            # an event may change waveforms, options or expressions: the layout follows the
+            # circuit (cheap; the compiled engine itself is reused)
+            system = CompiledSystem.of(c)
+            if system is None:
+                raise SolverError(f"the event at t = {t_a:g} s leaves a circuit that cannot run compiled; "
+                                  "use engine='scipy'", time=t_a)
+        if t_b <= t_a:  # several events at one time: apply them all, integrate nothing
+            continue
+        tpts = t_grid[(t_grid > t_a) & (t_grid < t_b)]
+        tpts = np.concatenate([[t_a], tpts, [t_b]])
+        try:
+            x = _compiled_segment(system, c, tpts, x, rtol, atol, h0, max_step, stats, ts, xs, segs, bar, t0)
+        except KeyboardInterrupt as exc:
+            raise Interrupted.of(exc, partial=_collect(c, ts, xs, segs) if ts else None) from None
+    res = _collect(c, ts, xs, segs)
+    from ..kernels.tableaus import default_method
+    res.stats = {**stats, "method": f"{default_method(rtol).upper()} (compiled)"}
+    return res
+
+
+#: steps per call of the compiled integrator: Python regains control (a signal is handled, the
+#: series so far kept) at least this often; a run needing more steps continues from its last
+#: output point (the output grid's times are kept)
+PIECE_STEPS = 200_000
+MAX_STEPS = 10_000_000  # per protocol segment, as the compiled integrator's own limit
+
+
+def _compiled_segment(system, c, tpts, x, rtol, atol, h0, max_step, stats, ts, xs, segs, bar=None, t0=0.0):
+    """One protocol segment on the output times ``tpts``; appends to ts, xs, segs; returns the
+    final state.  The compiled integrator returns to Python at least every PIECE_STEPS steps
+    and, with a progress ``bar`` shown, after each of ~50 consecutive ranges of output times
+    (each starting with the mean step of the range before) so that the bar moves."""
+    P = system.params(c)[0]
+    shown = bar is not None and getattr(bar, "_t", None) is not None
+    n_ranges = min(50, (len(tpts) - 1) // 20) if shown else 1  # ranges of >= 20 output points
+    cuts = np.unique(np.linspace(0, len(tpts) - 1, max(n_ranges, 1) + 1).round().astype(int))
+    used = 0
+    for a, b in zip(cuts[:-1], cuts[1:]):
+        before = used
+        x, used = _compiled_range(system, c, P, tpts[a:b + 1], x, rtol, atol, h0, max_step, stats, ts, xs, segs,
+                                  used)
+        if bar is not None:
+            bar.update_to(tpts[b] - t0)
+        h0 = (tpts[b] - tpts[a]) / max(used - before, 1)
+    return x
+
+
+def _compiled_range(system, c, P, tpts, x, rtol, atol, h0, max_step, stats, ts, xs, segs, used):
+    """The output times ``tpts`` in calls of at most PIECE_STEPS steps (``used``: the steps the
+    segment took so far, at most MAX_STEPS); appends to ts, xs, segs; returns (final state, used)."""
+    from ..execution import check_interrupted
+
+    breaks = c.breakpoints(tpts[0], tpts[-1])
+    budget = PIECE_STEPS
+    while True:
+        check_interrupted()
+        X, st = system.integrate(tpts, x, P, rtol=rtol, atol=atol, breaks=breaks, h0=h0, hmax=max_step,
+                                 max_steps=min(budget, MAX_STEPS - used))
+        for key in stats:
+            stats[key] += st[key]
+        used += st["steps"]
+        good = np.all(np.isfinite(X), axis=1)
+        if st["status"] == -2 and used < MAX_STEPS:  # the piece's budget ran out, not the run's
+            n_good = len(good) if good.all() else int(np.argmin(good))  # rows before the first NaN
+            if n_good > 1:  # keep the rows done, go on from the last one
+                ts.append(tpts[:n_good])
+                xs.append(X[:n_good])
+                segs.append(c)
+                tpts, x, budget = tpts[n_good - 1:], X[n_good - 1].copy(), PIECE_STEPS
+            else:  # one output interval needs more than a piece: give it the rest of the budget
+                budget = MAX_STEPS
+            continue
+        ts.append(tpts[good])
+        xs.append(X[good])
+        segs.append(c)
+        if st["status"] < 0:
+            bad = X[good][-1] if good.any() else x
+            raise SolverError(f"compiled integrator failed: {st['message']}", time=st["t"],
+                              state=c.state_dict(bad), partial=_collect(c, ts, xs, segs))
+        return X[-1].copy(), used

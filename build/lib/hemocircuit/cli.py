@@ -1,0 +1,582 @@
+"""Command line: ``hemocircuit check|op|dc|tran|graph|... NETLIST [options]``.
+
+Every command gets its circuit from :func:`load_circuit` (netlist, ``--set``, ``--protocol``).
+
+Errors the user can cause (netlist, units, topology, solver) print one clear message and
+exit with status 2; they never show a traceback.
+
+Exit status (docs/analyses.md, "Exit status and partial outputs"): 0 done (warnings about
+implausible values, if any, on stderr); 2 error; 3 a batch finished but some members failed
+(each named on stderr and in the output's ``error`` column and ``metadata['failed']``);
+130 / 143 stopped by SIGINT / SIGTERM (what had finished written to NAME.partial.EXT).
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+from .errors import HemocircuitError, Interrupted
+
+EXIT_ERROR = 2            # an error the user can fix (message on stderr)
+EXIT_FAILED_MEMBERS = 3   # a batch completed, but some members failed (each reported)
+
+
+def _assignments(items, flag="--set", form="ID.PARAM=VALUE", example="Pa.value=90mmHg"):
+    """['ID.NAME=VALUE', ...] -> {ID.NAME: VALUE} ('90mmHg' spaced to '90 mmHg')."""
+    out = {}
+    for it in items or []:
+        if "=" not in it:
+            raise HemocircuitError(f"{flag} {it!r}: expected {form} (e.g. {example})")
+        k, v = it.split("=", 1)
+        out[k.strip()] = _unit_spacing(v.strip())
+    return out
+
+
+def _sets(items):
+    return _assignments(items, "--set", "ID.PARAM=VALUE", "Pa.value=90mmHg")
+
+
+def _unit_spacing(v):
+    """Accept '90mmHg' as well as '90 mmHg' (an exponent, '1e8', is part of the number)."""
+    import re
+    m = re.match(r"^([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)(?![eE][-+]?\d)\s*([A-Za-z].*)$", v)
+    return f"{m.group(1)} {m.group(2)}" if m else v
+
+
+def load_circuit(netlist, sets=None, protocol=None, allow_paths=None):
+    """The one way every command gets its circuit: netlist, then ``--set``, then ``--protocol``.
+
+    ``sets``: {ID.NAME: value} (``--set``): structural options (``art.ca_order``, values as YAML
+    literals) re-assemble the circuit first, keeping every numeric value; then numeric
+    parameters are set (strings with units).  ``protocol``: path of a protocol YAML (or None),
+    checked against the circuit; its ``initial`` settings and its events at t = 0 are applied
+    last (they win over ``--set``, as they would in ``simulate``).  ``allow_paths``: more
+    folders the netlist may read files from (``--allow-path``, see hemocircuit.access).
+    Returns (circuit, protocol or None).  The protocol's timed events are left to the commands
+    that run them (tran, compare --tran), which pass it on stripped of ``initial`` (see
+    :func:`events_only`).  Errors in ``--set`` name the ``--set`` option, with close matches.
+    """
+    import os
+
+    from .build import path_problem
+    from .circuit import load
+    from .errors import NetlistError
+    from .protocol import Protocol
+
+    try:
+        c = load(str(netlist), allow_paths=allow_paths)
+    except NetlistError as exc:
+        given = os.path.abspath(str(netlist))
+        if exc.file and os.path.abspath(str(exc.file)) != given:  # an error in a base netlist: say which
+            exc.args = (f"{exc} (in the extends chain of {given})",)
+        raise
+    sets = dict(sets or {})
+    for k, v in sets.items():
+        problem = path_problem(c, k)
+        if problem:
+            raise HemocircuitError(f"--set {k}={v}: {problem}")
+    opts = {k: v for k, v in sets.items() if _is_option(c, k)}
+    params = {k: v for k, v in sets.items() if k not in opts}
+    try:
+        if opts:
+            c = c.with_options({k: _option_literal(v) for k, v in opts.items()})
+        c = c.with_values(params)
+    except NetlistError as exc:
+        mine = [f"{k}={v}" for k, v in sets.items() if k.partition(".")[0] == exc.element] or \
+            [f"{k}={v}" for k, v in sets.items()]
+        raise HemocircuitError(f"--set {', --set '.join(mine)}: "
+                               + (f"element '{exc.element}': " if exc.element else "") + exc.bare_message) from None
+    proto = None
+    if protocol:
+        proto = Protocol.load(str(protocol), c)
+        c = proto.apply_initial(c)
+    return c, proto
+
+
+def events_only(proto):
+    """The protocol without its ``initial`` settings (already applied by :func:`load_circuit`)."""
+    import dataclasses
+    return None if proto is None else dataclasses.replace(proto, initial={})
+
+
+def _is_option(c, path):
+    eid, _, name = path.partition(".")
+    return eid in c.elements and name in c.elements[eid].cls.options
+
+
+def _load(args, uses_events=False):
+    """load_circuit() from the parsed arguments (netlist, --set, --protocol, --allow-path) of any
+    command; ``--show`` names are checked against the circuit's columns."""
+    c, proto = load_circuit(args.netlist, _sets(getattr(args, "set", None)), getattr(args, "protocol", None),
+                            getattr(args, "allow_path", None))
+    later = [ev for ev in proto.events if ev.at > 0] if proto is not None else []
+    if later and not uses_events:
+        print(f"note: {args.command} applies the protocol's 'initial' settings and its events at t = 0; its "
+              f"{len(later)} later event(s) are used by tran only", file=sys.stderr)
+    _check_show(c, getattr(args, "show", None))
+    return c, proto
+
+
+def _check_show(c, show):
+    """Every ``--show`` name must be a column of the circuit (with close matches if not)."""
+    from .errors import did_you_mean
+
+    if not show:
+        return
+    columns = [col.name for col in c.columns()]
+    known = set(columns)
+    for name in show:
+        if name not in known:
+            derived = " (a derived quantity: compare shows those)" if name in (c.netlist.derived or {}) else ""
+            raise HemocircuitError(f"--show {name!r}: no such column{derived}{did_you_mean(name, columns)}; "
+                                   f"columns: {columns[:40]}{' ...' if len(columns) > 40 else ''}")
+
+
+def _option_literal(v):
+    import yaml
+    return yaml.safe_load(v) if isinstance(v, str) else v
+
+
+def cmd_check(args):
+    c, proto = _load(args, uses_events=True)
+    print(c.describe())
+    print("ok: the netlist is valid" + (" and so is the protocol" if proto else ""))
+
+
+def record(args, res):
+    """Add this invocation's provenance (command line, --set, --protocol) to a result."""
+    from .provenance import add_invocation
+    netlists = getattr(args, "netlists", None) or [getattr(args, "netlist", None)]
+    add_invocation(res.metadata, getattr(args, "argv", sys.argv[1:]), _sets(getattr(args, "set", None)),
+                   getattr(args, "protocol", None), netlists=[n for n in netlists if n])
+    args.computed_result = res  # main() reports its warnings and failed members (exit status)
+    return res
+
+
+def save_outputs(args, res, plot=None):
+    """Compute and print ``--measure`` (saved in ``metadata['measures']``), then write ``--out``
+    (the result, with provenance) and ``--plot`` (``plot(path)``, default ``res.plot``); both
+    files were checked before the computation (:func:`_check_outputs`)."""
+    apply_measures(args, res)
+    record(args, res)
+    if getattr(args, "out", None):
+        print(f"wrote {res.save(args.out)}")
+    if getattr(args, "plot", None):
+        (plot or (lambda path: res.plot(path, select=getattr(args, "show", None))))(args.plot)
+        print(f"wrote {args.plot}")
+
+
+def apply_measures(args, res):
+    """``--measure SPEC`` (repeatable): :mod:`hemocircuit.measures`, printed and stored."""
+    specs = getattr(args, "measure", None)
+    if not specs:
+        return
+    from .measures import measure_all
+    for line in measure_all(res, specs):
+        print(line)
+
+
+def computed(args, compute):
+    """The command's result: ``compute(args, sets)`` on the netlist with ``--set`` applied, or,
+    with ``--grid``, every member of the grid run in parallel and stacked into one result
+    (:mod:`hemocircuit.grid`)."""
+    sets = _sets(getattr(args, "set", None))
+    if not getattr(args, "grid", None):
+        return compute(args, sets)
+    from . import grid
+    first = getattr(args, "netlist", None) or args.netlists[0]
+    circuit, _ = load_circuit(first, sets, getattr(args, "protocol", None), getattr(args, "allow_path", None))
+    return grid.run(compute, args, circuit, sets, workers=getattr(args, "workers", None))
+
+
+def report_grid(args, res, show=None):
+    """What every command prints for a --grid result: the table (grid columns first), the
+    failed members, then --measure, --out and --plot."""
+    if show:
+        show = [k for k in show if k in res.data]
+    print(res.summary(show=getattr(args, "show", None) or show or None, max_rows=24, where=getattr(args, "out", None)))
+    for where, why in res.metadata.get("failed", []):
+        print(f"failed: {where}: {why}", file=sys.stderr)
+    save_outputs(args, res)
+
+
+def partial_path(path):
+    """'run.csv' -> 'run.partial.csv': where a failed run's computed part goes."""
+    stem, ext = os.path.splitext(path)
+    return f"{stem}.partial{ext or '.csv'}"
+
+
+def compute_op(args, sets):
+    """One --grid member (:func:`computed`)."""
+    c, _ = load_circuit(args.netlist, sets, args.protocol, getattr(args, "allow_path", None))
+    return c.operating_point()
+
+
+def cmd_op(args):
+    if args.plot and not args.grid:
+        raise HemocircuitError("op --plot: an operating point is one steady state, nothing to plot; "
+                               "use 'dc --sweep ... --plot' for curves, or op --grid ... --plot")
+    if args.grid:
+        return report_grid(args, computed(args, compute_op))
+    op = _load(args)[0].operating_point()
+    print(op.summary(show=args.show))
+    save_outputs(args, op)
+
+
+def _dc(args, c):
+    param, rng = args.sweep.split("=", 1)
+    return c.dc_sweep(param.strip(), _range_spacing(rng))
+
+
+def compute_dc(args, sets):
+    """One --grid member (:func:`computed`)."""
+    return _dc(args, load_circuit(args.netlist, sets, args.protocol, getattr(args, "allow_path", None))[0])
+
+
+def cmd_dc(args):
+    if not args.sweep or "=" not in args.sweep:
+        raise HemocircuitError("dc needs --sweep ID.PARAM=START:STOP:STEP UNIT (e.g. Pa.value=20:200:5mmHg)")
+    param = args.sweep.split("=", 1)[0].strip()
+    res = computed(args, compute_dc) if args.grid else _dc(args, _load(args)[0])
+    cols = res.columns
+    show = args.show or [k for k in cols if k.startswith("Q(")][:1] + [k for k in cols if k.startswith("P(")][:3]
+    if args.grid:
+        return report_grid(args, res, show)
+    print(res.summary(show=show, max_rows=0, where=args.out))
+    for v, why in res.failed:
+        print(f"failed at {param}={v:g}: {why}", file=sys.stderr)
+    save_outputs(args, res)
+
+
+def _range_spacing(r):
+    """'20:200:5mmHg' -> '20:200:5 mmHg'; exponents ('1e8') stay part of their number."""
+    import re
+    return re.sub(r"(\d)(?![eE][-+]?\d)([A-Za-z])", r"\1 \2", r, count=1)
+
+
+def compute_tran(args, sets):
+    """One run (a --grid member, :func:`computed`)."""
+    c, proto = load_circuit(args.netlist, sets, args.protocol, getattr(args, "allow_path", None))
+    t_end = float(_unit_to(args.t_end, "s")) if args.t_end else None
+    dt = float(_unit_to(args.dt, "s")) if args.dt else None
+    ic = _assignments(args.ic, "--ic", "ID.STATE=VALUE", "Cv.V=20mL")
+    return c.simulate(t_end, dt=dt, protocol=events_only(proto), method=args.method, ic=ic)
+
+
+def cmd_tran(args):
+    from .errors import SolverError
+
+    if args.grid:
+        return report_grid(args, computed(args, compute_tran))
+    try:
+        res = compute_tran(args, _sets(args.set))
+    except SolverError as exc:
+        part = exc.partial
+        if args.out and part is not None and part.n_rows:
+            record(args, part)
+            path = part.save(partial_path(args.out))
+            print(f"error: {exc}", file=sys.stderr)
+            print(f"the part computed (t = {part.t[0]:g} .. {part.t[-1]:g} s, {part.n_rows} points) is in "
+                  f"{path}, marked partial", file=sys.stderr)
+            raise _Reported() from None
+        raise
+    print(f"{len(res.t)} points, t = {res.t[0]:g} .. {res.t[-1]:g} s; solver {res.stats}")
+    names = args.show or list(res.columns)[:12]
+    res.check_columns(names)
+    for k in names:
+        print(f"  {res.label(k)} at end: {res[k][-1]:.6g}")
+    if len(names) < len(res.columns):
+        print(f"  (showing {len(names)} of {len(res.columns)} columns; "
+              + (f"all in {args.out})" if args.out else "all with --out FILE.csv)"))
+    save_outputs(args, res)
+
+
+class _Reported(HemocircuitError):
+    """An error already reported on stderr (exit status 2, nothing more printed)."""
+
+
+def _unit_to(text, unit):
+    from .units import parse_quantity
+    return parse_quantity(_unit_spacing(str(text)) if not str(text).replace(".", "").isdigit() else f"{text} {unit}",
+                          unit)
+
+
+def cmd_show(args):
+    """Reload a result file: its provenance, a summary, optionally a plot or a re-run."""
+    from .provenance import command_of, describe
+    from .results import Result
+
+    res = Result.load(args.result)
+    print(describe(res.metadata))
+    print(f"{res.n_rows} rows x {len(res)} columns; index {res.index}")
+    print(res.summary(show=args.show, where=args.result))
+    if args.plot:
+        res.plot(args.plot, select=args.show)
+        print(f"wrote {args.plot}")
+    if args.rerun:
+        argv, cwd = command_of(res.metadata)
+        if not argv:
+            raise HemocircuitError(f"{args.result}: no command line in its provenance (written by the API?)")
+        new = _rerun_argv(argv, os.path.abspath(args.rerun))
+        print("re-running: hemocircuit " + " ".join(new) + (f"  (in {cwd})" if cwd else ""))
+        here = os.getcwd()
+        try:
+            if cwd:
+                os.chdir(cwd)
+            return main(new)
+        finally:
+            os.chdir(here)
+    return 0
+
+
+def _rerun_argv(argv, out):
+    """The stored command line with --out replaced by ``out`` and plot outputs dropped."""
+    new, skip = [], False
+    for a in argv:
+        if skip:
+            skip = False
+            continue
+        key = a.split("=", 1)[0]
+        if key in ("--out", "--plot", "--phase-plot"):
+            skip = "=" not in a
+            continue
+        new.append(a)
+    return new + ["--out", out]
+
+
+def cmd_graph(args):
+    c, _ = _load(args)
+    from .plotting import draw_circuit
+    out = args.out or args.plot or "circuit.png"
+    draw_circuit(c, out)
+    print(f"wrote {out}")
+
+
+BUILTIN = ("check", "op", "dc", "tran", "graph", "show")
+
+
+def build_parser(command=None):
+    """The argument parser.  ``command``: the command about to run -- only the analysis
+    module that defines it is imported (``hemocircuit CMD`` starts without importing the
+    others); None: every command (also ``--help``, which lists the analysis commands from
+    their sources without importing them)."""
+    from . import __version__
+
+    p = argparse.ArgumentParser(prog="hemocircuit", description="Lumped-parameter hemodynamic circuits.")
+    p.add_argument("--version", action="version", version=f"hemocircuit {__version__}")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    def common(sp, outputs=True, netlist=True, grid=True):
+        """The loader's arguments (netlist, --set, --protocol: see load_circuit) and --quiet,
+        shared by every command; with ``grid`` also --grid, --workers and --measure
+        (:func:`computed`, :func:`apply_measures`); with ``outputs`` also --out, --plot, --show."""
+        if netlist:
+            sp.add_argument("netlist", help="netlist YAML file")
+        sp.add_argument("--set", action="append", metavar="ID.PARAM=VALUE",
+                        help="set a parameter (units allowed, e.g. Pa.value=90mmHg) or a structural option "
+                             "(e.g. art.ca_order=2); repeatable")
+        sp.add_argument("--protocol", help="protocol YAML: its 'initial' settings (and events at t = 0) apply "
+                                           "to every command, its later events to tran")
+        sp.add_argument("--allow-path", action="append", metavar="DIR",
+                        help="let the netlist read files (extends, tables) in DIR too; by default only its "
+                             "project folder and the bundled netlists (repeatable)")
+        sp.add_argument("--quiet", action="store_true", help="no progress bars (and, for ac, no table)")
+        if grid:
+            sp.add_argument("--grid", action="append", metavar="ID.PARAM=V1,V2,...",
+                            help="nested sweep: run the command for each value (units allowed, e.g. "
+                                 "art.tau_Ca=1,10s or Pa.value=60:120:20mmHg; structural options too); "
+                                 "repeatable, Cartesian product; one result, grid columns first")
+            sp.add_argument("--workers", type=int, help="worker processes for --grid (default: all cores)")
+            sp.add_argument("--measure", action="append", metavar="SPEC",
+                            help="a measure of the result (repeatable), e.g. 'plateau Q(Rla) 10%% ref=100mmHg', "
+                                 "'resonance P(a)', 'mean P(a) from=10s' (docs/analyses.md, Measures)")
+        if outputs:
+            sp.add_argument("--out", help="output file (CSV for series/sweeps, JSON for op, PNG for graph)")
+            sp.add_argument("--plot", help="PNG plot file")
+            sp.add_argument("--show", action="append", help="column to print/plot (repeatable)")
+        return sp
+
+    common(sub.add_parser("check", help="validate a netlist (and protocol)"), grid=False).set_defaults(func=cmd_check)
+    common(sub.add_parser("op", help="operating point (steady state)")).set_defaults(func=cmd_op)
+    sp = common(sub.add_parser("dc", help="DC sweep of a parameter"))
+    sp.add_argument("--sweep", help="ID.PARAM=START:STOP:STEP UNIT, e.g. Pa.value=20:200:5mmHg")
+    sp.set_defaults(func=cmd_dc)
+    sp = common(sub.add_parser("tran", help="transient simulation"))
+    sp.add_argument("--t-end", help="end time (e.g. 100 or '100 s')")
+    sp.add_argument("--dt", help="output interval (e.g. 0.1 s)")
+    sp.add_argument("--method", default="BDF", help="solve_ivp method (BDF, Radau, LSODA)")
+    sp.add_argument("--ic", action="append", metavar="ID.STATE=VALUE",
+                    help="start with this state overridden (units allowed, e.g. Cv.V=20mL, art.Ca=1e-7M); "
+                         "the others at the operating point; repeatable")
+    sp.set_defaults(func=cmd_tran)
+    common(sub.add_parser("graph", help="draw the circuit graph to PNG"), grid=False).set_defaults(func=cmd_graph)
+    sp = sub.add_parser("show", help="reload a result file: provenance, summary, re-plot, re-run")
+    sp.add_argument("result", help="a CSV or JSON file written by a hemocircuit command (--out)")
+    sp.add_argument("--plot", help="draw it again to this PNG file")
+    sp.add_argument("--show", action="append", help="column to print/plot (repeatable)")
+    sp.add_argument("--rerun", metavar="OUT", help="run the command stored in its provenance again, writing OUT")
+    sp.add_argument("--set", action="append", help=argparse.SUPPRESS)
+    sp.add_argument("--protocol", help=argparse.SUPPRESS)
+    sp.add_argument("--quiet", action="store_true", help="no progress bars (for --rerun)")
+    sp.set_defaults(func=cmd_show)
+    p.commands = sub.choices  # {name: parser}
+    index = command_index()
+    if command == "--help":  # names and one-line help only: nothing imported
+        for name, (_, text) in index.items():
+            sub.add_parser(name, help=text)
+        return p
+    if command in BUILTIN:
+        return p
+    for register in _extra_commands(index[command][0] if command in index else None):
+        register(sub, common)
+    return p
+
+
+def command_index():
+    """{command: (module, help)} of the analysis modules' commands, read from their sources
+    (``sub.add_parser("NAME", help="...")`` in ``register_cli``) without importing them."""
+    import re
+    from pathlib import Path
+    out = {}
+    for path in sorted((Path(__file__).parent / "analyses").glob("*.py")):
+        text = path.read_text(encoding="utf-8")
+        if "def register_cli" not in text:
+            continue
+        for m in re.finditer(r'add_parser\(\s*"([\w-]+)",\s*help="([^"]*)"', text):
+            out[m.group(1)] = (path.stem, m.group(2))
+    return out
+
+
+def _extra_commands(only=None):
+    """Commands contributed by analysis modules: every module of ``hemocircuit.analyses`` that
+    defines ``register_cli(subparsers, common)`` (found by scanning the package, like the
+    components), then third-party ones registered under the entry-point group
+    ``hemocircuit.analyses`` (the entry point names such a module or function)."""
+    import importlib
+    import pkgutil
+    from importlib import metadata
+
+    from . import analyses
+
+    out = []
+    for info in sorted(pkgutil.iter_modules(analyses.__path__), key=lambda i: i.name):
+        if only is not None and info.name != only:
+            continue
+        spec = info.module_finder.find_spec(info.name)
+        origin = getattr(spec, "origin", None)
+        if origin and origin.endswith(".py"):
+            with open(origin, encoding="utf-8") as fh:  # import only the modules that add a command:
+                if "def register_cli" not in fh.read():  # the others pull in scipy for nothing
+                    continue
+        m = importlib.import_module(f"{analyses.__name__}.{info.name}")
+        if callable(getattr(m, "register_cli", None)):
+            out.append(m.register_cli)
+    if only is not None:
+        return out
+    for ep in metadata.entry_points(group="hemocircuit.analyses"):
+        try:
+            obj = ep.load()
+            out.append(obj if callable(obj) and not hasattr(obj, "register_cli") else obj.register_cli)
+        except Exception as exc:  # noqa: BLE001 - one broken plug-in must not take the CLI down
+            print(f"warning: analysis plug-in {ep.name!r} ({ep.value}) could not be loaded: {exc}",
+                  file=sys.stderr)
+    return out
+
+
+OUTPUT_OPTIONS = ("out", "plot", "phase_plot")
+
+
+def _check_outputs(args):
+    """Every output file's folder is checked (or created) before anything is computed."""
+    from . import io
+    for key in OUTPUT_OPTIONS:
+        path = getattr(args, key, None)
+        if path:
+            io.prepare_output(path, "--" + key.replace("_", "-"))
+
+
+def main(argv=None):
+    argv = sys.argv[1:] if argv is None else [str(a) for a in argv]
+    first = next((a for a in argv if not a.startswith("-")), None)
+    if first is None or first == "help":
+        parser = build_parser("--help")  # --help, --version, or no command: nothing heavy imported
+    else:
+        parser = build_parser(first)
+        if first not in parser.commands:  # maybe a plug-in's command: load them all
+            parser = build_parser()
+        if first not in parser.commands:
+            import difflib
+            known = sorted(parser.commands)
+            near = difflib.get_close_matches(first, known, n=2)
+            print(f"hemocircuit: error: unknown command {first!r}" +
+                  (f"; did you mean {' or '.join(near)}?" if near else f"; commands: {', '.join(sorted(known))}"),
+                  file=sys.stderr)
+            return 2
+    args = parser.parse_args(argv)
+    args.argv = argv
+    from . import progress
+    progress.enable(not getattr(args, "quiet", False))
+    from .execution import catch_signals, restore_signals
+    previous = catch_signals()
+    try:
+        _check_outputs(args)
+        rc = args.func(args)
+    except _Reported:
+        return EXIT_ERROR
+    except HemocircuitError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_ERROR
+    except KeyboardInterrupt as exc:  # SIGINT, or SIGTERM (execution.catch_signals)
+        return _interrupted(args, Interrupted.of(exc))
+    except BrokenPipeError:  # output piped into a command that stopped reading (| head)
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
+    finally:
+        restore_signals(previous)
+    if isinstance(rc, int) and rc:
+        return rc
+    return _report(args)
+
+
+def _report(args):
+    """Warnings and failed members of the command's result on stderr; the exit status."""
+    res = getattr(args, "computed_result", None)
+    if res is None:
+        return 0
+    for w in res.metadata.get("warnings", []) or []:
+        print(f"warning: {w}", file=sys.stderr)
+    failed = res.metadata.get("failed", []) or []
+    if failed:
+        print(f"{len(failed)} member(s) failed (listed above and in the result's 'failed' metadata"
+              + (" and 'error' column" if "error" in res else "") + f"); exit status {EXIT_FAILED_MEMBERS}",
+              file=sys.stderr)
+        return EXIT_FAILED_MEMBERS
+    return 0
+
+
+def _interrupted(args, exc):
+    """Write what finished (``exc.partial``) to NAME.partial.EXT when --out was given, say so,
+    and return 128 + the signal number (130 for SIGINT, 143 for SIGTERM)."""
+    part = exc.partial
+    msg = f"interrupted by {exc.signame}"
+    if part is not None:
+        part.metadata["status"] = "partial"
+        part.metadata["interrupted"] = exc.signame
+        done = part.metadata.get("members_done")
+        msg += f"; {done}" if done else ""
+        if getattr(args, "out", None) and part.n_rows:
+            try:
+                record(args, part)
+                path = part.save(partial_path(args.out))
+                msg += f"; what had finished is in {path}, marked partial"
+            except HemocircuitError as err:
+                msg += f"; could not write the partial result: {err}"
+        elif not getattr(args, "out", None):
+            msg += "; nothing written (no --out)"
+    print(msg, file=sys.stderr)
+    return 128 + exc.signum
+
+
+if __name__ == "__main__":
+    sys.exit(main())

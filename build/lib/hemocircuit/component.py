@@ -1,0 +1,380 @@
+"""The component interface: what every element type declares and the hooks it implements.
+
+A component type is a subclass of :class:`Component` in a module of ``hemocircuit.components``
+(found by scanning that package, like Myokit plug-ins) or registered by a third party through
+the entry-point group ``hemocircuit.components``.  One instance serves *all* elements of that
+type that share the same options (a "group"): every hook is vectorised over the batch of
+parameter sets and over the elements of the group, so the hot path dispatches once per group,
+never once per element.
+
+Array shapes in the hooks (B = batch of parameter sets, E = elements in the group):
+  ``p[name]``   parameter values, shape (B, E), in the parameter's declared unit
+  ``x``         the group's states, shape (B, E, S) in the states' declared units
+  ``u``         local unknowns of the nodal system, shape (B, E, K + M): pressures of the
+                element's K local nodes (terminals then internal nodes, mmHg) followed by
+                the flows of its M pressure-defining branches (mL/s)
+  ``t``         time in s (float)
+
+Modified nodal analysis (MNA) contract: an element contributes to the global linear system
+``A u = b`` through ``stamp``, returning ``(A_loc, b_loc)`` of shapes (B, E, K+M, K+M) and
+(B, E, K+M).  Row j < K is the flow *leaving* local node j into the element (Kirchhoff's
+current law: the sum over elements is zero); row K+m is the constraint equation of branch m
+(P_plus - P_minus = E).  ``A_loc @ u - b_loc`` evaluated at the solution gives the flow the
+element draws from each of its nodes, which is how element flows are reported generically.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+
+class _Bounded:
+    """Bounds shared by parameters and numeric options: ``lower``/``upper`` in ``unit``,
+    ``lower_open``/``upper_open`` make them strict (R > 0); non-finite values always violate."""
+
+    def violates(self, value: np.ndarray) -> np.ndarray:
+        bad = ~np.isfinite(value)
+        if self.lower is not None:
+            bad |= (value <= self.lower) if self.lower_open else (value < self.lower)
+        if self.upper is not None:
+            bad |= (value >= self.upper) if self.upper_open else (value > self.upper)
+        return bad
+
+    def bounds_text(self) -> str:
+        lo = "" if self.lower is None else f"{self.lower:g} {'<' if self.lower_open else '<='} "
+        hi = "" if self.upper is None else f" {'<' if self.upper_open else '<='} {self.upper:g}"
+        return f"{lo}value{hi}" + (f" [{self.unit}]" if self.unit else "") + ", finite"
+
+
+@dataclass(frozen=True)
+class Param(_Bounded):
+    """A numeric parameter: unit, default (a string with unit, or None = required), bounds.
+
+    Bounds are in ``unit``; ``lower_open``/``upper_open`` make them strict (R > 0).
+    """
+
+    unit: str
+    default: Any = None
+    lower: float | None = None
+    upper: float | None = None
+    lower_open: bool = False
+    upper_open: bool = False
+    doc: str = ""
+
+
+@dataclass(frozen=True)
+class Option(_Bounded):
+    """A structural, non-numeric setting (changes the equations or the state list).
+
+    Options are fixed when the circuit is assembled; changing one re-assembles.  ``kind``
+    bool, int or float is checked at load (a float option written as a YAML string such as
+    ``1e-20`` is read as a number); numeric options also have bounds like parameters (in
+    ``unit``, which is the option's fixed unit: options take plain numbers).
+    """
+
+    default: Any
+    choices: tuple | None = None
+    kind: type | tuple = object
+    doc: str = ""
+    lower: float | None = None
+    upper: float | None = None
+    lower_open: bool = False
+    upper_open: bool = False
+    unit: str = ""
+
+
+@dataclass(frozen=True)
+class State:
+    """A dynamic state: name, unit, and a natural scale (used for solver tolerances)."""
+
+    name: str
+    unit: str
+    scale: float
+    doc: str = ""
+
+
+@dataclass(frozen=True)
+class Observable:
+    """A quantity the element reports (name, unit).  ``state_only``: needs no pressures,
+    so other elements' parameters may follow it (see netlist expressions)."""
+
+    name: str
+    unit: str
+    doc: str = ""
+    state_only: bool = False
+
+
+@dataclass(frozen=True)
+class Storage:
+    """A volume store: flow through local nodes ``plus`` -> ``minus`` changes ``volume``.
+
+    ``volume`` names a state_only observable (mL).  ``state`` names the state that holds the
+    volume (None if the volume is derived, like an arteriolar bed's pi r^2 L n).  Used to find
+    conservation laws (nodes reached only through stores) generically.
+    """
+
+    plus: str
+    minus: str
+    volume: str
+    state: str | None = None
+
+
+@dataclass(frozen=True)
+class Drive:
+    """How an input signal drives an element (a source): the names of the parameters involved.
+
+    ``value``: the parameter an input drives (a source's value; the input of AC, linearisation
+    and the frequency response, and what source stepping ramps).  ``amplitude``, ``frequency``,
+    ``phase``, ``start``: the parameters of the element's built-in sine term
+    ``amplitude sin(2 pi frequency (t - start) + phase)`` for t >= start, added to the value
+    (what the frequency response and forced periodic orbits set), or None when it has none.
+    """
+
+    value: str
+    amplitude: str | None = None
+    frequency: str | None = None
+    phase: str | None = None
+    start: str | None = None
+
+    @property
+    def has_sine(self) -> bool:
+        """True when all four parameters of a built-in sine term are declared."""
+        return None not in (self.amplitude, self.frequency, self.phase, self.start)
+
+
+class Component:
+    """Base class of every element type.  Subclasses set the class attributes and hooks."""
+
+    #: name used as ``type:`` in netlists
+    type_name: str = ""
+    #: terminal names, in netlist ``nodes:`` order
+    terminals: tuple[str, ...] = ()
+    #: numeric parameters
+    parameters: dict[str, Param] = {}
+    #: structural options
+    options: dict[str, Option] = {}
+    #: topology role of the element's terminal pairs (for the validation pass):
+    #:   'conductive': a resistive path; 'pressure': fixes a pressure difference
+    #:   (source, compliance); 'flow': fixes the flow (inductor, flow source).
+    role: str = "conductive"
+    #: True when A_loc does not depend on states or time (stamped once per parameter set)
+    constant_matrix: bool = True
+    #: True when stamp() is affine in the pressures (no Newton iteration needed)
+    linear_in_pressure: bool = True
+    #: True when the element drives its branch from a time-dependent source value
+    time_dependent: bool = False
+
+    #: option overrides used while solving for a steady state (must not change the states)
+    steady_opts: dict = {}
+    #: parameters that accept a waveform mapping (``{pwl: ...}``, ``{sine: ...}``) in netlists
+    waveform_params: tuple[str, ...] = ()
+    #: the parameters an input signal drives (:class:`Drive`); None: the element is not a source
+    drive: Drive | None = None
+
+    def __init__(self, opts: dict | None = None):
+        self.opts = {k: o.default for k, o in self.options.items()}
+        self.opts.update(opts or {})
+
+    # --- structure (may depend on options) -------------------------------------------
+    def internal_nodes(self) -> tuple[str, ...]:
+        return ()
+
+    def branches(self) -> tuple[tuple[str, str], ...]:
+        """Pressure-defining branches (plus, minus) in local node names."""
+        return ()
+
+    def states(self) -> tuple[State, ...]:
+        return ()
+
+    def observables(self) -> tuple[Observable, ...]:
+        return ()
+
+    def storages(self) -> tuple[Storage, ...]:
+        return ()
+
+    def edges(self) -> tuple[tuple[str, str, str], ...]:
+        """(local node a, local node b, role) for the topology pass."""
+        t = self.terminals
+        return ((t[0], t[1], self.role),)
+
+    @property
+    def local_nodes(self) -> tuple[str, ...]:
+        return tuple(self.terminals) + tuple(self.internal_nodes())
+
+    def varies_in_time(self, p) -> bool:
+        """True if the stamps of these parameter values change with time (sources with a sine)."""
+        return self.time_dependent
+
+    # --- checks ------------------------------------------------------------------------
+    def check(self, p: dict[str, np.ndarray]) -> list[tuple[int, str]]:
+        """Cross-parameter physics checks beyond simple bounds: [(element index, message)]."""
+        return []
+
+    # --- numerical hooks (vectorised: see module docstring) -----------------------------
+    def stamp(self, p, x, u, t, src=None):
+        """(A_loc, b_loc): see the module docstring.  ``u`` is None for elements affine in the
+        pressures; for ``linear_in_pressure = False`` it is the current Newton iterate of the
+        local unknowns and the stamp is the linearisation there."""
+        raise NotImplementedError
+
+    def derivatives(self, p, x, u, t, src=None) -> np.ndarray:
+        """dx/dt, shape (B, E, S)."""
+        return np.zeros(x.shape)
+
+    def observe(self, p, x, u, t, src=None) -> dict[str, np.ndarray]:
+        """Observables (B, E) each.  ``u`` is None when only state_only ones are wanted."""
+        return {}
+
+    def default_states(self, p) -> np.ndarray:
+        """States to start the DC-guess iteration from, shape (B, E, S)."""
+        return np.zeros(next(iter(p.values())).shape + (len(self.states()),)) if p else np.zeros((1, 1, 0))
+
+    def initial_states(self, p, u, flows=None, x=None) -> np.ndarray:
+        """A state guess consistent with local pressures/branch flows ``u`` and terminal flows.
+
+        Used by the DC-guess iteration of the operating point; ``x`` is the previous guess.
+        """
+        return np.zeros(u.shape[:2] + (len(self.states()),))
+
+    # --- DC guess of the operating point ----------------------------------------------
+    def dc_stamp(self, p, A_loc, b_loc, keep):
+        """The element's stamp in the DC-guess network of the operating point, from its normal
+        stamp ``(A_loc, b_loc)`` (writable arrays, shapes as :meth:`stamp`; modify and return
+        them).  ``keep`` (bool, (E,)) marks elements that must keep their normal stamp: one
+        volume store per conservation law, which anchors the pressure of a node group joined
+        to the rest of the circuit only through opened stores.  Default: the normal stamp.
+        Volume stores open their branches (no flow); inductors short themselves."""
+        return A_loc, b_loc
+
+    # --- analytic derivatives (optional; used by hemocircuit.derivatives) -----------------
+    def state_partials(self, p, x, u, t, src=None):
+        """Analytic partial derivatives of the element's equations with respect to its own
+        states, at states ``x`` and local unknowns ``u`` (shapes as in :meth:`stamp`), or
+        None (the default: not provided; finite differences are used).  A dict of arrays
+        (leading axes may broadcast; L = K + M local unknowns, S states):
+          ``dA``    d A_loc / d x      (B, E, L, L, S)
+          ``db``    d b_loc / d x      (B, E, L, S)
+          ``df_dx`` d(dx/dt)/dx at fixed u   (B, E, S, S)
+          ``df_du`` d(dx/dt)/du at fixed x   (B, E, S, L)
+        hemocircuit.derivatives composes them through the nodal solve into the circuit's
+        state Jacobian when every component with states provides them."""
+        return None
+
+    def provides_state_partials(self) -> bool:
+        """True if the type implements :meth:`state_partials`."""
+        return type(self).state_partials is not Component.state_partials
+
+    def has_dc_stamp(self) -> bool:
+        """True if :meth:`dc_stamp` changes the stamp (by default: the type overrides it)."""
+        return type(self).dc_stamp is not Component.dc_stamp
+
+    def dc_short(self) -> bool:
+        """True if the element is a short circuit at steady state (inductors): the topology
+        pass counts it in loops of pressure-defining elements (no operating point)."""
+        return False
+
+    # --- time structure ------------------------------------------------------------------
+    def breakpoints(self, p, t0, t1) -> list[float]:
+        """Times in (t0, t1) where the element's stamp is discontinuous in time (a sine term
+        switching on), over every element of the group and every parameter set of ``p``; the
+        integrators restart there.  Waveform breakpoints are found by the circuit itself."""
+        return []
+
+    def hard_limits(self) -> tuple[tuple[str, float, str | None], ...]:
+        """``((state, lower bound, state reset to 0 at the bound or None), ...)``: the integration
+        stops when ``state`` reaches the bound, puts it on the bound and resets the rate state
+        (the arteriole's second-order Ca: ``(("Ca", 1e-12, "dCa"),)``)."""
+        return ()
+
+    def limited_states(self, p, x, rtol=1e-6) -> np.ndarray:
+        """Bool (B, E, S): states sitting at a hard limit of the element's dynamics (flagged by
+        the stability analysis).  Default: the states within ``rtol`` of a :meth:`hard_limits`
+        bound."""
+        names = [s.name for s in self.states()]
+        out = np.zeros(x.shape, dtype=bool)
+        for name, bound, _ in self.hard_limits():
+            j = names.index(name)
+            out[..., j] = x[..., j] <= bound + rtol * max(abs(bound), 1e-300)
+        return out
+
+    def physical_limits(self) -> dict:
+        """``{observable or state name: (lower, upper)}``: the range a physical solution stays
+        in, in the quantity's declared unit (None: unbounded), e.g. a stored volume ``V >= 0``
+        (``{"V": (0.0, None)}``).  :mod:`hemocircuit.plausibility` warns, naming the element,
+        when an operating point or a run leaves it.  Default: none."""
+        return {}
+
+    # --- defaults and reporting -----------------------------------------------------------
+    def defaults(self) -> dict:
+        """Parameter values that replace the declared defaults for these options (a preset):
+        ``{name: number in the declared unit}``."""
+        return {}
+
+    def drive_output(self, eid: str, nodes: list) -> str | None:
+        """The output column that holds the driven quantity of element ``eid`` on ``nodes``
+        (a pressure source to ground: ``P(node)``; a flow source: ``Q(eid)``), or None."""
+        return None
+
+    def outputs_of_interest(self) -> tuple[str, ...]:
+        """Names of states/observables an analysis reports by default when the netlist declares
+        no ``outputs:`` (columns ``ID.name``, or ``V(ID)`` for a volume), e.g. ``("r",)``."""
+        return ()
+
+    def volume_observables(self) -> tuple[str, ...]:
+        """Observables reported as ``V(ID)`` rather than ``ID.name`` (stored volumes)."""
+        return tuple(s.volume for s in self.storages())
+
+    # --- compiled path (hemocircuit.kernels) --------------------------------------------
+    def kernel(self):
+        """The type's compiled equations (:class:`hemocircuit.kernels.Kernel`), or None when the
+        type runs only on the numpy path (circuits containing it then run on that path)."""
+        return None
+
+    def kernel_options(self) -> np.ndarray:
+        """This instance's structural options as an int64 array, read by the kernel's functions."""
+        return np.zeros(0, dtype=np.int64)
+
+
+
+def two_terminal_conductance(g: np.ndarray, j: np.ndarray | None = None):
+    """MNA stamp of flow q = g (Pa - Pb) + j from terminal a to terminal b.
+
+    Returns (A_loc, b_loc) with shapes (B, E, 2, 2) and (B, E, 2).
+    """
+    A = np.empty(g.shape + (2, 2))
+    A[..., 0, 0] = g
+    A[..., 0, 1] = -g
+    A[..., 1, 0] = -g
+    A[..., 1, 1] = g
+    b = np.zeros(g.shape + (2,))
+    if j is not None:
+        b[..., 0] = -j
+        b[..., 1] = j
+    return A, b
+
+
+def pressure_branch(value: np.ndarray):
+    """MNA stamp of a pressure-defining branch P_a - P_b = value between two terminals.
+
+    Local unknowns: [P_a, P_b, I] with I the flow from a through the element to b.
+    """
+    shape = value.shape
+    A = np.zeros(shape + (3, 3))
+    A[..., 0, 2] = 1.0   # I leaves node a
+    A[..., 1, 2] = -1.0  # and enters node b
+    A[..., 2, 0] = 1.0
+    A[..., 2, 1] = -1.0
+    b = np.zeros(shape + (3,))
+    b[..., 2] = value
+    return A, b
+
+
+def flow_branch(q: np.ndarray):
+    """MNA stamp of an imposed flow q from terminal a to terminal b."""
+    A = np.zeros(q.shape + (2, 2))
+    b = np.empty(q.shape + (2,))
+    b[..., 0] = -q
+    b[..., 1] = q
+    return A, b

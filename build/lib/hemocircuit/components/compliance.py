@@ -1,0 +1,245 @@
+"""Compliances (vascular volume stores).  State: stored volume V [mL].
+
+``compliance``      linear:       P(node) - P(ref) = (V - V0)/C
+``log_compliance``  Payne06 (thesis eqs. Cv, P2; Payne 2006 eqs. 5-6):
+                    V = Vn + ln(dP - P0)/k,  C = dV/d(dP) = 1/(k (dP - P0)),
+                    i.e. dP = P0 + exp(k (V - Vn)), defined for every V (no log of a pressure).
+Both are pressure-defining branches whose flow fills the store: dV/dt = flow node -> ref.
+``clamp_at_zero`` (log law, default true; MODEL_NOTES "compartments collapse"): the volume
+cannot fall below 0 -- at the limit its derivative is held at zero.
+"""
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from hemocircuit.component import Component, Observable, Option, Param, State, Storage, pressure_branch
+
+_jit = numba.njit(cache=True, nogil=True, error_model="numpy")
+
+
+class _Store(Component):
+    terminals = ("node", "ref")
+    role = "pressure"
+    options = {"clamp_at_zero": Option(False, kind=bool, doc="hold V >= 0 (dV/dt = 0 at the limit)")}
+
+    def branches(self):
+        return (("node", "ref"),)
+
+    def states(self):
+        return (State("V", "mL", 1.0, "stored volume"),)
+
+    def storages(self):
+        return (Storage("node", "ref", "V", state="V"),)
+
+    def observables(self):
+        return (Observable("V", "mL", "stored volume", state_only=True),
+                Observable("C", "mL/mmHg", "compliance dV/dP", state_only=True))
+
+    def physical_limits(self):
+        """A stored volume is not negative (mL)."""
+        return {"V": (0.0, None)}
+
+    def dc_stamp(self, p, A_loc, b_loc, keep):
+        """Open: the branch flows are 0 (except on the stores in ``keep``)."""
+        opened = ~np.asarray(keep, dtype=bool)
+        K = len(self.local_nodes)
+        for m in range(len(self.branches())):
+            r = K + m
+            A_loc[:, opened, r, :] = 0.0
+            A_loc[:, opened, r, r] = 1.0  # branch flow = 0
+            b_loc[:, opened, r] = 0.0
+        return A_loc, b_loc
+
+    def limited_states(self, p, x, rtol=1e-6):
+        """A clamped store collapsed to V <= 0 (the steady variant continues it below 0)."""
+        out = super().limited_states(p, x, rtol)
+        if self.opts["clamp_at_zero"]:
+            out[..., 0] |= x[..., 0] <= 0.0
+        return out
+
+    def pressure(self, p, V):
+        raise NotImplementedError
+
+    def volume(self, p, dP):
+        raise NotImplementedError
+
+    def stamp(self, p, x, u, t, src=None):
+        return pressure_branch(self.pressure(p, x[..., 0]))
+
+    def derivatives(self, p, x, u, t, src=None):
+        q = u[..., 2]
+        if self.opts["clamp_at_zero"]:
+            q = np.where((x[..., 0] <= 0.0) & (q < 0.0), 0.0, q)
+        return q[..., None]
+
+    def initial_states(self, p, u, flows=None, x=None):
+        return self.volume(p, u[..., 0] - u[..., 1])[..., None]
+
+    def observe(self, p, x, u, t, src=None):
+        V = x[..., 0]
+        collapsed = self.opts["clamp_at_zero"] or self.opts.get("extended", False)
+        return {"V": np.maximum(V, 0.0) if collapsed else V, "C": self.compliance(p, V)}
+
+    # --- compiled path (hemocircuit.kernels; functions at the end of this module) ----------
+    def kernel_options(self):
+        """[clamp_at_zero (0|1), extended (0|1)] (``extended`` is always 0 for the linear law)."""
+        return np.array([int(bool(self.opts["clamp_at_zero"])), int(bool(self.opts.get("extended", False)))],
+                        dtype=np.int64)
+
+
+class LinearCompliance(_Store):
+    """Linear compliance C [mL/mmHg] with unstressed volume V0 [mL]."""
+
+    type_name = "compliance"
+    parameters = {"C": Param("mL/mmHg", lower=0.0, lower_open=True, doc="compliance"),
+                  "V0": Param("mL", default="0 mL", doc="unstressed volume")}
+
+    def pressure(self, p, V):
+        return (V - p["V0"]) / p["C"]
+
+    def kernel(self):
+        from hemocircuit.kernels import Kernel
+        return Kernel(stamp=linear_stamp, derivs=store_derivs, observe=linear_observe, observables=("V", "C"))
+
+    def volume(self, p, dP):
+        return p["V0"] + p["C"] * dP
+
+    def compliance(self, p, V):
+        return p["C"] + 0.0 * V
+
+    def state_partials(self, p, x, u, t, src=None):
+        """Branch P_node - P_ref = (V - V0)/C: d b_loc[branch]/dV = 1/C; dV/dt = q (the branch
+        flow, local unknown 2), held at 0 by the clamp where V <= 0 and q < 0."""
+        V = x[..., 0]
+        shape = V.shape
+        dA = np.zeros(shape + (3, 3, 1))
+        db = np.zeros(shape + (3, 1))
+        db[..., 2, 0] = 1.0 / p["C"]
+        df_dx = np.zeros(shape + (1, 1))
+        df_du = np.zeros(shape + (1, 3))
+        flowing = np.ones(shape)
+        if self.opts["clamp_at_zero"]:
+            flowing = np.where((V <= 0.0) & (u[..., 2] < 0.0), 0.0, 1.0)
+        df_du[..., 0, 2] = flowing
+        return {"dA": dA, "db": db, "df_dx": df_dx, "df_du": df_du}
+
+
+class LogCompliance(_Store):
+    """Payne06 logarithmic compliance: V = Vn + ln(dP - P0)/k, k [1/mL] > 0."""
+
+    type_name = "log_compliance"
+    parameters = {"k": Param("1/mL", lower=0.0, lower_open=True, doc="stiffness coefficient"),
+                  "P0": Param("mmHg", doc="pressure offset (P_v1, P_a1)"),
+                  "Vn": Param("mL", doc="volume offset (V_vn, V_an)")}
+    options = {"clamp_at_zero": Option(True, kind=bool, doc="hold V >= 0 (dV/dt = 0 at the limit)"),
+               "extended": Option(False, kind=bool, doc="continue the law linearly below dP - P0 = EPS")}
+    #: steady states follow the thesis (section brainSS): pressures from the resistive network
+    #: even where dP <= P0 (a collapsed compartment, reported with V = 0), so the law is
+    #: continued linearly below dP - P0 = EPS while solving, and the clamp is off
+    steady_opts = {"clamp_at_zero": False, "extended": True}
+    EPS = 1e-3  # mmHg
+
+    def kernel(self):
+        from hemocircuit.kernels import Kernel
+        return Kernel(stamp=log_stamp, derivs=store_derivs, observe=log_observe, observables=("V", "C"))
+
+    def pressure(self, p, V):
+        k, P0, Vn = p["k"], p["P0"], p["Vn"]
+        if not self.opts["extended"]:
+            return P0 + np.exp(np.minimum(k * (V - Vn), 700.0))
+        V_eps = Vn + np.log(self.EPS) / k
+        # C1 continuation: slope d(dP)/dV = k EPS at V_eps
+        return P0 + np.where(V >= V_eps, np.exp(np.minimum(k * (np.maximum(V, V_eps) - Vn), 700.0)), self.EPS * (1 + k * (V - V_eps)))
+
+    def volume(self, p, dP):
+        k, P0, Vn = p["k"], p["P0"], p["Vn"]
+        e = dP - P0
+        V_eps = Vn + np.log(self.EPS) / k
+        return np.where(e >= self.EPS, Vn + np.log(np.maximum(e, self.EPS)) / k, V_eps + (e / self.EPS - 1) / k)
+
+    def compliance(self, p, V):
+        k = p["k"]
+        V_eps = p["Vn"] + np.log(self.EPS) / k
+        return np.where(V >= V_eps, np.exp(-k * (np.maximum(V, V_eps) - p["Vn"])) / k, 1.0 / (k * self.EPS))
+
+
+# --- compiled path (hemocircuit.kernels contract) -------------------------------------------
+# Local unknowns [P_node, P_ref, q] (q: flow node -> ref through the store), state [V] (mL).
+# p: compliance [C, V0]; log_compliance [k, P0, Vn].  iopt: [clamp_at_zero, extended].
+# Observables (state-only, in order): V, C.  Every expression follows the numpy code above.
+_EPS = LogCompliance.EPS  # compile-time constants of the kernels [mmHg], and numpy's log of it
+_LOG_EPS = float(np.log(_EPS))
+
+
+@_jit
+def _branch(value, A, b):
+    A[0, 2] = 1.0
+    A[1, 2] = -1.0
+    A[2, 0] = 1.0
+    A[2, 1] = -1.0
+    b[2] = value
+
+
+@_jit
+def store_derivs(p, x, u, t, iopt, dx):
+    q = u[2]
+    if iopt[0] != 0 and x[0] <= 0.0 and q < 0.0:
+        q = 0.0
+    dx[0] = q
+
+
+@_jit
+def _observed_volume(V, iopt):
+    if (iopt[0] != 0 or iopt[1] != 0) and V < 0.0:  # np.maximum(V, 0): NaN stays NaN
+        return 0.0
+    return V
+
+
+@_jit
+def linear_stamp(p, x, u, t, iopt, A, b):
+    _branch((x[0] - p[1]) / p[0], A, b)
+
+
+@_jit
+def linear_observe(p, x, iopt, out):
+    V = x[0]
+    out[0] = _observed_volume(V, iopt)
+    out[1] = p[0] + 0.0 * V
+
+
+@_jit
+def _exp_clipped(a):
+    if a > 700.0:  # np.minimum(a, 700): NaN stays NaN
+        a = 700.0
+    return math.exp(a)
+
+
+@_jit
+def log_pressure(k, P0, Vn, V, extended):
+    """LogCompliance.pressure for one element."""
+    if not extended:
+        return P0 + _exp_clipped(k * (V - Vn))
+    V_eps = Vn + _LOG_EPS / k
+    if V >= V_eps:  # then np.maximum(V, V_eps) is V
+        return P0 + _exp_clipped(k * (V - Vn))
+    return P0 + _EPS * (1 + k * (V - V_eps))
+
+
+@_jit
+def log_stamp(p, x, u, t, iopt, A, b):
+    _branch(log_pressure(p[0], p[1], p[2], x[0], iopt[1] != 0), A, b)
+
+
+@_jit
+def log_observe(p, x, iopt, out):
+    k, Vn = p[0], p[2]
+    V = x[0]
+    out[0] = _observed_volume(V, iopt)
+    V_eps = Vn + _LOG_EPS / k
+    if V >= V_eps:
+        out[1] = math.exp(-k * (V - Vn)) / k
+    else:
+        out[1] = 1.0 / (k * _EPS)

@@ -1,0 +1,136 @@
+"""Ideal pressure and flow sources (constant, waveform, or built-in sine term).
+
+value(t) = value + waveform(t) + amplitude * sin(2 pi frequency (t - start) + phase) for t >= start.
+The built-in sine term has numeric parameters so that a batch of frequency-response runs can
+give every member its own frequency; general waveforms are given in ``value`` (see waveforms).
+"""
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from hemocircuit.component import Component, Drive, Param, flow_branch, pressure_branch
+from hemocircuit.netlist import GROUND
+
+_jit = numba.njit(cache=True, nogil=True, error_model="numpy")
+
+
+def _sine_term(p, t):
+    t = np.asarray(t, dtype=float)
+    on = t >= p["start"]
+    return np.where(on, p["amplitude"] * np.sin(2 * np.pi * p["frequency"] * (t - p["start"]) + p["phase"]), 0.0)
+
+
+#: a source's input is its value; its built-in sine term has the parameters below
+_DRIVE = Drive(value="value", amplitude="amplitude", frequency="frequency", phase="phase", start="start")
+
+
+def _sine_breakpoints(p, t0, t1):
+    """Sine starts in (t0, t1) of the elements whose sine term is on (amplitude != 0)."""
+    start = np.asarray(p["start"], dtype=float)
+    amp = np.broadcast_to(p["amplitude"], start.shape)
+    return sorted({float(s) for s, a in zip(start.reshape(-1), amp.reshape(-1)) if a != 0 and t0 < s < t1})
+
+
+def _sine_params(unit):
+    return {
+        "amplitude": Param(unit, default=f"0 {unit}", doc="amplitude of the built-in sine term"),
+        "frequency": Param("Hz", default="0 Hz", lower=0.0, doc="frequency of the built-in sine term"),
+        "phase": Param("rad", default="0 rad", doc="phase of the built-in sine term"),
+        "start": Param("s", default="0 s", lower=0.0, doc="time the sine term starts"),
+    }
+
+
+# --- compiled path (hemocircuit.kernels contract) -------------------------------------------
+# p = [value, amplitude, frequency, phase, start] (the ``parameters`` order); the circuit kernel
+# has already added the waveform value ``src`` to p[0].  No states, options or observables.
+# pressure_source: local unknowns [P_node, P_ref, q]; flow_source: [P_a, P_b].
+@_jit
+def kernel_value(p, t):
+    """value(t) = p[value] + the built-in sine term (as PressureSource.value with src in p[0])."""
+    s = 0.0
+    if t >= p[4]:
+        s = p[1] * math.sin(2 * np.pi * p[2] * (t - p[4]) + p[3])
+    return p[0] + s
+
+
+@_jit
+def pressure_stamp(p, x, u, t, iopt, A, b):
+    A[0, 2] = 1.0
+    A[1, 2] = -1.0
+    A[2, 0] = 1.0
+    A[2, 1] = -1.0
+    b[2] = kernel_value(p, t)
+
+
+@_jit
+def flow_stamp(p, x, u, t, iopt, A, b):
+    q = kernel_value(p, t)
+    b[0] = -q
+    b[1] = q
+
+
+
+
+class PressureSource(Component):
+    """Imposes P(node) - P(ref) = value(t) [mmHg]; supplies whatever flow the circuit draws."""
+
+    type_name = "pressure_source"
+    terminals = ("node", "ref")
+    parameters = {"value": Param("mmHg", doc="constant pressure (or a waveform)"), **_sine_params("mmHg")}
+    waveform_params = ("value",)
+    drive = _DRIVE
+    role = "pressure"
+    time_dependent = True
+
+    def branches(self):
+        return (("node", "ref"),)
+
+    def varies_in_time(self, p):
+        return bool(np.any(p["amplitude"] != 0))
+
+    def breakpoints(self, p, t0, t1):
+        return _sine_breakpoints(p, t0, t1)
+
+    def drive_output(self, eid, nodes):
+        """P(node) when the reference is ground (otherwise no column holds the difference)."""
+        return f"P({nodes[0]})" if nodes[1] == GROUND and nodes[0] != GROUND else None
+
+    def value(self, p, t, src):
+        return p["value"] + (0.0 if src is None else src) + _sine_term(p, t)
+
+    def stamp(self, p, x, u, t, src=None):
+        return pressure_branch(self.value(p, t, src) + np.zeros(x.shape[:2]))
+
+    def kernel(self):
+        from hemocircuit.kernels import Kernel
+        from hemocircuit.kernels.stateless import no_derivs, no_observables
+        return Kernel(stamp=pressure_stamp, derivs=no_derivs, observe=no_observables, observables=())
+
+
+class FlowSource(Component):
+    """Imposes a flow value(t) [mL/s] from terminal ``a`` through the source to ``b``."""
+
+    type_name = "flow_source"
+    terminals = ("a", "b")
+    parameters = {"value": Param("mL/s", doc="constant flow (or a waveform)"), **_sine_params("mL/s")}
+    waveform_params = ("value",)
+    drive = _DRIVE
+    role = "flow"
+    time_dependent = True
+
+    varies_in_time = PressureSource.varies_in_time
+    breakpoints = PressureSource.breakpoints
+
+    def drive_output(self, eid, nodes):
+        return f"Q({eid})"
+
+    def stamp(self, p, x, u, t, src=None):
+        return flow_branch(PressureSource.value(self, p, t, src) + np.zeros(x.shape[:2]))
+
+    def kernel(self):
+        from hemocircuit.kernels import Kernel
+        from hemocircuit.kernels.stateless import no_derivs, no_observables
+        return Kernel(stamp=flow_stamp, derivs=no_derivs, observe=no_observables, observables=())

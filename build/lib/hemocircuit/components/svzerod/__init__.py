@@ -1,0 +1,20 @@
+"""Blocks of SimVascular's svZeroDSolver as hemocircuit components (one block per module).
+
+Each module cites the svZeroDSolver source file its equations come from
+(src/model/*.cpp at commit c7b0ca09).  The importer (hemocircuit.svzerod) maps their JSON
+blocks to these types; docs/svzerod.md lists the mapping.
+"""
+from .blood_vessel import BloodVessel
+from .blood_vessel_crl import BloodVesselCRL
+from .coronary_bc import CoronaryBC
+from .rcr_bc import RCRBC
+from .resistance_bc import ResistanceBC
+from .valve_tanh import ValveTanh
+from .piecewise_valve import PiecewiseValve
+from .chamber_elastance_inductor import ChamberElastanceInductor
+from .linear_elastance_chamber import LinearElastanceChamber
+from .closed_loop_rcr import ClosedLoopRCR
+from .closed_loop_heart_pulmonary import ClosedLoopHeartAndPulmonary
+
+__all__ = ["BloodVessel", "BloodVesselCRL", "ChamberElastanceInductor", "ClosedLoopHeartAndPulmonary", "ClosedLoopRCR",
+           "CoronaryBC", "LinearElastanceChamber", "PiecewiseValve", "RCRBC", "ResistanceBC", "ValveTanh"]

@@ -1,0 +1,32 @@
+"""Shared pieces of the svZeroDSolver blocks (components/svzerod/).
+
+Their vessels carry a flow-dependent stenosis resistance: pressure drop (R + S|q|) q
+(svZeroDSolver src/model/BloodVessel.cpp, "stenosis_resistance = stenosis_coeff * fabs(q_in)").
+In the nodal equations this is a branch row  P_a - P_b - f(q) = rhs, linearised at the
+current iterate q0 (f'(q0) = R + 2 S |q0|).
+"""
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+jit = numba.njit(cache=True, nogil=True, error_model="numpy")
+
+#: units of the blocks' parameters (the circuit's units: mmHg, mL, s)
+R_UNIT = "mmHg*s/mL"
+C_UNIT = "mL/mmHg"
+L_UNIT = "mmHg*s**2/mL"
+S_UNIT = "mmHg*s**2/mL**2"
+E_UNIT = "mmHg/mL"
+
+
+def stenosis_linearised(R, S, q0):
+    """(slope, offset) of f(q) = (R + S|q|) q linearised at q0: f ~ slope q + offset."""
+    a = np.abs(q0)
+    return R + 2.0 * S * a, -S * a * q0
+
+
+@jit
+def k_stenosis_linearised(R, S, q0):
+    a = abs(q0)
+    return R + 2.0 * S * a, -S * a * q0

@@ -1,0 +1,147 @@
+"""Elastance activation functions of svZeroDSolver's chambers (a periodic function of time).
+
+Equations from SimVascular/svZeroDSolver src/model/ActivationFunction.cpp (commit c7b0ca09):
+  half_cosine       t_c = max(0, fmod(t, T) - t_active); A = 0.5 - 0.5 cos(2 pi t_c / t_twitch)
+                    while t_c <= t_twitch, else 0
+  piecewise_cosine  s = fmod(t - contract_start, T): 0.5 (1 - cos(pi s / contract_duration)) for
+                    0 <= s < contract_duration; else s = fmod(t - relax_start, T):
+                    0.5 (1 + cos(pi s / relax_duration)) for 0 <= s < relax_duration; else 0
+  two_hill          s = (fmod(t, T) - t_shift) mod T; g1 = (s/tau_1)^m1, g2 = (s/tau_2)^m2;
+                    A = N g1/(1 + g1) / (1 + g2), N = 1 / max over [0, T) of the same product
+  wrapping_cosine   Tsa' = T Tsa, tp = T / tpwave, tc = fmod(t, T):
+                    tc <= tp: 0.5 (1 - cos(2 pi (tc - tp + Tsa')/Tsa'));
+                    T - Tsa' + tp <= tc < T: 0.5 (1 - cos(2 pi (tc - tp - (T - Tsa'))/Tsa')); else 0
+fmod is C's (sign of the dividend), as in their code: piecewise_cosine is 0 before its first
+contraction start.  Their two_hill normalisation scans [0, T) with a 1e-5 s step; here the
+maximum is found exactly: d/ds log A = 0 at m1/(1 + g1) = m2 g2/(1 + g2), whose left side
+minus right side decreases in s, so bisection finds it (then the maximum over [0, T) is at
+min(s*, T)).  The 25-mode ``fourier`` activation is not implemented (its normalisation needs
+a min/max scan per parameter set).
+
+Chamber components take these as parameters (``ACT_PARAMS``, times in s, the rest
+dimensionless) and the option ``activation``; only the parameters of the chosen function are used.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from hemocircuit.component import Param
+
+from ._common import jit
+
+KINDS = ("half_cosine", "piecewise_cosine", "two_hill", "wrapping_cosine")
+
+#: (name, unit) in the order the kernels read them
+ACT_PARAMS = (("t_active", "s"), ("t_twitch", "s"),
+              ("contract_start", "s"), ("relax_start", "s"), ("contract_duration", "s"), ("relax_duration", "s"),
+              ("t_shift", "s"), ("tau_1", "s"), ("tau_2", "s"), ("m1", "dimensionless"), ("m2", "dimensionless"),
+              ("Tsa", "dimensionless"), ("tpwave", "dimensionless"))
+
+#: the parameters each function needs (checked > 0 where they divide)
+USED = {"half_cosine": ("t_active", "t_twitch"),
+        "piecewise_cosine": ("contract_start", "relax_start", "contract_duration", "relax_duration"),
+        "two_hill": ("t_shift", "tau_1", "tau_2", "m1", "m2"),
+        "wrapping_cosine": ("Tsa", "tpwave")}
+POSITIVE = ("t_twitch", "contract_duration", "relax_duration", "tau_1", "tau_2", "m1", "m2", "Tsa", "tpwave")
+
+
+#: defaults: the values of their test cases (chamber_elastance_inductor, piecewise_Chamber_and_Valve
+#: ventricle, closed_loop_two_hill LV, closedLoopHeart_singleVessel atria)
+_DEFAULTS = {"t_active": 0.2, "t_twitch": 0.3, "contract_start": 0.207, "relax_start": 0.29625,
+             "contract_duration": 0.08925, "relax_duration": 0.26975, "t_shift": 0.207, "tau_1": 0.18551724137931036,
+             "tau_2": 0.31172413793103454, "m1": 1.32, "m2": 27.4, "Tsa": 0.40742, "tpwave": 8.976868}
+
+
+def act_parameters():
+    """Component parameter declarations of the activation functions (defaults: _DEFAULTS)."""
+    out = {"period": Param("s", default="1 s", lower=0.0, lower_open=True, doc="cardiac period T")}
+    for name, unit in ACT_PARAMS:
+        d = _DEFAULTS[name]
+        out[name] = Param(unit, default=f"{d} {unit}" if unit != "dimensionless" else str(d),
+                          doc=f"activation parameter (used by {', '.join(k for k in KINDS if name in USED[k])})")
+    return out
+
+
+def check_activation(kind, p):
+    """Cross-parameter checks: the chosen function's dividing parameters are > 0."""
+    out = []
+    for name in USED[kind]:
+        if name in POSITIVE:
+            bad = np.any(np.asarray(p[name]) <= 0, axis=tuple(range(np.ndim(p[name]) - 1)))
+            for i in np.nonzero(np.atleast_1d(bad))[0]:
+                out.append((int(i), f"activation {kind} needs {name} > 0"))
+    return out
+
+
+@jit
+def _two_hill_max(T, tau1, tau2, m1, m2):
+    lo, hi = math.log(T) - 40.0, math.log(T)
+    s = T
+    g1 = (s / tau1) ** m1
+    g2 = (s / tau2) ** m2
+    if m1 / (1.0 + g1) - m2 * g2 / (1.0 + g2) < 0.0:  # the maximum lies inside (0, T)
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            s = math.exp(mid)
+            g1 = (s / tau1) ** m1
+            g2 = (s / tau2) ** m2
+            if m1 / (1.0 + g1) - m2 * g2 / (1.0 + g2) > 0.0:
+                lo = mid
+            else:
+                hi = mid
+        s = math.exp(0.5 * (lo + hi))
+    g1 = (s / tau1) ** m1
+    g2 = (s / tau2) ** m2
+    return g1 / (1.0 + g1) / (1.0 + g2)
+
+
+@jit
+def activation(kind, t, T, a):
+    """Activation in [0, 1] at time t for period T; ``a`` the 13 ACT_PARAMS in order."""
+    if kind == 0:  # half_cosine
+        tc = np.fmod(t, T)
+        t_contract = tc - a[0] if tc >= a[0] else 0.0
+        if t_contract <= a[1]:
+            return -0.5 * math.cos(2.0 * math.pi * t_contract / a[1]) + 0.5
+        return 0.0
+    if kind == 1:  # piecewise_cosine
+        s = np.fmod(t - a[2], T)
+        if 0.0 <= s and s < a[4]:
+            return 0.5 * (1.0 - math.cos(math.pi * s / a[4]))
+        s = np.fmod(t - a[3], T)
+        if 0.0 <= s and s < a[5]:
+            return 0.5 * (1.0 + math.cos(math.pi * s / a[5]))
+        return 0.0
+    if kind == 2:  # two_hill
+        tc = np.fmod(t, T)
+        s = np.fmod(tc - a[6], T)
+        if s < 0.0:
+            s += T
+        g1 = (s / a[7]) ** a[9]
+        g2 = (s / a[8]) ** a[10]
+        return g1 / (1.0 + g1) / (1.0 + g2) / _two_hill_max(T, a[7], a[8], a[9], a[10])
+    # wrapping_cosine
+    Tsa = T * a[11]
+    tp = T / a[12]
+    tc = np.fmod(t, T)
+    if tc <= tp:
+        return 0.5 * (1.0 - math.cos(2.0 * math.pi * (tc - tp + Tsa) / Tsa))
+    if tc >= (T - Tsa) + tp and tc < T:
+        return 0.5 * (1.0 - math.cos(2.0 * math.pi * (tc - tp - (T - Tsa)) / Tsa))
+    return 0.0
+
+
+def activation_np(kind, t, p):
+    """Activation for every parameter set and element: p[name] arrays (B, E) -> (B, E) (``t``
+    a float or an array broadcasting with them)."""
+    k = KINDS.index(kind)
+    shape = np.broadcast_shapes(np.shape(t), *(np.shape(p[n]) for n in ("period",) + tuple(n for n, _ in ACT_PARAMS)))
+    tt = np.broadcast_to(np.asarray(t, float), shape)
+    T = np.broadcast_to(np.asarray(p["period"], float), shape)
+    a = np.stack([np.broadcast_to(np.asarray(p[n], float), shape) for n, _ in ACT_PARAMS], axis=-1)
+    out = np.empty(T.shape)
+    for idx in np.ndindex(T.shape):
+        out[idx] = activation(k, float(tt[idx]), float(T[idx]), np.ascontiguousarray(a[idx]))
+    return out

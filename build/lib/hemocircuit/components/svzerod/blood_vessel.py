@@ -1,0 +1,266 @@
+"""svZeroDSolver ``BloodVessel``: resistor (with stenosis), capacitor and inductor.
+
+Equations (SimVascular/svZeroDSolver src/model/BloodVessel.cpp, ``update_gradient`` residual):
+    P_in - (R + S|Q_in|) Q_in - P_out - L dQ_out/dt = 0
+    Q_in - Q_out - C d/dt[P_in - (R + S|Q_in|) Q_in] = 0
+i.e. inlet -> R (+ stenosis S|Q|) -> node c -> L -> outlet, with C from c to the reference
+(absolute zero pressure: the ``ref`` terminal is ground in imported models).
+Units: R_poiseuille [mmHg*s/mL], C [mL/mmHg], L [mmHg*s^2/mL], stenosis_coefficient S
+[mmHg*s^2/mL^2]; the importer converts their cgs values.
+
+C = 0 or L = 0 removes the state, so the structure is chosen by two options (set by the
+importer from the values): ``capacitive`` (C > 0) and ``inductive`` (L > 0).
+States: V = C * P_c [mL] (stored volume above zero pressure) when capacitive, and Q_out [mL/s]
+(the inductor's flow) when inductive.  Local unknowns (terminals in, out, ref):
+  R   : branch (in, out) carrying q = Q_in = Q_out
+  RC  : branches (in, ref) carrying Q_in and (out, ref) with P_out = P_c (carrying -Q_out)
+  RL  : no branch; the state Q_out is imposed from in to out
+  RCL : branch (in, ref) carrying Q_in; Q_out imposed from ref to out
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from hemocircuit.component import Component, Observable, Option, Param, State, Storage
+
+from ._common import C_UNIT, L_UNIT, R_UNIT, S_UNIT, jit, k_stenosis_linearised, stenosis_linearised
+
+_PARAMS = {
+    "R_poiseuille": Param(R_UNIT, lower=0.0, doc="Poiseuille resistance"),
+    "C": Param(C_UNIT, default=f"0 {C_UNIT}", lower=0.0, doc="capacitance (used when capacitive)"),
+    "L": Param(L_UNIT, default=f"0 {L_UNIT}", lower=0.0, doc="inductance (used when inductive)"),
+    "stenosis_coefficient": Param(S_UNIT, default=f"0 {S_UNIT}", lower=0.0,
+                                  doc="stenosis coefficient: extra resistance S|Q|"),
+}
+
+
+class _Vessel(Component):
+    """Common structure of BloodVessel and BloodVesselCRL (options, states, DC stamp)."""
+
+    terminals = ("in", "out", "ref")
+    parameters = _PARAMS
+    options = {"capacitive": Option(False, kind=bool, doc="has the capacitor (C > 0)"),
+               "inductive": Option(False, kind=bool, doc="has the inductor (L > 0)")}
+    linear_in_pressure = False
+    constant_matrix = False
+
+    @property
+    def cap(self):
+        return bool(self.opts["capacitive"])
+
+    @property
+    def ind(self):
+        return bool(self.opts["inductive"])
+
+    def check(self, p):
+        out = []
+        for i in range(np.shape(p["C"])[-1]):
+            if self.cap and np.any(p["C"][..., i] <= 0):
+                out.append((i, "capacitive vessel needs C > 0 (set capacitive: false for C = 0)"))
+            if self.ind and np.any(p["L"][..., i] <= 0):
+                out.append((i, "inductive vessel needs L > 0 (set inductive: false for L = 0)"))
+        return out
+
+    def states(self):
+        s = ()
+        if self.cap:
+            s += (State("V", "mL", 1.0, "volume of the capacitor (C * its pressure)"),)
+        if self.ind:
+            s += (State("Q_out", "mL/s", 10.0, "outlet flow (inductor)"),)
+        return s
+
+    def observables(self):
+        v = (Observable("V", "mL", "volume of the capacitor", state_only=True),) if self.cap else ()
+        return v + (Observable("Q_in", "mL/s", "flow into the inlet"),
+                    Observable("Q_out", "mL/s", "flow out of the outlet"))
+
+    def storages(self):
+        """The capacitor is a volume store (closed loops conserve the blood volume); its
+        terminals are those of the edge that carries its flow to the reference."""
+        if not self.cap:
+            return ()
+        return (Storage(*self._store_edge(), volume="V", state="V"),)
+
+    def _store_edge(self):
+        return ("in", "ref")
+
+    def _restore_kept(self, keep, orig, A_loc, b_loc):
+        """Stores anchoring a conservation law keep their normal stamp in the DC guess."""
+        kept = np.asarray(keep, dtype=bool)
+        if self.cap and kept.any():
+            A_loc[:, kept] = orig[0][:, kept]
+            b_loc[:, kept] = orig[1][:, kept]
+        return A_loc, b_loc
+
+    def kernel_options(self):
+        return np.array([int(self.cap), int(self.ind)], dtype=np.int64)
+
+    def dc_short(self):
+        return self.ind and not self.cap
+
+
+class BloodVessel(_Vessel):
+    __doc__ = __doc__
+    type_name = "blood_vessel"
+
+    def branches(self):
+        if self.cap:
+            return (("in", "ref"), ("out", "ref")) if not self.ind else (("in", "ref"),)
+        return () if self.ind else (("in", "out"),)
+
+    def edges(self):
+        if not self.cap:
+            return (("in", "out", "flow" if self.ind else "conductive"),)
+        if self.ind:  # R + C from in to the reference, L on to out
+            return (("in", "ref", "conductive"), ("in", "out", "flow"))
+        return (("in", "out", "conductive"), ("out", "ref", "pressure"))  # R, then C at out
+
+    def _store_edge(self):
+        return ("in", "ref") if self.ind else ("out", "ref")
+
+    def stamp(self, p, x, u, t, src=None):
+        R, S = p["R_poiseuille"], p["stenosis_coefficient"]
+        L = len(self.local_nodes) + len(self.branches())
+        A = np.zeros(np.broadcast_shapes(R.shape, x.shape[:2]) + (L, L))
+        b = np.zeros(np.broadcast_shapes(R.shape, x.shape[:2]) + (L,))
+        if self.cap:
+            Pc = x[..., 0] / p["C"]
+            slope, off = stenosis_linearised(R, S, 0.0 if u is None else u[..., 3])
+            A[..., 0, 3], A[..., 2, 3] = 1.0, -1.0          # Q_in: in -> (R) -> c -> ref
+            A[..., 3, 0], A[..., 3, 2], A[..., 3, 3] = 1.0, -1.0, -slope
+            b[..., 3] = Pc + off
+            if self.ind:
+                q = x[..., 1]
+                b[..., 1], b[..., 2] = q, -q                 # Q_out delivered at out, drawn from ref
+            else:
+                A[..., 1, 4], A[..., 2, 4] = 1.0, -1.0       # branch out -> ref: P_out - P_ref = P_c
+                A[..., 4, 1], A[..., 4, 2] = 1.0, -1.0
+                b[..., 4] = Pc
+        elif self.ind:
+            q = x[..., 0]
+            b[..., 0], b[..., 1] = -q, q
+        else:
+            slope, off = stenosis_linearised(R, S, 0.0 if u is None else u[..., 3])
+            A[..., 0, 3], A[..., 1, 3] = 1.0, -1.0
+            A[..., 3, 0], A[..., 3, 1], A[..., 3, 3] = 1.0, -1.0, -slope
+            b[..., 3] = off
+        return A, b
+
+    def derivatives(self, p, x, u, t, src=None):
+        R, S = p["R_poiseuille"], p["stenosis_coefficient"]
+        dx = np.zeros(x.shape)
+        if self.cap:
+            Pc = x[..., 0] / p["C"]
+            if self.ind:
+                q = x[..., 1]
+                dx[..., 0] = u[..., 3] - q
+                dx[..., 1] = (Pc - (u[..., 1] - u[..., 2])) / p["L"]
+            else:
+                dx[..., 0] = u[..., 3] + u[..., 4]
+        elif self.ind:
+            q = x[..., 0]
+            dx[..., 0] = (u[..., 0] - u[..., 1] - (R + S * np.abs(q)) * q) / p["L"]
+        return dx
+
+    def observe(self, p, x, u, t, src=None):
+        if u is None:
+            return {"V": x[..., 0]} if self.cap else {}
+        if self.cap:
+            q_out = x[..., 1] if self.ind else -u[..., 4]
+            return {"V": x[..., 0], "Q_in": u[..., 3], "Q_out": q_out}
+        q = x[..., 0] if self.ind else u[..., 3]
+        return {"Q_in": q, "Q_out": q}
+
+    def dc_stamp(self, p, A_loc, b_loc, keep):
+        """Steady state without stenosis: the capacitor open, the inductor a short."""
+        R = p["R_poiseuille"]
+        orig = (A_loc.copy(), b_loc.copy())
+        A_loc[...] = 0.0
+        b_loc[...] = 0.0
+        if self.cap and self.ind:   # branch (in, ref) becomes in -> out through R
+            A_loc[..., 0, 3], A_loc[..., 1, 3] = 1.0, -1.0
+            A_loc[..., 3, 0], A_loc[..., 3, 1], A_loc[..., 3, 3] = 1.0, -1.0, -R
+        elif self.cap:              # Q_in = Q_out through R, P_out = P_in - R Q_in
+            A_loc[..., 0, 3], A_loc[..., 1, 4] = 1.0, 1.0
+            A_loc[..., 3, 0], A_loc[..., 3, 1], A_loc[..., 3, 3] = 1.0, -1.0, -R
+            A_loc[..., 4, 3], A_loc[..., 4, 4] = 1.0, 1.0
+        elif self.ind:              # a conductance 1/R (large when R = 0)
+            g = 1.0 / np.maximum(R, 1e-6)
+            A_loc[..., 0, 0], A_loc[..., 0, 1], A_loc[..., 1, 0], A_loc[..., 1, 1] = g, -g, -g, g
+        else:
+            A_loc[..., 0, 3], A_loc[..., 1, 3] = 1.0, -1.0
+            A_loc[..., 3, 0], A_loc[..., 3, 1], A_loc[..., 3, 3] = 1.0, -1.0, -R
+        return self._restore_kept(keep, orig, A_loc, b_loc)
+
+    def initial_states(self, p, u, flows=None, x=None):
+        out = np.zeros(u.shape[:2] + (len(self.states()),))
+        q_in = flows[..., 0] if flows is not None else np.zeros(u.shape[:2])
+        if self.cap:
+            out[..., 0] = p["C"] * (u[..., 1] - u[..., 2])  # P_c ~ P_out
+            if self.ind:
+                out[..., 1] = q_in
+        elif self.ind:
+            out[..., 0] = q_in
+        return out
+
+    def kernel(self):
+        from hemocircuit.kernels import Kernel
+        return Kernel(stamp=vessel_stamp, derivs=vessel_derivs, observe=vessel_observe,
+                      observables=("V",) if self.cap else ())
+
+
+# --- compiled path (hemocircuit.kernels contract) -------------------------------------------
+# p = [R_poiseuille, C, L, stenosis_coefficient]; iopt = [capacitive, inductive]; layout as above.
+@jit
+def vessel_stamp(p, x, u, t, iopt, A, b):
+    R, S = p[0], p[3]
+    if iopt[0] != 0:
+        Pc = x[0] / p[1]
+        slope, off = k_stenosis_linearised(R, S, u[3])
+        A[0, 3] = 1.0
+        A[2, 3] = -1.0
+        A[3, 0] = 1.0
+        A[3, 2] = -1.0
+        A[3, 3] = -slope
+        b[3] = Pc + off
+        if iopt[1] != 0:
+            b[1] = x[1]
+            b[2] = -x[1]
+        else:
+            A[1, 4] = 1.0
+            A[2, 4] = -1.0
+            A[4, 1] = 1.0
+            A[4, 2] = -1.0
+            b[4] = Pc
+    elif iopt[1] != 0:
+        b[0] = -x[0]
+        b[1] = x[0]
+    else:
+        slope, off = k_stenosis_linearised(R, S, u[3])
+        A[0, 3] = 1.0
+        A[1, 3] = -1.0
+        A[3, 0] = 1.0
+        A[3, 1] = -1.0
+        A[3, 3] = -slope
+        b[3] = off
+
+
+@jit
+def vessel_derivs(p, x, u, t, iopt, dx):
+    R, S = p[0], p[3]
+    if iopt[0] != 0:
+        Pc = x[0] / p[1]
+        if iopt[1] != 0:
+            dx[0] = u[3] - x[1]
+            dx[1] = (Pc - (u[1] - u[2])) / p[2]
+        else:
+            dx[0] = u[3] + u[4]
+    elif iopt[1] != 0:
+        q = x[0]
+        dx[0] = (u[0] - u[1] - (R + S * abs(q)) * q) / p[2]
+
+
+@jit
+def vessel_observe(p, x, iopt, out):
+    if iopt[0] != 0:
+        out[0] = x[0]

@@ -1,0 +1,143 @@
+"""svZeroDSolver ``ChamberElastanceInductor``: a time-varying elastance chamber with an
+outflow inductor.
+
+Equations (SimVascular/svZeroDSolver src/model/ChamberElastanceInductor.cpp,
+``update_constant``, ``update_time``, ``get_elastance_values``):
+    P_in = E(t) (Vc - Vrest(t))                 E = (Emax - Emin) A(t) + Emin
+    L dQ_out/dt = P_in - P_out                  Vrest = (1 - A(t)) (Vrd - Vrs) + Vrs
+    dVc/dt = Q_in - Q_out
+with A(t) the activation function (option ``activation``, parameters as in
+components/svzerod/activation.py).  Pressures relative to ``ref`` (ground in imported models).
+Units: Emax, Emin [mmHg/mL], Vrd, Vrs [mL], Impedance L [mmHg*s^2/mL] > 0, period [s].
+States: Vc [mL] (a volume store, so closed loops conserve it), Q_out [mL/s].
+Local unknowns [P_in, P_out, P_ref, q]: branch (in, ref) with P_in - P_ref = E (Vc - Vrest)
+carrying q = dVc/dt; Q_out (state) imposed from in to out, so Q_in = q + Q_out.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from hemocircuit.component import Component, Observable, Option, Param, State, Storage
+
+from ._common import E_UNIT, L_UNIT, jit
+from .activation import KINDS, act_parameters, activation, activation_np, check_activation
+
+_OWN = {"Emax": Param(E_UNIT, lower=0.0, doc="maximum elastance"),
+        "Emin": Param(E_UNIT, lower=0.0, doc="minimum elastance"),
+        "Vrd": Param("mL", doc="rest volume at diastole"),
+        "Vrs": Param("mL", doc="rest volume at systole"),
+        "Impedance": Param(L_UNIT, lower=0.0, lower_open=True, doc="outflow inductance L")}
+
+
+class ChamberElastanceInductor(Component):
+    __doc__ = __doc__
+    type_name = "chamber_elastance_inductor"
+    terminals = ("in", "out", "ref")
+    parameters = {**_OWN, **act_parameters()}
+    options = {"activation": Option("half_cosine", choices=KINDS, doc="activation function A(t)")}
+    time_dependent = True
+
+    def branches(self):
+        return (("in", "ref"),)
+
+    def edges(self):
+        return (("in", "ref", "pressure"), ("in", "out", "flow"))
+
+    def states(self):
+        return (State("Vc", "mL", 10.0, "chamber volume"), State("Q_out", "mL/s", 10.0, "outflow (inductor)"))
+
+    def storages(self):
+        return (Storage("in", "ref", "Vc", state="Vc"),)
+
+    def observables(self):
+        return (Observable("Vc", "mL", "chamber volume", state_only=True),
+                Observable("Q_in", "mL/s", "flow into the chamber"),
+                Observable("Q_out", "mL/s", "flow out of the chamber"))
+
+    def check(self, p):
+        return check_activation(self.opts["activation"], p)
+
+    def _elastance(self, p, t):
+        a = activation_np(self.opts["activation"], t, p)
+        return (p["Emax"] - p["Emin"]) * a + p["Emin"], (1.0 - a) * (p["Vrd"] - p["Vrs"]) + p["Vrs"]
+
+    def stamp(self, p, x, u, t, src=None):
+        E, Vrest = self._elastance(p, t)
+        shape = np.broadcast_shapes(E.shape, x.shape[:2])
+        A = np.zeros(shape + (4, 4))
+        b = np.zeros(shape + (4,))
+        A[..., 0, 3], A[..., 2, 3] = 1.0, -1.0
+        A[..., 3, 0], A[..., 3, 2] = 1.0, -1.0
+        b[..., 3] = E * (x[..., 0] - Vrest)
+        b[..., 0], b[..., 1] = -x[..., 1], x[..., 1]
+        return A, b
+
+    def derivatives(self, p, x, u, t, src=None):
+        dx = np.zeros(np.broadcast_shapes(x.shape, u.shape[:2] + (2,)))
+        dx[..., 0] = u[..., 3]
+        dx[..., 1] = (u[..., 0] - u[..., 1]) / p["Impedance"]
+        return dx
+
+    def observe(self, p, x, u, t, src=None):
+        out = {"Vc": x[..., 0]}
+        if u is not None:
+            out["Q_in"], out["Q_out"] = u[..., 3] + x[..., 1], x[..., 1]
+        return out
+
+    def dc_stamp(self, p, A_loc, b_loc, keep):
+        """Steady state: the store open (q = 0) unless it anchors a conservation law, the
+        inductor a short (a 1e6 mL/s/mmHg conductance, as the inductor component)."""
+        opened = ~np.asarray(keep, dtype=bool)
+        A_loc[:, opened, 3, :] = 0.0
+        A_loc[:, opened, 3, 3] = 1.0
+        b_loc[:, opened, 3] = 0.0
+        g = 1e6
+        A_loc[..., 0, 0] += g
+        A_loc[..., 0, 1] -= g
+        A_loc[..., 1, 0] -= g
+        A_loc[..., 1, 1] += g
+        b_loc[..., 0] = 0.0
+        b_loc[..., 1] = 0.0
+        return A_loc, b_loc
+
+    def initial_states(self, p, u, flows=None, x=None):
+        E, Vrest = self._elastance(p, 0.0)
+        out = np.zeros(np.broadcast_shapes(E.shape, u.shape[:2]) + (2,))
+        out[..., 0] = (u[..., 0] - u[..., 2]) / E + Vrest
+        if flows is not None:
+            out[..., 1] = -flows[..., 1]
+        return out
+
+    def kernel_options(self):
+        return np.array([KINDS.index(self.opts["activation"])], dtype=np.int64)
+
+    def kernel(self):
+        from hemocircuit.kernels import Kernel
+        return Kernel(stamp=cei_stamp, derivs=cei_derivs, observe=cei_observe, observables=("Vc",))
+
+
+# --- compiled path: p = [Emax, Emin, Vrd, Vrs, Impedance, period, 13 activation parameters];
+# iopt = [activation kind]; states [Vc, Q_out]; local unknowns [P_in, P_out, P_ref, q]
+@jit
+def cei_stamp(p, x, u, t, iopt, A, b):
+    a = activation(iopt[0], t, p[5], p[6:19])
+    E = (p[0] - p[1]) * a + p[1]
+    Vrest = (1.0 - a) * (p[2] - p[3]) + p[3]
+    A[0, 3] = 1.0
+    A[2, 3] = -1.0
+    A[3, 0] = 1.0
+    A[3, 2] = -1.0
+    b[3] = E * (x[0] - Vrest)
+    b[0] = -x[1]
+    b[1] = x[1]
+
+
+@jit
+def cei_derivs(p, x, u, t, iopt, dx):
+    dx[0] = u[3]
+    dx[1] = (u[0] - u[1]) / p[4]
+
+
+@jit
+def cei_observe(p, x, iopt, out):
+    out[0] = x[0]

@@ -1,0 +1,248 @@
+"""svZeroDSolver ``ClosedLoopHeartAndPulmonary``: four chambers with valves and inductive
+outflows, a pulmonary RC and the aortic capacitor (Sankaran 2012 / Menon 2023 heart model).
+
+Equations (SimVascular/svZeroDSolver src/model/ClosedLoopHeartPulmonary.cpp, ``update_constant``,
+``update_time``, ``update_solution``, ``get_activation_and_elastance_functions``,
+``get_psi_ra_la``, ``get_valve_positions``, ``post_solve``); pressures relative to ``ref``:
+    P_in = P_RA = AA Emax_ra (V_RA - Vaso_ra) + psi_ra (1 - AA),
+           psi_ra = Kxp_ra (exp((V_RA - Vaso_ra) Kxv_ra) - 1)            (P_LA likewise, _la)
+    P_RV = Erv (V_RV - Vrv_u),  P_LV = Elv (V_LV - Vlv_u),  Erv|Elv = F(t) Erv_s|Elv_s
+    dV_RA = Q_in - v_RA Q_RA          Lra_v dQ_RA = P_RA - P_RV - Rra_v v_RA Q_RA
+    dV_RV = v_RA Q_RA - v_RV Q_RV     Lrv_a dQ_RV = P_RV - P_pul - Rrv_a v_RV Q_RV
+    Cp dP_pul = v_RV Q_RV - (P_pul - P_LA)/Rpd
+    dV_LA = v_RV Q_RV - v_LA Q_LA     Lla_v dQ_LA = P_LA - P_LV - Rla_v v_LA Q_LA
+    dV_LV = v_LA Q_LA - v_LV Q_LV     Llv_a dQ_LV = P_LV - P_out - Rlv_ao v_LV Q_LV
+    Cpa dP_out = v_LV Q_LV - Q_out
+AA: their atrial activation (the ``wrapping_cosine`` of activation.py with Tsa, tpwave); F(t):
+their 25-mode Fourier series of ventricular elastance, NOT normalised (as in this block).
+Valves: v = 0 (closed) while P_upstream <= P_downstream and Q <= 0, else 1; their post_solve
+sets a closed valve's Q to 0.  Here a closed valve's dQ/dt is 0 and Q >= 0 is a hard limit
+(the integration stops where Q reaches 0 and puts it there), the same semantics.
+Note (theirs, kept): the left atrium fills with the right ventricle's outflow v_RV Q_RV; the
+pulmonary RC only sets the back-pressure P_pul.  So the blood volume is
+V_RA + V_RV + V_LA + V_LV + Cpa P_out (not Cp P_pul), which is what the stores declare.
+Units: L* [mmHg*s^2/mL], R* and Rpd [mmHg*s/mL], Cp, Cpa [mL/mmHg], Erv_s, Elv_s, Emax_* [mmHg/mL],
+Kxp_* [mmHg], Kxv_* [1/mL], V* [mL], Tsa, tpwave, iml, imr dimensionless (iml, imr scale the
+intramyocardial pressure of their closed-loop coronary blocks; unused here), period [s].
+States: V_RA, Q_RA, V_RV, Q_RV, V_pul = Cp P_pul, V_LA, Q_LA, V_LV, Q_LV, V_ao = Cpa P_out.
+Local unknowns [P_in, P_out, P_ref, q_in, q_out]: branch (in, ref) P_in - P_ref = P_RA carrying
+Q_in; branch (out, ref) P_out - P_ref = V_ao/Cpa carrying -Q_out.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from hemocircuit.component import Component, Observable, Param, State, Storage
+
+from ._common import C_UNIT, E_UNIT, L_UNIT, R_UNIT, jit
+
+_P = {"period": ("s", "cardiac period (their cardiac_cycle_period)"),
+      "Tsa": ("dimensionless", "atrial systole fraction of the period"),
+      "tpwave": ("dimensionless", "P-wave divisor of the period"),
+      "Erv_s": (E_UNIT, "right ventricular elastance scale"), "Elv_s": (E_UNIT, "left ventricular elastance scale"),
+      "iml": ("dimensionless", "left intramyocardial pressure scale (unused)"),
+      "imr": ("dimensionless", "right intramyocardial pressure scale (unused)"),
+      "Lra_v": (L_UNIT, "RA outflow inductance"), "Rra_v": (R_UNIT, "RA outflow resistance"),
+      "Lrv_a": (L_UNIT, "RV outflow inductance"), "Rrv_a": (R_UNIT, "RV outflow resistance"),
+      "Lla_v": (L_UNIT, "LA outflow inductance"), "Rla_v": (R_UNIT, "LA outflow resistance"),
+      "Llv_a": (L_UNIT, "LV outflow inductance"), "Rlv_ao": (R_UNIT, "LV outflow resistance"),
+      "Vrv_u": ("mL", "RV unstressed volume"), "Vlv_u": ("mL", "LV unstressed volume"),
+      "Rpd": (R_UNIT, "pulmonary resistance"), "Cp": (C_UNIT, "pulmonary capacitance"),
+      "Cpa": (C_UNIT, "aortic capacitance"),
+      "Kxp_ra": ("mmHg", "RA passive pressure scale"), "Kxv_ra": ("1/mL", "RA passive volume exponent"),
+      "Kxp_la": ("mmHg", "LA passive pressure scale"), "Kxv_la": ("1/mL", "LA passive volume exponent"),
+      "Emax_ra": (E_UNIT, "RA active elastance"), "Emax_la": (E_UNIT, "LA active elastance"),
+      "Vaso_ra": ("mL", "RA rest volume"), "Vaso_la": ("mL", "LA rest volume")}
+_POSITIVE = {"period", "tpwave", "Tsa", "Lra_v", "Lrv_a", "Lla_v", "Llv_a", "Rpd", "Cp", "Cpa"}
+_NONNEG = {"Rra_v", "Rrv_a", "Rla_v", "Rlv_ao"}
+
+_FT = np.array([[0.283748803, 0.000000000], [0.031830626, -0.374299825], [-0.209472400, -0.018127770],
+                [0.020520047, 0.073971113], [0.008316883, -0.047249597], [-0.041677660, 0.003212163],
+                [0.000867323, 0.019441411], [-0.001675379, -0.005565534], [-0.011252277, 0.003401432],
+                [-0.000414677, 0.008376795], [0.000253749, -0.000071880], [-0.002584966, 0.001566861],
+                [0.000584752, 0.003143555], [0.000028502, -0.000024787], [0.000022961, -0.000007476],
+                [0.000018735, -0.000001281], [0.000015573, 0.000001781], [0.000013133, 0.000003494],
+                [0.000011199, 0.000004507], [0.000009634, 0.000005117], [0.000008343, 0.000005481],
+                [0.000007265, 0.000005687], [0.000006354, 0.000005789], [0.000005575, 0.000005821],
+                [0.000004903, 0.000005805]])
+_FT_A = np.ascontiguousarray(_FT[:, 0])
+_FT_B = np.ascontiguousarray(_FT[:, 1])
+
+_STATES = ("V_RA", "Q_RA", "V_RV", "Q_RV", "V_pul", "V_LA", "Q_LA", "V_LV", "Q_LV", "V_ao")
+(PERIOD, TSA, TPWAVE, ERV_S, ELV_S, IML, IMR, LRA_V, RRA_V, LRV_A, RRV_A, LLA_V, RLA_V, LLV_A, RLV_AO, VRV_U,
+ VLV_U, RPD, CP, CPA, KXP_RA, KXV_RA, KXP_LA, KXV_LA, EMAX_RA, EMAX_LA, VASO_RA, VASO_LA) = range(len(_P))
+
+
+@jit
+def _activations(t, p):
+    """(AA, F): their atrial activation and the raw ventricular Fourier elastance at t."""
+    T = p[PERIOD]
+    Tsa = T * p[TSA]
+    tp = T / p[TPWAVE]
+    tc = np.fmod(t, T)
+    AA = 0.0
+    if tc <= tp:
+        AA = 0.5 * (1.0 - math.cos(2.0 * math.pi * (tc - tp + Tsa) / Tsa))
+    elif tc >= (T - Tsa) + tp and tc < T:
+        AA = 0.5 * (1.0 - math.cos(2.0 * math.pi * (tc - tp - (T - Tsa)) / Tsa))
+    F = 0.0
+    for i in range(25):
+        w = 2.0 * math.pi * i * tc / T
+        F += _FT_A[i] * math.cos(w) - _FT_B[i] * math.sin(w)
+    return AA, F
+
+
+@jit
+def _pressures(p, x, t):
+    """(P_RA, P_RV, P_pul, P_LA, P_LV, P_ao) from the states at time t."""
+    AA, F = _activations(t, p)
+    psi_ra = p[KXP_RA] * (math.exp((x[0] - p[VASO_RA]) * p[KXV_RA]) - 1.0)
+    psi_la = p[KXP_LA] * (math.exp((x[5] - p[VASO_LA]) * p[KXV_LA]) - 1.0)
+    P_ra = AA * p[EMAX_RA] * (x[0] - p[VASO_RA]) + psi_ra * (1.0 - AA)
+    P_la = AA * p[EMAX_LA] * (x[5] - p[VASO_LA]) + psi_la * (1.0 - AA)
+    P_rv = F * p[ERV_S] * (x[2] - p[VRV_U])
+    P_lv = F * p[ELV_S] * (x[7] - p[VLV_U])
+    return P_ra, P_rv, x[4] / p[CP], P_la, P_lv, x[9] / p[CPA]
+
+
+@jit
+def _valve(dp, q):
+    """1 open, 0 closed (closed while the pressure difference and the flow are both <= 0)."""
+    return 0.0 if (dp <= 0.0 and q <= 0.0) else 1.0
+
+
+@jit
+def heart_stamp(p, x, u, t, iopt, A, b):
+    P_ra, P_rv, P_pul, P_la, P_lv, P_ao = _pressures(p, x, t)
+    A[0, 3] = 1.0
+    A[2, 3] = -1.0
+    A[3, 0] = 1.0
+    A[3, 2] = -1.0
+    b[3] = P_ra
+    A[1, 4] = 1.0
+    A[2, 4] = -1.0
+    A[4, 1] = 1.0
+    A[4, 2] = -1.0
+    b[4] = P_ao
+
+
+@jit
+def heart_derivs(p, x, u, t, iopt, dx):
+    P_ra, P_rv, P_pul, P_la, P_lv, P_ao = _pressures(p, x, t)
+    q_ra, q_rv, q_la, q_lv = x[1], x[3], x[6], x[8]
+    v_ra = _valve(P_ra - P_rv, q_ra)
+    v_rv = _valve(P_rv - P_pul, q_rv)
+    v_la = _valve(P_la - P_lv, q_la)
+    v_lv = _valve(P_lv - P_ao, q_lv)
+    dx[0] = u[3] - v_ra * q_ra
+    dx[1] = v_ra * (P_ra - P_rv - p[RRA_V] * q_ra) / p[LRA_V]
+    dx[2] = v_ra * q_ra - v_rv * q_rv
+    dx[3] = v_rv * (P_rv - P_pul - p[RRV_A] * q_rv) / p[LRV_A]
+    dx[4] = v_rv * q_rv - (P_pul - P_la) / p[RPD]
+    dx[5] = v_rv * q_rv - v_la * q_la
+    dx[6] = v_la * (P_la - P_lv - p[RLA_V] * q_la) / p[LLA_V]
+    dx[7] = v_la * q_la - v_lv * q_lv
+    dx[8] = v_lv * (P_lv - P_ao - p[RLV_AO] * q_lv) / p[LLV_A]
+    dx[9] = v_lv * q_lv + u[4]
+
+
+@jit
+def heart_observe(p, x, iopt, out):
+    out[0] = x[0] + x[2] + x[5] + x[7]
+    out[1] = x[9]
+
+
+class ClosedLoopHeartAndPulmonary(Component):
+    __doc__ = __doc__
+    type_name = "closed_loop_heart_pulmonary"
+    terminals = ("in", "out", "ref")
+    parameters = {k: Param(u, lower=0.0 if (k in _POSITIVE or k in _NONNEG) else None,
+                           lower_open=k in _POSITIVE, doc=d) for k, (u, d) in _P.items()}
+    time_dependent = True
+
+    def branches(self):
+        return (("in", "ref"), ("out", "ref"))
+
+    def edges(self):
+        return (("in", "ref", "pressure"), ("out", "ref", "pressure"))
+
+    def states(self):
+        return tuple(State(s, "mL" if s[0] == "V" else "mL/s", 10.0, d) for s, d in zip(_STATES, (
+            "right atrial volume", "right atrial outflow (tricuspid)", "right ventricular volume",
+            "right ventricular outflow (pulmonary valve)", "pulmonary capacitor charge Cp P_pul",
+            "left atrial volume", "left atrial outflow (mitral)", "left ventricular volume",
+            "left ventricular outflow (aortic valve)", "aortic capacitor volume Cpa P_out")))
+
+    def hard_limits(self):
+        """A valve's flow never falls below 0 (their post_solve zeroes a closed valve's flow):
+        the integration stops there and holds it on 0 while the valve stays closed."""
+        return tuple((q, 0.0, None) for q in ("Q_RA", "Q_RV", "Q_LA", "Q_LV"))
+
+    def storages(self):
+        return (Storage("in", "ref", "V_heart"), Storage("out", "ref", "V_ao", state="V_ao"))
+
+    def observables(self):
+        return (Observable("V_heart", "mL", "volume of the four chambers", state_only=True),
+                Observable("V_ao", "mL", "aortic capacitor volume", state_only=True),
+                Observable("P_RV", "mmHg", "right ventricular pressure"),
+                Observable("P_pul", "mmHg", "pulmonary pressure"),
+                Observable("P_LA", "mmHg", "left atrial pressure"),
+                Observable("P_LV", "mmHg", "left ventricular pressure"),
+                Observable("Q_in", "mL/s", "flow into the right atrium"),
+                Observable("Q_out", "mL/s", "flow out of the aortic capacitor"))
+
+    def _each(self, p, x, t, *more):
+        """Broadcast parameters, states, time (and ``more`` arrays) to one (B, E) shape:
+        (shape, P (..., 28), X (..., 10), T (...), more...)."""
+        shape = np.broadcast_shapes(np.shape(p["period"]), x.shape[:-1], np.shape(t), *(m.shape[:-1] for m in more))
+        P = np.stack([np.broadcast_to(np.asarray(p[k], float), shape) for k in _P], axis=-1)
+        X = np.broadcast_to(x, shape + x.shape[-1:])
+        T = np.broadcast_to(np.asarray(t, float), shape)
+        return (shape, P, X, T) + tuple(np.broadcast_to(m, shape + m.shape[-1:]) for m in more)
+
+    def stamp(self, p, x, u, t, src=None):
+        shape, P, X, T = self._each(p, x, t)
+        A = np.zeros(shape + (5, 5))
+        b = np.zeros(shape + (5,))
+        for idx in np.ndindex(shape):
+            heart_stamp(np.ascontiguousarray(P[idx]), np.ascontiguousarray(X[idx]), None, float(T[idx]), None,
+                        A[idx], b[idx])
+        return A, b
+
+    def derivatives(self, p, x, u, t, src=None):
+        shape, P, X, T, U = self._each(p, x, t, u)
+        dx = np.zeros(shape + (10,))
+        for idx in np.ndindex(shape):
+            heart_derivs(np.ascontiguousarray(P[idx]), np.ascontiguousarray(X[idx]), np.ascontiguousarray(U[idx]),
+                         float(T[idx]), None, dx[idx])
+        return dx
+
+    def observe(self, p, x, u, t, src=None):
+        out = {"V_heart": x[..., 0] + x[..., 2] + x[..., 5] + x[..., 7], "V_ao": x[..., 9]}
+        if u is not None:
+            shape, P, X, T = self._each(p, x, t)
+            pr = np.zeros(shape + (6,))
+            for idx in np.ndindex(shape):
+                pr[idx] = _pressures(np.ascontiguousarray(P[idx]), np.ascontiguousarray(X[idx]), float(T[idx]))
+            out.update(P_RV=pr[..., 1], P_pul=pr[..., 2], P_LA=pr[..., 3], P_LV=pr[..., 4],
+                       Q_in=u[..., 3], Q_out=-u[..., 4])
+        return out
+
+    def dc_stamp(self, p, A_loc, b_loc, keep):
+        """Steady state of the heart is not a DC state (it is time-varying); the DC guess keeps
+        both branches as pressure definitions (from the current states)."""
+        return A_loc, b_loc
+
+    def initial_states(self, p, u, flows=None, x=None):
+        shape = np.broadcast_shapes(np.shape(p["Cpa"]), u.shape[:-1])
+        out = np.zeros(shape + (10,))
+        for name, k in (("Vaso_ra", 0), ("Vrv_u", 2), ("Vaso_la", 5), ("Vlv_u", 7)):
+            out[..., k] = p[name]
+        out[..., 9] = p["Cpa"] * (u[..., 1] - u[..., 2])
+        return out
+
+    def kernel(self):
+        from hemocircuit.kernels import Kernel
+        return Kernel(stamp=heart_stamp, derivs=heart_derivs, observe=heart_observe, observables=("V_heart", "V_ao"))

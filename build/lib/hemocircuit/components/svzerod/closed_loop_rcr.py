@@ -1,0 +1,116 @@
+"""svZeroDSolver ``ClosedLoopRCR`` boundary condition: Rp, then C to the reference, then Rd
+on to the outlet (a two-port Windkessel in a closed loop).
+
+Equations (SimVascular/svZeroDSolver src/model/ClosedLoopRCRBC.cpp, ``update_constant``):
+    C dP_c/dt = Q_in - Q_out,   P_in - Rp Q_in - P_c = 0,   P_c - Rd Q_out - P_out = 0
+Units: Rp [mmHg*s/mL] >= 0, C [mL/mmHg] > 0, Rd [mmHg*s/mL] > 0.  State: V = C P_c [mL]
+(pressures relative to ``ref``, ground in imported models), a volume store.
+Local unknowns [P_in, P_out, P_ref, P_c, q_p, q_c]: internal node c; branch (in, c) with
+P_in - P_c - Rp q_p = 0 (Rp may be 0), branch (c, ref) with P_c - P_ref = V/C carrying
+q_c = dV/dt; Rd a conductance from c to out.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from hemocircuit.component import Component, Observable, Param, State, Storage
+
+from ._common import C_UNIT, R_UNIT, jit
+
+
+class ClosedLoopRCR(Component):
+    __doc__ = __doc__
+    type_name = "closed_loop_rcr"
+    terminals = ("in", "out", "ref")
+    parameters = {"Rp": Param(R_UNIT, lower=0.0, doc="proximal resistance"),
+                  "C": Param(C_UNIT, lower=0.0, lower_open=True, doc="capacitance"),
+                  "Rd": Param(R_UNIT, lower=0.0, lower_open=True, doc="distal resistance")}
+
+    def internal_nodes(self):
+        return ("c",)
+
+    def branches(self):
+        return (("in", "c"), ("c", "ref"))
+
+    def edges(self):
+        return (("in", "c", "conductive"), ("c", "out", "conductive"), ("c", "ref", "pressure"))
+
+    def states(self):
+        return (State("V", "mL", 1.0, "volume of C (C * P_c)"),)
+
+    def storages(self):
+        return (Storage("c", "ref", "V", state="V"),)
+
+    def observables(self):
+        return (Observable("V", "mL", "volume of C", state_only=True),
+                Observable("P_c", "mmHg", "pressure of the capacitor", state_only=True),
+                Observable("Q_in", "mL/s", "flow into the inlet"),
+                Observable("Q_out", "mL/s", "flow out of the outlet"))
+
+    def stamp(self, p, x, u, t, src=None):
+        shape = np.broadcast_shapes(p["C"].shape, x.shape[:2])
+        A = np.zeros(shape + (6, 6))
+        b = np.zeros(shape + (6,))
+        g = 1.0 / p["Rd"]
+        A[..., 0, 4], A[..., 3, 4] = 1.0, -1.0
+        A[..., 3, 5], A[..., 2, 5] = 1.0, -1.0
+        A[..., 3, 3], A[..., 3, 1], A[..., 1, 3], A[..., 1, 1] = g, -g, -g, g
+        A[..., 4, 0], A[..., 4, 3], A[..., 4, 4] = 1.0, -1.0, -p["Rp"]
+        A[..., 5, 3], A[..., 5, 2] = 1.0, -1.0
+        b[..., 5] = x[..., 0] / p["C"]
+        return A, b
+
+    def derivatives(self, p, x, u, t, src=None):
+        return u[..., 5][..., None] + 0.0 * x
+
+    def observe(self, p, x, u, t, src=None):
+        out = {"V": x[..., 0], "P_c": x[..., 0] / p["C"]}
+        if u is not None:
+            out["Q_in"], out["Q_out"] = u[..., 4], (u[..., 3] - u[..., 1]) / p["Rd"]
+        return out
+
+    def dc_stamp(self, p, A_loc, b_loc, keep):
+        """Steady state: C open (q_c = 0) unless it anchors a conservation law."""
+        opened = ~np.asarray(keep, dtype=bool)
+        A_loc[:, opened, 5, :] = 0.0
+        A_loc[:, opened, 5, 5] = 1.0
+        b_loc[:, opened, 5] = 0.0
+        return A_loc, b_loc
+
+    def initial_states(self, p, u, flows=None, x=None):
+        return (p["C"] * (u[..., 3] - u[..., 2]))[..., None]
+
+    def kernel(self):
+        from hemocircuit.kernels import Kernel
+        return Kernel(stamp=clrcr_stamp, derivs=clrcr_derivs, observe=clrcr_observe, observables=("V", "P_c"))
+
+
+# --- compiled path: p = [Rp, C, Rd]; state [V]; local unknowns [P_in, P_out, P_ref, P_c, q_p, q_c]
+@jit
+def clrcr_stamp(p, x, u, t, iopt, A, b):
+    g = 1.0 / p[2]
+    A[0, 4] = 1.0
+    A[3, 4] = -1.0
+    A[3, 5] = 1.0
+    A[2, 5] = -1.0
+    A[3, 3] = g
+    A[3, 1] = -g
+    A[1, 3] = -g
+    A[1, 1] = g
+    A[4, 0] = 1.0
+    A[4, 3] = -1.0
+    A[4, 4] = -p[0]
+    A[5, 3] = 1.0
+    A[5, 2] = -1.0
+    b[5] = x[0] / p[1]
+
+
+@jit
+def clrcr_derivs(p, x, u, t, iopt, dx):
+    dx[0] = u[5]
+
+
+@jit
+def clrcr_observe(p, x, iopt, out):
+    out[0] = x[0]
+    out[1] = x[0] / p[1]

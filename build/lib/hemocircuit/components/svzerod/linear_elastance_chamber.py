@@ -1,0 +1,120 @@
+"""svZeroDSolver ``LinearElastanceChamber``: a time-varying elastance chamber (Regazzoni 2022).
+
+Equations (SimVascular/svZeroDSolver src/model/LinearElastanceChamber.cpp,
+``update_constant``, ``update_time``, ``get_elastance_values``):
+    P_in = E(t) (Vc - Vrest),  E = Epass + Emax A(t);   P_in = P_out;   dVc/dt = Q_in - Q_out
+with A(t) the activation function (option ``activation``, components/svzerod/activation.py).
+Pressures relative to ``ref`` (ground in imported models).
+Units: Emax, Epass [mmHg/mL], Vrest [mL], period [s].  State: Vc [mL] (a volume store).
+Local unknowns [P_in, P_out, P_ref, q, q_out]: branch (in, ref) with P_in - P_ref =
+E (Vc - Vrest) carrying q = dVc/dt, and branch (in, out) with P_in = P_out carrying Q_out.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from hemocircuit.component import Component, Observable, Option, Param, State, Storage
+
+from ._common import E_UNIT, jit
+from .activation import KINDS, act_parameters, activation, activation_np, check_activation
+
+
+class LinearElastanceChamber(Component):
+    __doc__ = __doc__
+    type_name = "linear_elastance_chamber"
+    terminals = ("in", "out", "ref")
+    parameters = {"Emax": Param(E_UNIT, lower=0.0, doc="active elastance (added at full activation)"),
+                  "Epass": Param(E_UNIT, lower=0.0, lower_open=True, doc="passive elastance"),
+                  "Vrest": Param("mL", doc="rest volume"),
+                  **act_parameters()}
+    options = {"activation": Option("piecewise_cosine", choices=KINDS, doc="activation function A(t)")}
+    time_dependent = True
+
+    def branches(self):
+        return (("in", "ref"), ("in", "out"))
+
+    def edges(self):
+        return (("in", "ref", "pressure"), ("in", "out", "pressure"))
+
+    def states(self):
+        return (State("Vc", "mL", 10.0, "chamber volume"),)
+
+    def storages(self):
+        return (Storage("in", "ref", "Vc", state="Vc"),)
+
+    def observables(self):
+        return (Observable("Vc", "mL", "chamber volume", state_only=True),
+                Observable("Q_in", "mL/s", "flow into the chamber"),
+                Observable("Q_out", "mL/s", "flow out of the chamber"))
+
+    def check(self, p):
+        return check_activation(self.opts["activation"], p)
+
+    def _elastance(self, p, t):
+        return p["Epass"] + p["Emax"] * activation_np(self.opts["activation"], t, p)
+
+    def stamp(self, p, x, u, t, src=None):
+        E = self._elastance(p, t)
+        shape = np.broadcast_shapes(E.shape, x.shape[:2])
+        A = np.zeros(shape + (5, 5))
+        b = np.zeros(shape + (5,))
+        A[..., 0, 3], A[..., 2, 3] = 1.0, -1.0
+        A[..., 3, 0], A[..., 3, 2] = 1.0, -1.0
+        b[..., 3] = E * (x[..., 0] - p["Vrest"])
+        A[..., 0, 4], A[..., 1, 4] = 1.0, -1.0
+        A[..., 4, 0], A[..., 4, 1] = 1.0, -1.0
+        return A, b
+
+    def derivatives(self, p, x, u, t, src=None):
+        return u[..., 3][..., None] + 0.0 * x
+
+    def observe(self, p, x, u, t, src=None):
+        out = {"Vc": x[..., 0]}
+        if u is not None:
+            out["Q_in"], out["Q_out"] = u[..., 3] + u[..., 4], u[..., 4]
+        return out
+
+    def dc_stamp(self, p, A_loc, b_loc, keep):
+        """Steady state: the store open (q = 0) unless it anchors a conservation law."""
+        opened = ~np.asarray(keep, dtype=bool)
+        A_loc[:, opened, 3, :] = 0.0
+        A_loc[:, opened, 3, 3] = 1.0
+        b_loc[:, opened, 3] = 0.0
+        return A_loc, b_loc
+
+    def initial_states(self, p, u, flows=None, x=None):
+        E = self._elastance(p, 0.0)
+        return ((u[..., 0] - u[..., 2]) / E + p["Vrest"])[..., None]
+
+    def kernel_options(self):
+        return np.array([KINDS.index(self.opts["activation"])], dtype=np.int64)
+
+    def kernel(self):
+        from hemocircuit.kernels import Kernel
+        return Kernel(stamp=lec_stamp, derivs=lec_derivs, observe=lec_observe, observables=("Vc",))
+
+
+# --- compiled path: p = [Emax, Epass, Vrest, period, 13 activation parameters];
+# iopt = [activation kind]; state [Vc]; local unknowns [P_in, P_out, P_ref, q, q_out]
+@jit
+def lec_stamp(p, x, u, t, iopt, A, b):
+    E = p[1] + p[0] * activation(iopt[0], t, p[3], p[4:17])
+    A[0, 3] = 1.0
+    A[2, 3] = -1.0
+    A[3, 0] = 1.0
+    A[3, 2] = -1.0
+    b[3] = E * (x[0] - p[2])
+    A[0, 4] = 1.0
+    A[1, 4] = -1.0
+    A[4, 0] = 1.0
+    A[4, 1] = -1.0
+
+
+@jit
+def lec_derivs(p, x, u, t, iopt, dx):
+    dx[0] = u[3]
+
+
+@jit
+def lec_observe(p, x, iopt, out):
+    out[0] = x[0]

@@ -1,0 +1,91 @@
+"""svZeroDSolver ``RCR`` boundary condition (three-element Windkessel).
+
+Equations (SimVascular/svZeroDSolver src/model/WindkesselBC.cpp, ``update_constant`` and
+``update_time``; internal variable ``pressure_c``):
+    P_in - Rp Q_in - P_c = 0
+    Rd Q_in - P_c - Rd C dP_c/dt + Pd = 0    <=>  C dP_c/dt = Q_in - (P_c - Pd)/Rd
+Parameters Rp, Rd [mmHg*s/mL] (Rp may be 0), C [mL/mmHg] > 0, Pd [mmHg] (may be a waveform).
+State V = C P_c [mL] (pressures relative to ``ref``, ground in imported models).  Local
+unknowns [P_node, P_ref, Q_in]: the branch row P_node - P_ref - Rp Q_in = V/C.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from hemocircuit.component import Component, Observable, Param, State
+
+from ._common import C_UNIT, R_UNIT, jit
+
+
+class RCRBC(Component):
+    __doc__ = __doc__
+    type_name = "rcr_bc"
+    terminals = ("node", "ref")
+    parameters = {"Rp": Param(R_UNIT, lower=0.0, doc="proximal resistance"),
+                  "C": Param(C_UNIT, lower=0.0, lower_open=True, doc="capacitance"),
+                  "Rd": Param(R_UNIT, lower=0.0, lower_open=True, doc="distal resistance"),
+                  "Pd": Param("mmHg", default="0 mmHg", doc="distal pressure (constant or a waveform)")}
+    waveform_params = ("Pd",)
+    role = "pressure"
+
+    def branches(self):
+        return (("node", "ref"),)
+
+    def states(self):
+        return (State("V", "mL", 1.0, "volume of C (C * P_c)"),)
+
+    def observables(self):
+        return (Observable("Q_in", "mL/s", "flow into the block"),
+                Observable("P_c", "mmHg", "pressure of the capacitor", state_only=True))
+
+    def stamp(self, p, x, u, t, src=None):
+        A = np.zeros(np.broadcast_shapes(p["C"].shape, x.shape[:2]) + (3, 3))
+        b = np.zeros(np.broadcast_shapes(p["C"].shape, x.shape[:2]) + (3,))
+        A[..., 0, 2], A[..., 1, 2] = 1.0, -1.0
+        A[..., 2, 0], A[..., 2, 1], A[..., 2, 2] = 1.0, -1.0, -p["Rp"]
+        b[..., 2] = x[..., 0] / p["C"]
+        return A, b
+
+    def derivatives(self, p, x, u, t, src=None):
+        Pd = p["Pd"] + (0.0 if src is None else src)
+        return (u[..., 2] - (x[..., 0] / p["C"] - Pd) / p["Rd"])[..., None]
+
+    def observe(self, p, x, u, t, src=None):
+        out = {"P_c": x[..., 0] / p["C"]}
+        if u is not None:
+            out["Q_in"] = u[..., 2]
+        return out
+
+    def dc_stamp(self, p, A_loc, b_loc, keep):
+        """Steady state: C open, so Q_in = (P - Pd)/(Rp + Rd) (Pd's constant part)."""
+        A_loc[..., 2, 2] = -(p["Rp"] + p["Rd"])
+        b_loc[..., 2] = p["Pd"]
+        return A_loc, b_loc
+
+    def initial_states(self, p, u, flows=None, x=None):
+        return (p["C"] * (u[..., 0] - u[..., 1] - p["Rp"] * u[..., 2]))[..., None]
+
+    def kernel(self):
+        from hemocircuit.kernels import Kernel
+        return Kernel(stamp=rcr_stamp, derivs=rcr_derivs, observe=rcr_observe, observables=("P_c",))
+
+
+# --- compiled path: p = [Rp, C, Rd, Pd]; state [V]; local unknowns [P_node, P_ref, Q_in]
+@jit
+def rcr_stamp(p, x, u, t, iopt, A, b):
+    A[0, 2] = 1.0
+    A[1, 2] = -1.0
+    A[2, 0] = 1.0
+    A[2, 1] = -1.0
+    A[2, 2] = -p[0]
+    b[2] = x[0] / p[1]
+
+
+@jit
+def rcr_derivs(p, x, u, t, iopt, dx):
+    dx[0] = u[2] - (x[0] / p[1] - p[3]) / p[2]
+
+
+@jit
+def rcr_observe(p, x, iopt, out):
+    out[0] = x[0] / p[1]

@@ -1,0 +1,269 @@
+"""Running batches: local processes (default), in-process, or a Dask cluster.
+
+A batch job is split into chunks; each chunk is ONE vectorised batch (a circuit with a batch
+of parameter sets, integrated together), so a worker pays Python overhead once per step for
+its whole chunk.  Chunks go to worker processes (``concurrent.futures``) or to Dask
+(``scheduler='tcp://HOST:PORT'``, extra ``hemocircuit[distributed]``).  A member's numbers do
+not depend on which chunk or executor ran it (the batched integrator works member by member),
+so results are identical whichever executor ran them.  A failing member is recorded with its
+reason and does not lose the others.
+
+Failures and signals (the caller turns both into rows marked failed or not run):
+* ``failures='collect'``: a chunk whose function raises becomes a :class:`ChunkFailed` (its
+  reason) in the returned list; the other chunks finish.
+* SIGINT / SIGTERM (a KeyboardInterrupt; the CLI turns SIGTERM into one, see
+  :class:`hemocircuit.errors.Interrupted`): the worker processes are terminated and joined
+  (none is left running), and :class:`~hemocircuit.errors.Interrupted` is raised with
+  ``chunk_results`` (None for the chunks that had not finished).  Workers ignore SIGINT (a
+  Ctrl-C reaches the whole process group; the parent decides) and, on Linux, die with the
+  parent even if it is killed outright (``PR_SET_PDEATHSIG``).
+"""
+from __future__ import annotations
+
+import os
+from concurrent.futures import ProcessPoolExecutor, as_completed
+
+from .errors import HemocircuitError, Interrupted
+
+
+def default_workers() -> int:
+    return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))
+
+
+def split(items, n_chunks):
+    """Split a list into at most n_chunks contiguous, nearly equal chunks (order kept)."""
+    n = len(items)
+    n_chunks = max(1, min(n_chunks, n))
+    bounds = [round(k * n / n_chunks) for k in range(n_chunks + 1)]
+    return [items[bounds[k]:bounds[k + 1]] for k in range(n_chunks) if bounds[k + 1] > bounds[k]]
+
+
+def run_chunks(fn, chunks, scheduler=None, workers=None, progress=None, desc="runs", sizes=None,
+               failures="raise"):
+    """[fn(chunk) for chunk in chunks], in order, on the chosen executor.
+
+    scheduler: None / 'processes' (local worker processes), 'serial' (this process), a Dask
+    scheduler address 'tcp://HOST:PORT', or a dask.distributed Client.
+    progress: a bar counting runs (:class:`hemocircuit.progress.Tracker`); ``sizes[i]`` is the
+    number of runs in chunk i (default 1 each); ``fn`` may report runs as they finish with
+    :func:`hemocircuit.progress.advance`.
+    failures: 'raise' (a chunk's exception propagates) or 'collect' (it becomes a
+    :class:`ChunkFailed` in the list; the other chunks finish).
+    An interruption raises :class:`~hemocircuit.errors.Interrupted` with the finished chunks.
+    """
+    from functools import partial
+
+    from . import progress as _progress
+
+    workers = workers or default_workers()
+    results = [None] * len(chunks)
+    try:
+        with _progress.Tracker(sizes or [1] * len(chunks), desc, progress) as bar:
+            def done(i, r):
+                results[i] = r
+                bar.chunk_done(i)
+
+            if scheduler == "serial" or (scheduler in (None, "processes") and (workers == 1 or len(chunks) == 1)):
+                for i, c in enumerate(chunks):
+                    done(i, _call(partial(_progress.call_in_chunk, fn, i), c, failures))
+            elif scheduler in (None, "processes"):
+                _run_processes(fn, chunks, workers, done, failures, bar)
+            else:
+                client = _dask_client(scheduler)
+                futs = client.map(fn, chunks, pure=False)
+                from dask.distributed import as_completed as das_completed
+                index = {f.key: i for i, f in enumerate(futs)}
+                for f in das_completed(futs):
+                    done(index[f.key], _outcome(f, failures))
+    except KeyboardInterrupt as exc:  # SIGINT, or SIGTERM through the CLI's handler
+        raise Interrupted.of(exc, chunk_results=list(results)) from None
+    return results
+
+
+def _dask_client(scheduler):
+    try:
+        from dask.distributed import Client
+    except ImportError:
+        raise HemocircuitError("a Dask scheduler was given but dask.distributed is not installed: "
+                               "pip install 'hemocircuit[distributed]'") from None
+    if isinstance(scheduler, Client):
+        return scheduler
+    try:
+        return Client(scheduler, timeout="10s")
+    except OSError as exc:
+        raise HemocircuitError(f"cannot reach the Dask scheduler {scheduler}: {exc}") from None
+
+
+# ---------------------------------------------------------------- failures and signals ----
+class ChunkFailed:
+    """What :func:`run_chunks` (``failures='collect'``) gives for a chunk whose function
+    raised: ``reason`` (text naming the exception)."""
+
+    def __init__(self, reason):
+        self.reason = reason
+
+    def __repr__(self):
+        return f"ChunkFailed({self.reason!r})"
+
+
+def failure_reason(exc):
+    """An exception as a member's failure reason: a HemocircuitError's own message; anything
+    else with its type (an internal error, reported rather than losing the other members)."""
+    if isinstance(exc, HemocircuitError):
+        return str(exc)
+    from concurrent.futures.process import BrokenProcessPool
+    if isinstance(exc, BrokenProcessPool):
+        return f"a worker process died ({exc})"
+    return f"internal error ({type(exc).__name__}: {exc})"
+
+
+def _call(fn, chunk, failures):
+    if failures != "collect":
+        return fn(chunk)
+    try:
+        return fn(chunk)
+    except Exception as exc:  # noqa: BLE001 - reported per member; the others finish
+        return ChunkFailed(failure_reason(exc))
+
+
+def _outcome(future, failures):
+    if failures != "collect":
+        return future.result()
+    try:
+        return future.result()
+    except Exception as exc:  # noqa: BLE001
+        return ChunkFailed(failure_reason(exc))
+
+
+def _run_processes(fn, chunks, workers, done, failures, bar):
+    """Chunks on local worker processes; on any interruption the workers are stopped first.
+    ``bar`` (a progress Tracker) hears the runs the workers report as they finish."""
+    import multiprocessing as mp
+    from functools import partial
+
+    from . import progress as _progress
+    ctx = mp.get_context("fork") if hasattr(os, "fork") else None
+    bar.listen_to_workers(ctx)
+    ex = ProcessPoolExecutor(max_workers=min(workers, len(chunks)), mp_context=ctx, initializer=_worker_init,
+                             initargs=(os.getpid(),))
+    try:
+        futs = {ex.submit(partial(_progress.call_in_chunk, fn, i), c): i for i, c in enumerate(chunks)}
+        for f in as_completed(futs):
+            done(futs[f], _outcome(f, failures))
+    except BaseException:
+        stop_workers(ex)
+        raise
+    ex.shutdown(wait=True)
+
+
+def stop_workers(executor, timeout=5.0):
+    """Terminate (SIGTERM, then SIGKILL after ``timeout`` s) and join every worker process of a
+    ProcessPoolExecutor, and drop its queued work: no worker outlives this call."""
+    procs = list((getattr(executor, "_processes", None) or {}).values())
+    executor.shutdown(wait=False, cancel_futures=True)
+    for p in procs:
+        if p.is_alive():
+            p.terminate()
+    for p in procs:
+        p.join(timeout)
+        if p.is_alive():
+            p.kill()
+            p.join(1.0)
+
+
+def _worker_init(parent_pid):
+    """In each worker: ignore SIGINT (the parent handles Ctrl-C and stops the workers),
+    default SIGTERM (how the parent stops them), and die with the parent (Linux)."""
+    import signal
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    try:
+        import ctypes
+        libc = ctypes.CDLL(None, use_errno=True)
+        PR_SET_PDEATHSIG = 1
+        libc.prctl(PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0)
+    except (OSError, AttributeError):  # not Linux: the parent's own cleanup still applies
+        pass
+    if os.getppid() != parent_pid:  # the parent died before prctl took effect
+        os._exit(1)
+
+
+NOT_RUN = "not run (interrupted)"
+
+
+def member_results(n, where, results):
+    """Chunk results -> one entry per member: ``where[i]`` the member indices of chunk i and
+    ``results[i]`` its list of per-member results, a :class:`ChunkFailed` (every member of the
+    chunk gets ``{'error': reason}``) or None (not run: ``{'error': NOT_RUN}``)."""
+    out = [{"error": NOT_RUN} for _ in range(n)]
+    for chunk, r in zip(where, results):
+        for j, k in enumerate(chunk):
+            if r is None:
+                continue
+            out[k] = {"error": r.reason} if isinstance(r, ChunkFailed) else r[j]
+    return out
+
+
+def finish_batch(res, interrupted=None):
+    """Mark a batch result: status 'partial' when a member failed or did not run,
+    ``members_done``; with ``interrupted`` (an Interrupted) raise it carrying the result."""
+    failed = res.metadata.get("failed", [])
+    n_not_run = sum(1 for _, why in failed if why == NOT_RUN)
+    if failed:
+        res.metadata["status"] = "partial"
+    if interrupted is not None:
+        res.metadata["members_done"] = f"{res.n_rows - n_not_run} of {res.n_rows} members finished"
+        raise Interrupted.of(interrupted, partial=res) from None
+    return res
+
+
+# ---------------------------------------------------------------- the front's signal handler ----
+_pending = []  # a signal that arrived inside compiled code, not yet raised
+
+
+def catch_signals():
+    """Make SIGINT and SIGTERM raise :class:`~hemocircuit.errors.Interrupted` in the main thread
+    (once: a second signal while stopping is ignored).  A signal that arrives while compiled
+    (numba) code has called back into Python must not raise there (numba turns it into a
+    SystemError or crashes): it is kept, raised by the next :func:`check_interrupted` (the
+    compiled integrators' pieces call it) or delivered again shortly.  Returns the previous
+    handlers for :func:`restore_signals`."""
+    import signal
+    state = {"stopping": False}
+
+    def handler(signum, frame):
+        if state["stopping"]:
+            return
+        if frame is not None and f"{os.sep}numba{os.sep}" in frame.f_code.co_filename:
+            _pending[:] = [signum]
+            import threading
+            again = threading.Timer(0.2, os.kill, (os.getpid(), signum))
+            again.daemon = True
+            again.start()
+            return
+        state["stopping"] = True
+        _pending.clear()
+        raise Interrupted(signum)
+
+    previous = {}
+    try:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            previous[sig] = signal.signal(sig, handler)
+    except ValueError:  # not the main thread: leave the handlers alone
+        pass
+    return previous
+
+
+def restore_signals(previous):
+    import signal
+    _pending.clear()
+    for sig, h in previous.items():
+        signal.signal(sig, h)
+
+
+def check_interrupted():
+    """Raise the Interrupted of a signal kept while compiled code ran (see catch_signals)."""
+    if _pending:
+        signum = _pending.pop()
+        _pending.clear()
+        raise Interrupted(signum)

@@ -1,0 +1,49 @@
+"""Compiled kernels: the hot path (element equations, nodal solve, right-hand side, Jacobian,
+stiff integration with events) as numba nopython code with an on-disk cache.
+
+The contract a component type fulfils to run compiled is :class:`Kernel` (returned by
+``Component.kernel()``): three numba ``@njit(cache=True)`` functions defined at module level,
+each working on ONE element (the circuit kernel loops over elements, so no per-call Python):
+
+``stamp(p, x, u, t, iopt, A, b)``
+    Fill the element's local MNA stamp in place (see ``hemocircuit.component``): ``A`` (L, L)
+    and ``b`` (L,) arrive zeroed.  Row j < K is the flow leaving local node j into the element
+    [mL/s], row K+m the constraint of branch m.  ``u`` is the current iterate of the local
+    unknowns (only meaningful for elements with ``linear_in_pressure = False``; others ignore it).
+``derivs(p, x, u, t, iopt, dx)``
+    dx/dt of the element's states into ``dx`` (S,), in the states' declared units per second,
+    given the solved local unknowns ``u`` (L,): pressures [mmHg] of the K local nodes, then the
+    M branch flows [mL/s].
+``observe(p, x, iopt, out)``
+    The element's *state-only* observables (those with ``Observable.state_only``), in the order
+    of ``Kernel.observables``, into ``out`` -- what parameter expressions of other elements read.
+
+The arrays may be LONGER than the element needs (the engine passes reusable scratch buffers,
+not slices, because a slice costs more than a small element's equations): read and write
+only the first P, S, L entries (``A`` only its leading L x L block).
+
+Arguments: ``p`` float64 (P,) the element's parameters in the order of ``Component.parameters``,
+in their declared units, with waveforms and expressions already applied; ``x`` float64 (S,) the
+element's states in ``Component.states()`` order; ``t`` float time [s]; ``iopt`` int64 array
+from ``Component.kernel_options()`` (the structural options as integers, so one compiled kernel
+serves every option combination of the type).  Shapes follow the Python-side component (L =
+len(local_nodes) + len(branches), S = len(states)); a kernel reads the options to know them.
+
+A component without a kernel (``kernel()`` returns None) runs on the vectorised numpy path;
+circuits that contain one fall back to it as a whole.  Both paths must agree: the contract
+test compares them on every registered component type.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Kernel:
+    """Compiled equations of one component type (see the module docstring)."""
+
+    stamp: object
+    derivs: object
+    observe: object
+    #: names of the state-only observables ``observe`` writes, in order
+    observables: tuple = ()

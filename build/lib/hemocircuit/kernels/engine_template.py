@@ -1,0 +1,722 @@
+# Template of the compiled circuit engine: NOT imported on its own.
+#
+# hemocircuit.kernels.codegen writes one module per set of component types, made of a header
+# (imports, and the dispatchers elem_stamp / elem_derivs / elem_observe that call each type's
+# Kernel functions by a type code) followed by this text.  Everything here is numba nopython
+# code with no per-call Python: the nodal solve, the right-hand side, the finite-difference
+# Jacobian and a stiff Rosenbrock-W integrator with hard-limit events and dense output.
+#
+# Layout tuple ``lay`` (built by hemocircuit.kernels.layout from an assembled circuit):
+#   n, nx            unknowns of the nodal system (pressures, branch flows), states
+#   et (E,)          type code of element e;  L (E,) local unknowns;  S (E,) states
+#   ep (E+1,)        offsets of each element's parameters in the flat parameter vector P
+#   ex (E+1,)        offsets of each element's states in x (states of an element are contiguous)
+#   eu (E+1,), ui    offsets into ui: global index of each local unknown (n = the ground slot)
+#   eo (E+1,), io    offsets into io: the element's integer options (Component.kernel_options)
+#   eb (E+1,)        offsets of each element's state-only observables in the vector O
+#   ws, w0, wd       waveforms: parameter slot, start of the record in wd (kernels.waveforms)
+#   xs, xc, xk       expressions: parameter slot, start in the code / constants arrays
+#   xcode, xconst    expression programs (kernels.expressions)
+#   oe               elements whose observables expressions read (evaluated before them)
+#   nonlin           1 if some element is nonlinear in the pressures (Newton on the nodes)
+#   cm (E,)          1 if the element's matrix stamp is constant (summed once into A0)
+#   st (E,)          1 if its whole stamp is constant ("static": stamped once, into A0 and b0)
+# Units: as the numpy path -- pressures mmHg, flows mL/s, time s, states in declared units.
+
+NEWTON_TOL = 1e-12
+NEWTON_MAXIT = 50
+
+
+@njit(cache=True, nogil=True)
+def make_work(lay):
+    """Scratch arrays for one evaluation.  Elements get whole scratch buffers (pl, xl, ul, Al,
+    bl, il, dl, ol) rather than slices: a slice is a new array view whose reference counting
+    costs more than the element's equations (measured 70 ns a call against 2 ns)."""
+    (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st) = lay
+    Lm, Sm, Pm, Im, Om = 1, 1, 1, 1, 1
+    for e in range(et.shape[0]):
+        Lm = max(Lm, L[e])
+        Sm = max(Sm, S[e])
+        Pm = max(Pm, ep[e + 1] - ep[e])
+        Im = max(Im, eo[e + 1] - eo[e])
+        Om = max(Om, eb[e + 1] - eb[e])
+    return (np.zeros(ep[-1]), np.zeros(max(eb[-1], 1)), np.zeros((n + 1, n + 1)), np.zeros(n + 1),
+            np.zeros(n + 1), np.zeros((Lm, Lm)), np.zeros(Lm), np.zeros(Lm), np.zeros(n + 1),
+            np.zeros(Pm), np.zeros(Sm), np.zeros(Im, dtype=np.int64), np.zeros(Sm), np.zeros(Om),
+            np.zeros((n + 1, n + 1)), np.zeros(n + 1), np.zeros(n + 1, dtype=np.int64),
+            # static condensation (prepare_static): 17 Acc's LU, 18 Z = Acc^-1 Acv, 19 S0, 20 Avc,
+            # 21 S, 22 pivots of Acc, 23 order (C unknowns, then V), 24 slot in V (-1: in C),
+            # 25 [nc, nv, on], 26 y, 27 rv
+            np.zeros((n + 1, n + 1)), np.zeros((n + 1, n + 1)), np.zeros((n + 1, n + 1)),
+            np.zeros((n + 1, n + 1)), np.zeros((n + 1, n + 1)), np.zeros(n + 1, dtype=np.int64),
+            np.zeros(n + 1, dtype=np.int64), np.zeros(n + 1, dtype=np.int64), np.zeros(3, dtype=np.int64),
+            np.zeros(n + 1), np.zeros(n + 1))
+
+
+# inline="always" (numba IR inlining) on the small helpers called inside the per-evaluation
+# loops: passing the layout and work tuples to a separate function costs a reference count per
+# member (~1 us per evaluation in all).  Not on rhs_into: inlining it at its six call sites
+# quadruples the compile time (25 s -> 100 s) for 14 % speed.
+@njit(cache=True, nogil=True, inline="always")
+def load_element(e, x, Pe, ep, ex, eo, io, pl, xl, il):
+    """Copy element e's parameters, states and options into the scratch buffers.  (Arrays, not
+    the layout tuple: passing the tuple costs a reference count per member, ~70 ns.)"""
+    for i in range(ep[e], ep[e + 1]):
+        pl[i - ep[e]] = Pe[i]
+    for i in range(ex[e], ex[e + 1]):
+        xl[i - ex[e]] = x[i]
+    for i in range(eo[e], eo[e + 1]):
+        il[i - eo[e]] = io[i]
+
+
+@njit(cache=True, nogil=True, inline="always")
+def effective_params(t, x, P, lay, work):
+    """Parameters with waveforms added and expressions evaluated (into work[0])."""
+    (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st) = lay
+    Pe, O, pl, xl, il, ol = work[0], work[1], work[9], work[10], work[11], work[13]
+    for i in range(P.shape[0]):
+        Pe[i] = P[i]
+    for w in range(ws.shape[0]):
+        Pe[ws[w]] += wave_value(wd, w0[w], t)
+    if xs.shape[0] > 0:
+        for j in range(oe.shape[0]):
+            e = oe[j]
+            load_element(e, x, Pe, ep, ex, eo, io, pl, xl, il)
+            elem_observe(et[e], pl, xl, il, ol)
+            for i in range(eb[e], eb[e + 1]):
+                O[i] = ol[i - eb[e]]
+        for k in range(xs.shape[0]):
+            Pe[xs[k]] = eval_expr(xcode, xc[k], xconst, xk[k], Pe, O)
+    return Pe
+
+
+@njit(cache=True, nogil=True, inline="always")
+def stamp_element(e, t, x, Pe, et, L, ep, ex, eu, ui, eo, io, u, Al, bl, ul, pl, xl, il):
+    """Element e's local stamp into the scratch Al, bl (at the current iterate u).  Arrays, not
+    the layout and work tuples: passing a tuple costs a reference count per member."""
+    Lm = ul.shape[0]
+    Le = L[e]
+    for i in range(Lm):
+        bl[i] = 0.0
+        ul[i] = u[ui[eu[e] + i]] if i < Le else 0.0
+        for j in range(Lm):
+            Al[i, j] = 0.0
+    load_element(e, x, Pe, ep, ex, eo, io, pl, xl, il)
+    elem_stamp(et[e], pl, xl, ul, t, il, Al, bl)
+
+
+@njit(cache=True, nogil=True)
+def prepare_static(t, x, P, lay, work):
+    """A0 = the constant matrix stamps, b0 = the static elements' right-hand sides, for the
+    parameters P (call again whenever P changes)."""
+    (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st) = lay
+    Pe = effective_params(t, x, P, lay, work)
+    A0, b0, u, Al, bl, ul, pl, xl, il = work[14], work[15], work[4], work[5], work[6], work[7], work[9], work[10], work[11]
+    A0[:, :] = 0.0
+    b0[:] = 0.0
+    for e in range(et.shape[0]):
+        if cm[e] == 0:
+            continue
+        stamp_element(e, t, x, Pe, et, L, ep, ex, eu, ui, eo, io, u, Al, bl, ul, pl, xl, il)
+        for i in range(L[e]):
+            r = ui[eu[e] + i]
+            if st[e] == 1:
+                b0[r] += bl[i]
+            for j in range(L[e]):
+                A0[r, ui[eu[e] + j]] += Al[i, j]
+    condense(lay, work)
+
+
+@njit(cache=True, nogil=True)
+def condense(lay, work):
+    """Static condensation of the nodal system: the unknowns V that state-dependent matrix
+    stamps touch are kept, the constant rest C is eliminated once per parameter set.  With
+    A0 = [[Acc, Acv], [Avc, Avv]]: Acc is factorised, Z = Acc^-1 Acv and the Schur complement
+    S0 = Avv - Avc Z stored; an evaluation then solves only S0 + (varying stamps) (nv x nv).
+    Used when V is at most half the unknowns and Acc is regular; otherwise the dense path."""
+    (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st) = lay
+    A0, Fc, Z, S0, Avc, pivc, order, vpos, meta, y = (work[14], work[17], work[18], work[19], work[20],
+                                                      work[22], work[23], work[24], work[25], work[26])
+    meta[2] = 0
+    for i in range(n + 1):
+        vpos[i] = -1
+    for e in range(et.shape[0]):
+        if cm[e] == 0:
+            for i in range(L[e]):
+                r = ui[eu[e] + i]
+                if r < n:
+                    vpos[r] = 0
+    # unknowns the constant part alone leaves undetermined (e.g. a node joined to the rest
+    # only through a state-dependent element) join V: Acc must be regular
+    while True:
+        nv = 0
+        for i in range(n):
+            if vpos[i] >= 0:
+                nv += 1
+        nc = n - nv
+        if nv == 0 or 2 * nv > n:
+            return
+        k = 0
+        for i in range(n):
+            if vpos[i] < 0:
+                order[k] = i
+                k += 1
+        for i in range(nc):
+            for j in range(nc):
+                Fc[i, j] = A0[order[i], order[j]]
+        bad = lu_factor_at(Fc, pivc, nc)
+        if bad < 0:
+            break
+        vpos[order[bad]] = 0
+    a = 0
+    for i in range(n):
+        if vpos[i] >= 0:
+            order[nc + a] = i
+            vpos[i] = a
+            a += 1
+    for b in range(nv):
+        for i in range(nc):
+            y[i] = A0[order[i], order[nc + b]]
+        lu_apply(Fc, pivc, y, nc)
+        for i in range(nc):
+            Z[i, b] = y[i]
+    for a in range(nv):
+        for i in range(nc):
+            Avc[a, i] = A0[order[nc + a], order[i]]
+        for b in range(nv):
+            acc = A0[order[nc + a], order[nc + b]]
+            for i in range(nc):
+                acc -= Avc[a, i] * Z[i, b]
+            S0[a, b] = acc
+    meta[0] = nc
+    meta[1] = nv
+    meta[2] = 1
+
+
+@njit(cache=True, nogil=True, inline="always")
+def solve_nodes(t, x, Pe, lay, work):
+    """Node pressures and branch flows u (n+1,; u[n] = 0 is ground) for states x: the MNA
+    system A0 + (varying stamps) and b0 + (non-static right-hand sides), solved densely
+    (Newton for elements nonlinear in the pressures).  prepare_static must have run for these
+    parameters.  Returns False if the system is singular or Newton fails."""
+    (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st) = lay
+    A, b, u, Al, bl, un, A0, b0 = work[2], work[3], work[4], work[5], work[6], work[8], work[14], work[15]
+    ul, pl, xl, il, piv = work[7], work[9], work[10], work[11], work[16]
+    Fc, Z, S0, Avc, Sw, pivc, order, vpos, meta, y, rv = (work[17], work[18], work[19], work[20], work[21],
+                                                          work[22], work[23], work[24], work[25], work[26],
+                                                          work[27])
+    schur = meta[2] == 1
+    nc = meta[0]
+    nv = meta[1]
+    if nonlin == 0:
+        for i in range(n + 1):
+            u[i] = 0.0
+    for it in range(NEWTON_MAXIT):
+        for i in range(n + 1):
+            b[i] = b0[i]
+        if schur:
+            for a in range(nv):
+                for c in range(nv):
+                    Sw[a, c] = S0[a, c]
+        else:
+            for i in range(n + 1):
+                for j in range(n + 1):
+                    A[i, j] = A0[i, j]
+        for e in range(et.shape[0]):
+            if st[e] == 1:
+                continue
+            stamp_element(e, t, x, Pe, et, L, ep, ex, eu, ui, eo, io, u, Al, bl, ul, pl, xl, il)
+            for i in range(L[e]):
+                r = ui[eu[e] + i]
+                b[r] += bl[i]
+                if cm[e] == 0:
+                    if schur:
+                        if r < n:
+                            for j in range(L[e]):
+                                c = ui[eu[e] + j]
+                                if c < n:
+                                    Sw[vpos[r], vpos[c]] += Al[i, j]
+                    else:
+                        for j in range(L[e]):
+                            A[r, ui[eu[e] + j]] += Al[i, j]
+        if schur:
+            # y = Acc^-1 b_C;  (S0 + varying) u_V = b_V - Avc y;  u_C = y - Z u_V
+            for i in range(nc):
+                y[i] = b[order[i]]
+            lu_apply(Fc, pivc, y, nc)
+            for a in range(nv):
+                acc = b[order[nc + a]]
+                for i in range(nc):
+                    acc -= Avc[a, i] * y[i]
+                rv[a] = acc
+            if not lu_factor(Sw, piv, nv):
+                return False
+            lu_apply(Sw, piv, rv, nv)
+            for a in range(nv):
+                un[order[nc + a]] = rv[a]
+            for i in range(nc):
+                acc = y[i]
+                for a in range(nv):
+                    acc -= Z[i, a] * rv[a]
+                un[order[i]] = acc
+        else:
+            if not lu_factor(A, piv, n):
+                return False
+            for i in range(n):
+                un[i] = b[i]
+            lu_apply(A, piv, un, n)
+        un[n] = 0.0
+        if nonlin == 0:
+            for i in range(n + 1):
+                u[i] = un[i]
+            return True
+        change = 0.0
+        for i in range(n + 1):
+            d = abs(un[i] - u[i]) / (1.0 + abs(un[i]))
+            if d > change:
+                change = d
+            u[i] = un[i]
+        if change < NEWTON_TOL:
+            return True
+    return False
+
+
+@njit(cache=True, nogil=True)
+def rhs_into(t, x, P, lay, work, dx):
+    """dx/dt for states x at time t into dx.  Returns False on a singular nodal system
+    (dx is then NaN)."""
+    (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st) = lay
+    Pe = effective_params(t, x, P, lay, work)
+    if not solve_nodes(t, x, Pe, lay, work):
+        for i in range(dx.shape[0]):
+            dx[i] = np.nan
+        return False
+    u, ul, pl, xl, il, dl = work[4], work[7], work[9], work[10], work[11], work[12]
+    for e in range(et.shape[0]):
+        if S[e] == 0:
+            continue
+        for i in range(L[e]):
+            ul[i] = u[ui[eu[e] + i]]
+        load_element(e, x, Pe, ep, ex, eo, io, pl, xl, il)
+        elem_derivs(et[e], pl, xl, ul, t, il, dl)
+        for i in range(ex[e], ex[e + 1]):
+            dx[i] = dl[i - ex[e]]
+    return True
+
+
+@njit(cache=True, nogil=True)
+def rhs(t, x, P, lay):
+    """dx/dt (allocating; for tests and single calls)."""
+    work = make_work(lay)
+    prepare_static(t, x, P, lay, work)
+    dx = np.empty(x.shape[0])
+    rhs_into(t, x, P, lay, work, dx)
+    return dx
+
+
+@njit(cache=True, nogil=True)
+def rhs_batch(t, X, P, lay):
+    """dx/dt for rows X (m, nx) with parameter rows P (m or 1, nP)."""
+    work = make_work(lay)
+    out = np.empty(X.shape)
+    for k in range(X.shape[0]):
+        p = P[k if P.shape[0] > 1 else 0]
+        if k == 0 or P.shape[0] > 1:
+            prepare_static(t, X[k], p, lay, work)
+        rhs_into(t, X[k], p, lay, work, out[k])
+    return out
+
+
+# --- Rosenbrock(-W) integrator.  The tableau is a run-time argument (``tab``, packed by
+# hemocircuit.kernels.tableaus: ROS34PW2 by default, ROS34PW3, RODAS4, RODAS5P), so choosing a
+# method never recompiles.
+FD_REL = 1e-7  # finite-difference step, relative to max(|x|, the state's scale): hemocircuit.derivatives' rule
+
+
+# inlined (numba IR) into integrate, its one caller: numba links a callee's machine code into
+# every caller and LLVM optimises it again there, so each call level costs compile time
+@njit(cache=True, nogil=True, inline="always")
+def jacobian_into(t, x, f0, P, lay, work, scales, J, ft, xt, ftmp, autonomous):
+    """Forward-difference Jacobian J (nx, nx) and df/dt ft (nx,) at (t, x) with f0 = f(t, x)
+    (ft = 0 without an evaluation when the circuit is autonomous).
+    Returns the number of evaluations, or -1 if one failed (singular nodal system)."""
+    nx = x.shape[0]
+    for i in range(nx):
+        xt[i] = x[i]
+    for j in range(nx):
+        hj = FD_REL * max(abs(x[j]), scales[j])
+        xt[j] = x[j] + hj
+        hj = xt[j] - x[j]
+        if not rhs_into(t, xt, P, lay, work, ftmp):
+            return -1
+        for i in range(nx):
+            J[i, j] = (ftmp[i] - f0[i]) / hj
+        xt[j] = x[j]
+    if autonomous:
+        return nx
+    ht = FD_REL * max(abs(t), 1.0)
+    if not rhs_into(t + ht, x, P, lay, work, ftmp):
+        return -1
+    for i in range(nx):
+        ft[i] = (ftmp[i] - f0[i]) / ht
+    return nx + 1
+
+
+@njit(cache=True, nogil=True)
+def lu_factor(W, piv, m):
+    """In-place LU with partial pivoting of the leading m x m block of W; False if singular.
+    (The nodal system uses it with m = n, leaving out the ground slot; the integrator's W
+    matrix with m = nx.)"""
+    return lu_factor_at(W, piv, m) < 0
+
+
+@njit(cache=True, nogil=True)
+def lu_factor_at(W, piv, m):
+    """lu_factor, returning -1 on success or the column where no nonzero pivot was left."""
+    for c in range(m):
+        p = c
+        best = abs(W[c, c])
+        for r in range(c + 1, m):
+            v = abs(W[r, c])
+            if v > best:
+                best, p = v, r
+        piv[c] = p
+        if best == 0.0:
+            return c
+        if p != c:
+            for j in range(m):
+                tmp = W[c, j]
+                W[c, j] = W[p, j]
+                W[p, j] = tmp
+        inv = 1.0 / W[c, c]
+        for r in range(c + 1, m):
+            W[r, c] *= inv
+            f = W[r, c]
+            if f != 0.0:
+                for j in range(c + 1, m):
+                    W[r, j] -= f * W[c, j]
+    return -1
+
+
+@njit(cache=True, nogil=True)
+def lu_apply(W, piv, v, m):
+    """Solve with the factors of lu_factor (size m), in place on v[:m]."""
+    for c in range(m):
+        p = piv[c]
+        if p != c:
+            tmp = v[c]
+            v[c] = v[p]
+            v[p] = tmp
+    for i in range(m):
+        s = v[i]
+        for j in range(i):
+            s -= W[i, j] * v[j]
+        v[i] = s
+    for i in range(m - 1, -1, -1):
+        s = v[i]
+        for j in range(i + 1, m):
+            s -= W[i, j] * v[j]
+        v[i] = s / W[i, i]
+
+
+@njit(cache=True, nogil=True)
+def hermite(x0, f0, x1, f1, h, s, out):
+    a = (1 + 2 * s) * (1 - s) ** 2
+    b = s * (1 - s) ** 2 * h
+    c = s * s * (3 - 2 * s)
+    d = s * s * (s - 1) * h
+    for i in range(x0.shape[0]):
+        out[i] = a * x0[i] + b * f0[i] + c * x1[i] + d * f1[i]
+
+
+@njit(cache=True, nogil=True)
+def hermite_root(y0, d0, y1, d1):
+    """First fraction s in [0, 1] where the cubic (values y0 > 0 >= y1, scaled slopes d0, d1)
+    crosses zero (bisection, 50 halvings)."""
+    lo = 0.0
+    hi = 1.0
+    for _ in range(50):
+        m = 0.5 * (lo + hi)
+        v = (1 + 2 * m) * (1 - m) ** 2 * y0 + m * (1 - m) ** 2 * d0 + m * m * (3 - 2 * m) * y1 + m * m * (m - 1) * d1
+        if v > 0:
+            lo = m
+        else:
+            hi = m
+    return hi
+
+
+# inlined into integrate_batch, its one caller (see jacobian_into): one level less to compile
+@njit(cache=True, nogil=True, inline="always")
+def integrate(t_out, x0, P, lay, scales, lim_i, lim_b, lim_r, breaks, rtol, atol, h0, hmax, max_steps, tab, out):
+    """Integrate from t_out[0] to t_out[-1], writing the states at every t_out into out (T, nx).
+
+    Hard limits (lim_i, lim_b, lim_r): state lim_i[k] may not fall below lim_b[k]; at the
+    crossing (located on the step's cubic Hermite interpolant) the state is put on the bound
+    and state lim_r[k] (if >= 0) is reset to max(., 0); the next step starts from the size of
+    the step that hit the bound (tab[4] = 1), not from the shortened one.  Steps end exactly on
+    ``breaks`` (discontinuities of sources), where f is re-evaluated; where f does not jump
+    (a slope-only kink, e.g. of a pwl table) the Jacobian is kept (tab[5] = 1).
+    ``tab``: the method (hemocircuit.kernels.tableaus.packed).
+    Returns (status, t reached, steps, rejected steps, f evaluations, limit events);
+    status 0 done, -1 step size too small, -2 step limit, -3 non-finite state or singular system.
+    """
+    nx = x0.shape[0]
+    T = t_out.shape[0]
+    ns = int(tab[0])
+    GAMMA = tab[1]
+    q = tab[2]
+    JAC_REUSE = int(tab[3])
+    ev_restart = tab[4] != 0.0
+    soft_kinks = tab[5] != 0.0
+    autonomous = tab[6] != 0.0  # no waveform or time-dependent element: df/dt = 0
+    oA = 8  # offsets of A, G (ns x ns, row major), b, e, c, d, reuse (ns) in tab
+    oG = oA + ns * ns
+    oB = oG + ns * ns
+    oE = oB + ns
+    oC = oE + ns
+    oD = oC + ns
+    oR = oD + ns
+    work = make_work(lay)
+    x = x0.copy()
+    f = np.empty(nx)
+    fn = np.empty(nx)
+    xn = np.empty(nx)
+    xs = np.empty(nx)
+    gs = np.empty(nx)
+    err = np.empty(nx)
+    K = np.empty((ns, nx))
+    fr = np.empty(nx)
+    J = np.zeros((nx, nx))
+    ft = np.zeros(nx)
+    W = np.empty((nx, nx))
+    piv = np.empty(nx, dtype=np.int64)
+    xt = np.empty(nx)
+    ftmp = np.empty(nx)
+    xh = np.empty(nx)
+    t = t_out[0]
+    t_end = t_out[-1]
+    for i in range(nx):
+        out[0, i] = x[i]
+    k_out = 1
+    nfev = 1
+    prepare_static(t, x, P, lay, work)
+    if not rhs_into(t, x, P, lay, work, f):
+        return -3, t, 0, 0, nfev, 0
+    h = h0
+    age = JAC_REUSE
+    nsteps = 0
+    nrej = 0
+    nev = 0
+    ib = 0
+    while ib < breaks.shape[0] and breaks[ib] <= t:
+        ib += 1
+    status = 0
+    nrej_run = 0
+    err_prev = 1.0
+    while t < t_end and k_out < T:
+        if nsteps >= max_steps:
+            status = -2
+            break
+        tb = t_end
+        if ib < breaks.shape[0] and breaks[ib] < t_end:
+            tb = breaks[ib]
+        if age >= JAC_REUSE:
+            nj = jacobian_into(t, x, f, P, lay, work, scales, J, ft, xt, ftmp, autonomous)
+            if nj < 0:
+                status = -3
+                break
+            nfev += nj
+            age = 0
+        hh = min(h, hmax)
+        at_break = False
+        tlim = np.inf  # stages never sample a source on the far side of a breakpoint
+        if t + hh >= tb - 1e-12 * max(1.0, abs(tb)):
+            hh = tb - t
+            at_break = True
+            tlim = tb - 1e-13 * max(1.0, abs(tb))
+            if hh <= 1e-12 * max(1.0, abs(tb)):  # already there (to rounding): cross it
+                t = tb
+                if tb < t_end:
+                    ib += 1
+                nfev += 1
+                if not rhs_into(t, x, P, lay, work, f):
+                    status = -3
+                    break
+                age = JAC_REUSE
+                continue
+        for i in range(nx):
+            for j in range(nx):
+                W[i, j] = -GAMMA * hh * J[i, j]
+            W[i, i] += 1.0
+        if not lu_factor(W, piv, nx):
+            h = 0.25 * hh
+            age = JAC_REUSE
+            nrej += 1
+            nsteps += 1
+            if h < 1e-14 * max(1.0, abs(t)):
+                status = -1
+                break
+            continue
+        good = True
+        for s in range(ns):
+            for i in range(nx):
+                xs[i] = x[i]
+                gs[i] = 0.0
+            for j in range(s):
+                a_sj = tab[oA + s * ns + j]
+                g_sj = tab[oG + s * ns + j]
+                if a_sj != 0.0:
+                    for i in range(nx):
+                        xs[i] += a_sj * K[j, i]
+                if g_sj != 0.0:
+                    for i in range(nx):
+                        gs[i] += g_sj * K[j, i]
+            if s == 0:
+                for i in range(nx):
+                    fn[i] = f[i]
+            elif tab[oR + s] == 0.0:  # else: same point as stage s-1, fn holds its f
+                nfev += 1
+                if not rhs_into(min(t + tab[oC + s] * hh, tlim), xs, P, lay, work, fn):
+                    good = False
+                    break
+            d_s = tab[oD + s]
+            for i in range(nx):
+                acc = 0.0
+                for j in range(nx):
+                    acc += J[i, j] * gs[j]
+                K[s, i] = hh * fn[i] + hh * acc + hh * hh * d_s * ft[i]
+            lu_apply(W, piv, K[s], nx)
+        enorm = np.inf
+        if good:
+            enorm = 0.0
+            for i in range(nx):
+                xi = x[i]
+                e = 0.0
+                for s in range(ns):
+                    xi += tab[oB + s] * K[s, i]
+                    e += tab[oE + s] * K[s, i]
+                xn[i] = xi
+                sc = atol[i] + rtol * max(abs(x[i]), abs(xn[i]))
+                enorm += (e / sc) ** 2
+            enorm = np.sqrt(enorm / nx)
+            if not np.isfinite(enorm):
+                enorm = np.inf
+        nsteps += 1
+        if enorm <= 1.0:
+            # PI step-size control (Gustafsson): smoother steps, fewer rejections than I alone
+            en = max(enorm, 1e-10)
+            fac = 0.9 * en ** (-0.7 / q) * err_prev ** (0.4 / q)
+            fac = min(5.0, max(0.2, fac))
+            err_prev = max(en, 1e-4)
+            tn = tb if at_break else t + hh
+            nfev += 1
+            ok = rhs_into(min(tn, tlim), xn, P, lay, work, fn)  # left limit at a breakpoint
+            # hard limits: end the step at the earliest crossing
+            s_hit = 2.0
+            k_hit = -1
+            held = False
+            for k in range(lim_i.shape[0]):
+                li = lim_i[k]
+                if xn[li] < lim_b[k] and x[li] <= lim_b[k]:
+                    # already on the bound (just reset): hold it there, as the floor means,
+                    # instead of locating the same crossing again at s ~ 0 every step
+                    xn[li] = lim_b[k]
+                    if lim_r[k] >= 0:
+                        xn[lim_r[k]] = max(xn[lim_r[k]], 0.0)
+                    held = True
+                    continue
+                if xn[li] < lim_b[k] and x[li] > lim_b[k]:
+                    sk = hermite_root(x[li] - lim_b[k], f[li] * hh, xn[li] - lim_b[k], fn[li] * hh)
+                    if sk < s_hit:
+                        s_hit, k_hit = sk, k
+            h_full = hh
+            if k_hit >= 0:
+                hermite(x, f, xn, fn, hh, s_hit, xh)
+                for i in range(nx):
+                    xn[i] = xh[i]
+                xn[lim_i[k_hit]] = lim_b[k_hit]
+                if lim_r[k_hit] >= 0:
+                    xn[lim_r[k_hit]] = max(xn[lim_r[k_hit]], 0.0)
+                hh = s_hit * hh
+                tn = t + hh
+                at_break = False
+                nfev += 1
+                ok = rhs_into(tn, xn, P, lay, work, fn)
+                age = JAC_REUSE
+                nev += 1
+            elif held:
+                nfev += 1
+                ok = rhs_into(min(tn, tlim), xn, P, lay, work, fn)
+            if not ok:
+                status = -3
+                break
+            # dense output: cubic Hermite between (t, x, f) and (tn, xn, fn)
+            while k_out < T and t_out[k_out] <= tn + 1e-12 * max(1.0, abs(tn)):
+                sfrac = (t_out[k_out] - t) / hh if hh > 0 else 1.0
+                sfrac = min(1.0, max(0.0, sfrac))
+                hermite(x, f, xn, fn, hh, sfrac, xh)
+                for i in range(nx):
+                    out[k_out, i] = xh[i]
+                k_out += 1
+            t = tn
+            for i in range(nx):
+                x[i] = xn[i]
+                f[i] = fn[i]
+            h = hh * fac if not at_break else max(h, hh * fac)
+            if k_hit >= 0 and ev_restart:
+                # restart after the reset from the step that reached the bound: the shortened
+                # step (s_hit x hh, often tiny) says nothing about the dynamics after the reset
+                h = max(h, h_full * fac)
+            if at_break and tb < t_end:  # the source may jump here: continue from its right limit
+                ib += 1
+                nfev += 1
+                if not rhs_into(t, x, P, lay, work, fr):
+                    status = -3
+                    break
+                jump = not soft_kinks
+                for i in range(nx):
+                    # a jump of f that moves x by more than 1e-3 of its tolerance over the next
+                    # step is a value discontinuity (new Jacobian); less is a slope-only kink
+                    if abs(fr[i] - f[i]) * h > 1e-3 * (atol[i] + rtol * abs(x[i])):
+                        jump = True
+                    f[i] = fr[i]
+                if jump:
+                    age = JAC_REUSE
+            age += 1
+            nrej_run = 0
+        else:
+            nrej += 1
+            if np.isfinite(enorm):
+                fac = 0.9 * enorm ** (-1.0 / q)
+                h = hh * min(0.5, max(0.2, fac))
+            else:
+                h = 0.25 * hh
+            nrej_run += 1
+            if nrej_run >= 2 and age > 0:  # a second rejection in a row: the Jacobian is stale
+                age = JAC_REUSE
+            if h < 1e-14 * max(1.0, abs(t)):
+                status = -1
+                break
+    for k in range(k_out, T):
+        for i in range(nx):
+            out[k, i] = np.nan
+    return status, t, nsteps, nrej, nfev, nev
+
+
+@njit(cache=True, nogil=True)
+def integrate_batch(t_out, X0, P, lay, scales, lim_i, lim_b, lim_r, breaks, rtol, atol, h0, hmax, max_steps, tab):
+    """integrate() for each member: t_out (B, T), X0 (B, nx), P (B, nP), hmax (B,) ->
+    (out (B, T, nx), stats (B, 6) as integrate's return values)."""
+    B = X0.shape[0]
+    out = np.empty((B, t_out.shape[1], X0.shape[1]))
+    stats = np.zeros((B, 6))
+    for m in range(B):
+        status, t, steps, rej, nfev, nev = integrate(t_out[m], X0[m], P[m], lay, scales, lim_i, lim_b, lim_r,
+                                                     breaks, rtol, atol, h0, hmax[m], max_steps, tab, out[m])
+        stats[m, 0] = status
+        stats[m, 1] = t
+        stats[m, 2] = steps
+        stats[m, 3] = rej
+        stats[m, 4] = nfev
+        stats[m, 5] = nev
+    return out, stats

@@ -1,0 +1,155 @@
+"""Flatten an assembled circuit into the arrays the compiled engine reads (see engine_template).
+
+Everything that is structure (elements, their type codes, node and state numbering, options,
+waveform records, expression programs) goes into the layout tuple; parameter *values* go into
+a separate matrix P (members x slots), so a batch or a new parameter value reuses the layout
+and the compiled code.
+"""
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import expressions as kexpr
+from . import waveforms as kwave
+
+#: above this many nodal unknowns the dense in-kernel solve is not used (the sparse numpy path is)
+MAX_DENSE_UNKNOWNS = 200
+
+
+@dataclass
+class Layout:
+    lay: tuple
+    kernels: list          # Kernel objects; index = type code
+    slots: dict            # (element id, parameter) -> column of P
+    n_params: int
+    autonomous: bool = False  # no waveform, no time-dependent element: f does not depend on t
+
+
+@functools.lru_cache(maxsize=1)
+def registered_kernels() -> tuple:
+    """The kernels of every registered component type (one option set each; the functions do
+    not depend on options), in type-name order.  The engine is generated for all of them, so
+    every netlist, whatever its types, uses one compiled engine: compiled once per install."""
+    from ..registry import component_types
+
+    out, seen = [], set()
+    for _, cls in sorted(component_types().items()):
+        try:
+            k = cls().kernel()
+        except Exception:  # noqa: BLE001 - a plug-in that cannot build without options: numpy path
+            k = None
+        if k is not None and (k.stamp, k.derivs, k.observe) not in seen:
+            seen.add((k.stamp, k.derivs, k.observe))
+            out.append(k)
+    return tuple(out)
+
+
+def kernels_of(circuit):
+    """[(group, Kernel)] for every group, or None if some type has no compiled kernel."""
+    out = []
+    for g in circuit.groups:
+        k = g.comp.kernel()
+        if k is None:
+            return None
+        out.append((g, k))
+    return out
+
+
+def build_layout(circuit) -> Layout | None:
+    """The layout of ``circuit``, or None when it cannot run compiled (a type without a kernel,
+    or more nodal unknowns than the dense in-kernel solve is meant for)."""
+    pairs = kernels_of(circuit)
+    if pairs is None or circuit.n > MAX_DENSE_UNKNOWNS:
+        return None
+    kernels = list(registered_kernels())
+    codes = {(k.stamp, k.derivs, k.observe): i for i, k in enumerate(kernels)}
+    for _, k in pairs:  # a type registered after the first call (tests, notebooks)
+        if (k.stamp, k.derivs, k.observe) not in codes:
+            codes[(k.stamp, k.derivs, k.observe)] = len(kernels)
+            kernels.append(k)
+    et, L, S, cm, st = [], [], [], [], []
+    ep, ex, eu, eo, eb = [0], [0], [0], [0], [0]
+    ui, io = [], []
+    slots, obs_index, elem_index = {}, {}, {}
+    for g, k in pairs:
+        names = list(g.comp.parameters)
+        iopt = np.asarray(g.comp.kernel_options(), dtype=np.int64)
+        for i, eid in enumerate(g.ids):
+            elem_index[eid] = len(et)
+            et.append(codes[(k.stamp, k.derivs, k.observe)])
+            own = {name for j, name, _ in g.waves if j == i} | {name for j, name, _ in g.exprs if j == i}
+            const = g.comp.constant_matrix and g.comp.linear_in_pressure and not any(
+                name for j, name, _ in g.exprs if j == i)
+            cm.append(int(const))
+            st.append(int(const and g.S == 0 and not own and not g.comp.time_dependent))
+            L.append(g.L)
+            S.append(g.S)
+            for name in names:
+                slots[(eid, name)] = ep[-1] + names.index(name)
+            ep.append(ep[-1] + len(names))
+            sidx = g.sidx[i]
+            if g.S and not np.array_equal(sidx, np.arange(sidx[0], sidx[0] + g.S)):
+                return None  # states of an element must be contiguous
+            if g.S and sidx[0] != ex[-1]:
+                return None  # and numbered in element order
+            ex.append(ex[-1] + g.S)
+            ui.extend(int(v) for v in g.uidx[i])
+            eu.append(len(ui))
+            io.extend(int(v) for v in iopt)
+            eo.append(len(io))
+            for j, oname in enumerate(k.observables):
+                obs_index[(eid, oname)] = eb[-1] + j
+            eb.append(eb[-1] + len(k.observables))
+    # waveforms: their value is added to the parameter slot (sources keep value = 0 then)
+    ws, w0, wd = [], [], []
+    for g in circuit.groups:
+        for i, name, wf in g.waves:
+            ws.append(slots[(g.ids[i], name)])
+            w0.append(len(wd))
+            wd.extend(kwave.encode(wf).tolist())
+    # expressions: programs for the stack machine; observables they read are evaluated first
+    xs, xc, xk, code, const, oe = [], [], [], [], [], set()
+
+    def slot(ref):
+        if ref.kind == "param":
+            return "param", slots[(ref.element, ref.name)]
+        if ref.kind == "observable":
+            if (ref.element, ref.name) not in obs_index:
+                raise KeyError(ref)
+            oe.add(elem_index[ref.element])
+            return "obs", obs_index[(ref.element, ref.name)]
+        raise KeyError(ref)
+
+    for g in circuit.groups:
+        for i, name, ex_ in g.exprs:
+            try:
+                c_, k_ = kexpr.encode(ex_, slot)
+            except KeyError:
+                return None  # reads something the kernels do not provide: numpy path
+            xs.append(slots[(g.ids[i], name)])
+            xc.append(len(code))
+            xk.append(len(const))
+            code.extend(int(v) for v in c_)
+            const.extend(float(v) for v in k_)
+    i64 = lambda a: np.asarray(a, dtype=np.int64)  # noqa: E731
+    f64 = lambda a: np.asarray(a, dtype=np.float64)  # noqa: E731
+    nonlin = int(any(not g.comp.linear_in_pressure for g in circuit.groups))
+    lay = (int(circuit.n), int(circuit.nx), i64(et), i64(L), i64(S), i64(ep), i64(ex), i64(eu), i64(ui),
+           i64(eo), i64(io), i64(eb), i64(ws), i64(w0), f64(wd), i64(xs), i64(xc), i64(xk), i64(code),
+           f64(const), i64(sorted(oe)), nonlin, i64(cm), i64(st))
+    autonomous = not ws and not any(g.comp.time_dependent for g in circuit.groups)
+    return Layout(lay, kernels, slots, ep[-1], autonomous)
+
+
+def param_matrix(circuit, layout: Layout) -> np.ndarray:
+    """P (B, n_params): the circuit's parameter values per member, in layout slot order."""
+    P = np.zeros((circuit.B, layout.n_params))
+    for g in circuit.groups:
+        for name, arr in g.p.items():
+            a = np.broadcast_to(arr, (circuit.B, g.E))
+            for i, eid in enumerate(g.ids):
+                P[:, layout.slots[(eid, name)]] = a[:, i]
+    return np.nan_to_num(P, nan=0.0)  # expression slots are filled at run time

@@ -1,0 +1,88 @@
+"""The compiled evaluator of an assembled circuit: right-hand side, nodal solve and the stiff
+integrator, all in numba (see engine_template).  Python is entered once per call, not per
+step: a 1000 s run is one call."""
+from __future__ import annotations
+
+import numpy as np
+
+from .codegen import engine_module
+from .layout import build_layout, param_matrix
+from . import tableaus
+
+STATUS = {0: "done", -1: "step size too small", -2: "step limit reached",
+          -3: "non-finite state or singular nodal system"}
+
+
+class CompiledSystem:
+    """Compiled right-hand side and integrator for one circuit structure.
+
+    Build with :meth:`of` (None when the circuit has a component type without a kernel).
+    Parameter values are passed as a matrix P (members x slots, :meth:`params`), so one
+    compiled system serves every parameter set of the structure.
+    """
+
+    def __init__(self, layout, module, scales, limits):
+        self.layout = layout
+        self.mod = module
+        self.lay = layout.lay
+        self.scales = np.asarray(scales, dtype=float)
+        self.lim_i = np.array([li for li, _, _ in limits], dtype=np.int64)
+        self.lim_b = np.array([b for _, b, _ in limits], dtype=float)
+        self.lim_r = np.array([-1 if r is None else r for _, _, r in limits], dtype=np.int64)
+
+    @classmethod
+    def of(cls, circuit) -> "CompiledSystem | None":
+        layout = build_layout(circuit)
+        if layout is None:
+            return None
+        return cls(layout, engine_module(layout.kernels), circuit.state_scales, circuit.hard_limits())
+
+    def params(self, circuit) -> np.ndarray:
+        """P (B, slots) of ``circuit`` (same structure as the one this system was built from)."""
+        return param_matrix(circuit, self.layout)
+
+    def rhs(self, t, x, P):
+        """dx/dt for x (nx,) or rows (m, nx); P (1 or m, slots)."""
+        x = np.asarray(x, dtype=float)
+        P = np.atleast_2d(P)
+        if x.ndim == 1:
+            return self.mod.rhs(float(t), x, P[0], self.lay)
+        return self.mod.rhs_batch(float(t), np.ascontiguousarray(x), P, self.lay)
+
+    def integrate(self, t_out, x0, P, rtol=1e-6, atol=None, breaks=(), h0=1e-3, hmax=np.inf,
+                  max_steps=10_000_000, method=None, **tab_options):
+        """States on the grid t_out (T,) from x0 at t_out[0] for one parameter row P (slots,).
+        ``method``: a Rosenbrock tableau of hemocircuit.kernels.tableaus (None: chosen by rtol,
+        tableaus.default_method;
+        ``tab_options`` go to its ``packed``).
+
+        Returns (X (T, nx), stats dict).  Rows after a failure are NaN; stats['status'] < 0
+        says why (see STATUS)."""
+        # one member of the batch entry point: a process compiles one integrator, not two
+        X, st = self.integrate_batch(np.asarray(t_out, dtype=float)[None], np.asarray(x0, dtype=float)[None],
+                                     np.asarray(P, dtype=float)[None], rtol=rtol, atol=atol, breaks=breaks, h0=h0,
+                                     hmax=hmax, max_steps=max_steps, method=method, **tab_options)
+        status, t, steps, rej, nfev, nev = (st[0, k] for k in range(6))
+        return X[0], {"status": int(status), "message": STATUS[int(status)], "t": float(t), "steps": int(steps),
+                      "rejected": int(rej), "nfev": int(nfev), "limit_events": int(nev)}
+
+    def integrate_batch(self, t_out, X0, P, rtol=1e-6, atol=None, breaks=(), h0=1e-3, hmax=np.inf,
+                        max_steps=10_000_000, method=None, **tab_options):
+        """integrate() for every member: t_out (T,) or (B, T), X0 (B, nx), P (B, slots), hmax
+        scalar or (B,).
+        Returns (X (B, T, nx), stats (B, 6): status, t, steps, rejected, nfev, limit events)."""
+        X0 = np.ascontiguousarray(X0, dtype=float)
+        B = X0.shape[0]
+        t_out = np.ascontiguousarray(np.broadcast_to(np.asarray(t_out, dtype=float), (B, np.shape(t_out)[-1])))
+        P = np.ascontiguousarray(np.broadcast_to(P, (B, P.shape[-1])), dtype=float)
+        atol_v = (rtol * 1e-3 if atol is None else atol) * self.scales
+        hmax = np.ascontiguousarray(np.broadcast_to(np.asarray(hmax, dtype=float), (B,)))
+        return self.mod.integrate_batch(t_out, X0, P, self.lay, self.scales, self.lim_i, self.lim_b, self.lim_r,
+                                        np.asarray(sorted(breaks), dtype=float), float(rtol), atol_v, float(h0),
+                                        hmax, int(max_steps),
+                                        self.tableau(method or tableaus.default_method(rtol), **tab_options))
+
+    def tableau(self, method, **tab_options):
+        """The packed method for integrate_batch (hemocircuit.kernels.tableaus)."""
+        opts = {"autonomous": int(self.layout.autonomous), **tab_options}
+        return tableaus.packed(method, **opts)

@@ -1,0 +1,157 @@
+"""Rosenbrock(-W) tableaus for the compiled integrator, packed into one float64 array.
+
+The engine (engine_template.integrate) uses the classical form (Hairer & Wanner II, IV.7):
+W = I - gamma h J and, for stages s = 1..ns,
+
+    W k_s = h f(t + c_s h, x + sum_j A_sj k_j) + h J sum_j G_sj k_j + h^2 d_s f_t,
+    x_new = x + sum_s b_s k_s,   error estimate = sum_s e_s k_s  (e = b - embedded b).
+
+Methods (coefficients copied from the sources named; ``_from_transformed`` converts the
+transformed form u_i = sum_j Gamma_ij k_j of RODAS-type codes back to the classical one):
+
+``ros34pw2``  Rang & Angermann 2005 (BIT 45:761), 4 stages (3 evaluations), order 3(2),
+              L-stable, stiffly accurate, a W-method (order kept with an approximate Jacobian).
+``ros34pw3``  same paper, order 4 with an exact Jacobian (3 as a W-method), A-stable
+              (R(inf) = 0.63); its embedded solution is order 2 (measured), so q = 3.
+``rodas4``    Hairer & Wanner's RODAS (coefficients of rodas.f, as in OrdinaryDiffEq.jl's
+              Rodas4Tableau), 6 stages (5 evaluations), order 4(3), L-stable, stiffly accurate.
+``rodas5p``   Steinebach 2023 (BIT 63:27, OrdinaryDiffEq.jl's Rodas5PTableau), 8 stages
+              (7 evaluations), order 5(4), stiffly accurate.
+RODAS-type methods assume a fairly exact Jacobian: the engine refreshes it every step for them
+(``jac_reuse`` = 1; reusing it over 2 or 3 steps doubled the step count of the vasomotion run).
+
+Packed array (read by the engine): [ns, gamma, q, jac_reuse, event_restart, soft_kinks, autonomous, 0,
+A (ns*ns, row major), G (ns*ns), b (ns), e (ns), c (ns), d (ns), reuse (ns)], where q is the
+order of the error estimate (step-size exponent 1/q), reuse[s] = 1 when stage s evaluates f at
+the same point as stage s-1 (ROS4-type methods; the engine then skips the evaluation).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+HEADER = 8
+
+
+def _from_transformed(gamma, a, C, m, m_err):
+    """Classical (A, G, b, e, c, d) from the transformed form (a, C, m, m_err) of
+    Hairer & Wanner II (7.21): Gamma^-1 = diag(1/gamma) - C, A = a Gamma, b = m Gamma."""
+    ns = len(m)
+    Ginv = np.eye(ns) / gamma - np.asarray(C, dtype=float)
+    Gam = np.linalg.inv(Ginv)
+    A = np.asarray(a, dtype=float) @ Gam
+    b = np.asarray(m, dtype=float) @ Gam
+    e = np.asarray(m_err, dtype=float) @ Gam
+    G = Gam - gamma * np.eye(ns)
+    return A, G, b, e
+
+
+def _ros34pw2():
+    from ..batch_integrator import A, B_EMB, B_SOL, G, GAMMA
+    return GAMMA, A, G, B_SOL, B_SOL - B_EMB, 3
+
+
+def _ros34pw3():
+    gamma = 1.0685790213016289
+    A = np.array([[0, 0, 0, 0],
+                  [2.5155456020628817, 0, 0, 0],
+                  [5.0777280103144085e-1, 0.75, 0, 0],
+                  [1.3959081404277204e-1, -3.3111001065419338e-1, 8.2040559712714178e-1, 0]])
+    Gam = np.array([[gamma, 0, 0, 0],
+                    [-2.5155456020628817, gamma, 0, 0],
+                    [-8.7991339217106512e-1, -9.6014187766190695e-1, gamma, 0],
+                    [-4.1731389379448741e-1, 4.1091047035857703e-1, -1.3558873204765276, gamma]])
+    b = np.array([2.2047681286931747e-1, 2.7828278331185935e-3, 7.1844787635140066e-3, 7.6955588053404989e-1])
+    bhat = np.array([3.1300297285209688e-1, -2.8946895245112692e-1, 9.7646597959903003e-1, 0])
+    return gamma, A, Gam - gamma * np.eye(4), b, b - bhat, 3
+
+
+def _rodas(gamma, a, C, order):
+    """RODAS-type (stiffly accurate): the solution is the last stage's point plus u_ns, the
+    embedded one the last stage's point (m = last row of a with 1, m_err = e_ns)."""
+    a = np.asarray(a, dtype=float)
+    ns = a.shape[0]
+    m = a[-1].copy()
+    m[-1] = 1.0
+    m_err = np.zeros(ns)
+    m_err[-1] = 1.0
+    A, G, b, e = _from_transformed(gamma, a, C, m, m_err)
+    return gamma, A, G, b, e, order
+
+
+def _rodas4():
+    a = [[0, 0, 0, 0, 0, 0],
+         [1.544, 0, 0, 0, 0, 0],
+         [0.9466785280815826, 0.2557011698983284, 0, 0, 0, 0],
+         [3.314825187068521, 2.896124015972201, 0.9986419139977817, 0, 0, 0],
+         [1.221224509226641, 6.019134481288629, 12.53708332932087, -0.6878860361058950, 0, 0],
+         [1.221224509226641, 6.019134481288629, 12.53708332932087, -0.6878860361058950, 1, 0]]
+    C = [[0, 0, 0, 0, 0, 0],
+         [-5.6688, 0, 0, 0, 0, 0],
+         [-2.430093356833875, -0.2063599157091915, 0, 0, 0, 0],
+         [-0.1073529058151375, -9.594562251023355, -20.47028614809616, 0, 0, 0],
+         [7.496443313967647, -10.24680431464352, -33.99990352819905, 11.70890893206160, 0, 0],
+         [8.083246795921522, -7.981132988064893, -31.52159432874371, 16.31930543123136, -6.058818238834054, 0]]
+    return _rodas(0.25, a, C, 4)
+
+
+def _rodas5p():
+    a = np.zeros((8, 8))
+    a[1, :1] = [3.0]
+    a[2, :2] = [2.849394379747939, 0.45842242204463923]
+    a[3, :3] = [-6.954028509809101, 2.489845061869568, -10.358996098473584]
+    a[4, :4] = [2.8029986275628964, 0.5072464736228206, -0.3988312541770524, -0.04721187230404641]
+    a[5, :5] = [-7.502846399306121, 2.561846144803919, -11.627539656261098, -0.18268767659942256,
+                0.030198172008377946]
+    a[6, :6] = list(a[5, :5]) + [1.0]
+    a[7, :7] = list(a[5, :5]) + [1.0, 1.0]
+    C = np.zeros((8, 8))
+    C[1, :1] = [-14.155112264123755]
+    C[2, :2] = [-17.97296035885952, -2.859693295451294]
+    C[3, :3] = [147.12150275711716, -1.41221402718213, 71.68940251302358]
+    C[4, :4] = [165.43517024871676, -0.4592823456491126, 42.90938336958603, -5.961986721573306]
+    C[5, :5] = [24.854864614690072, -3.0009227002832186, 47.4931110020768, 5.5814197821558125, -0.6610691825249471]
+    C[6, :6] = [30.91273214028599, -3.1208243349937974, 77.79954646070892, 34.28646028294783, -19.097331116725623,
+                -28.087943162872662]
+    C[7, :7] = [37.80277123390563, -3.2571969029072276, 112.26918849496327, 66.9347231244047, -40.06618937091002,
+                -54.66780262877968, -9.48861652309627]
+    return _rodas(0.21193756319429014, a, C, 5)
+
+
+METHODS = {"ros34pw2": _ros34pw2, "ros34pw3": _ros34pw3, "rodas4": _rodas4, "rodas5p": _rodas5p}
+#: accepted steps per Jacobian: W-methods stay consistent with an old one; RODAS-type need a
+#: fresh one more often (measured on the vasomotion run, docs/performance.md)
+JAC_REUSE = {"ros34pw2": 6, "ros34pw3": 6, "rodas4": 1, "rodas5p": 1}
+#: the engine's method at tight tolerances: RODAS5P (order 5, fresh Jacobian) takes the least
+#: CPU at rtol <= 1e-6; at rtol >= 1e-5 ROS34PW2 (order 3, Jacobian reused) is ~12 % cheaper
+#: (vasomotion run, docs/performance.md)
+DEFAULT = "rodas5p"
+LOOSE = "ros34pw2"
+LOOSE_RTOL = 1e-5
+
+
+def default_method(rtol):
+    """The method used when none is named: by tolerance (see DEFAULT, LOOSE)."""
+    return LOOSE if rtol >= LOOSE_RTOL else DEFAULT
+
+
+def classical(name):
+    """(gamma, A, G, b, e, q) of method ``name`` in the classical form."""
+    if name not in METHODS:
+        raise ValueError(f"unknown integration method {name!r}: choose one of {sorted(METHODS)}")
+    return METHODS[name]()
+
+
+def packed(name=DEFAULT, jac_reuse=None, event_restart=1, soft_kinks=1, autonomous=0) -> np.ndarray:
+    """The float64 array the engine reads (see the module docstring).  ``autonomous``: the
+    circuit has no waveform and no time-dependent element, so df/dt = 0 is not evaluated."""
+    gamma, A, G, b, e, q = classical(name)
+    ns = len(b)
+    c = A.sum(axis=1)
+    d = gamma + G.sum(axis=1)
+    reuse = np.zeros(ns)
+    for s in range(1, ns):
+        if np.allclose(A[s], A[s - 1], rtol=0, atol=1e-14):
+            reuse[s] = 1.0
+    jr = JAC_REUSE[name] if jac_reuse is None else int(jac_reuse)
+    head = [ns, gamma, q, jr, event_restart, soft_kinks, autonomous, 0]
+    return np.concatenate([head, A.ravel(), G.ravel(), b, e, c, d, reuse]).astype(np.float64)

@@ -1,0 +1,440 @@
+"""YAML netlists: reading, ``extends`` chains with add/remove/change, ``${name}`` parameters.
+
+The result is a plain :class:`Netlist` of :class:`ElementSpec` (raw values, still strings with
+units); turning values into numbers and checking them is the job of :mod:`hemocircuit.build`.
+See docs/netlist.md for the format.
+"""
+from __future__ import annotations
+
+import copy
+import os
+import re
+from dataclasses import dataclass, field
+
+import yaml
+
+from . import limits
+from .access import Access
+from .errors import NetlistError, did_you_mean, excerpt
+
+TOP_KEYS = {"name", "description", "parameters", "elements", "extends", "add", "remove", "change",
+            "constraints", "outputs", "input", "derived"}
+ELEMENT_KEYS = {"id", "type", "nodes"}
+GROUND = "ground"
+_REF = re.compile(r"\$\{([A-Za-z_][A-Za-z0-9_]*)\}")
+
+
+@dataclass
+class ElementSpec:
+    id: str
+    type: str
+    nodes: list
+    values: dict  # parameter/option name -> raw value (str with unit, number, bool, mapping)
+    file: str | None = None
+
+
+@dataclass
+class Netlist:
+    name: str
+    description: str
+    elements: list
+    parameters: dict
+    constraints: list
+    file: str | None = None
+    base_dir: str | None = None
+    #: outputs of interest {use: [column or derived name]} ('default' and hemocircuit.outputs.USES)
+    outputs: dict = field(default_factory=dict)
+    derived: dict = field(default_factory=dict)  # name -> {expr, unit}: quantities computed from columns
+    input: str | None = None  # the default input: a source id or ID.PARAM
+    outputs_file: str | None = None  # the files that declared outputs / input (for errors)
+    input_file: str | None = None
+    #: the folders this netlist's files may be read from (hemocircuit.access), for protocol tables
+    allowed: list = field(default_factory=list)
+
+    def element(self, eid):
+        for e in self.elements:
+            if e.id == eid:
+                return e
+        raise KeyError(eid)
+
+
+class _UniqueKeys:
+    """Rejects a key repeated in one mapping (PyYAML keeps the last one silently, so
+    ``{R: 1 mmHg*s/mL, R: 2 mmHg*s/mL}`` would hide a typo)."""
+
+    def construct_mapping(self, node, deep=False):
+        seen = set()
+        for key_node, _ in node.value:
+            try:
+                key = self.construct_object(key_node, deep=True)
+                hash(key)
+            except (TypeError, yaml.YAMLError):
+                continue  # unhashable keys: PyYAML itself reports them
+            if key in seen:
+                raise yaml.constructor.ConstructorError(
+                    "while constructing a mapping", node.start_mark, f"found duplicate key {key!r}",
+                    key_node.start_mark)
+            seen.add(key)
+        return super().construct_mapping(node, deep=deep)
+
+
+class UniqueKeyLoader(_UniqueKeys, yaml.SafeLoader):
+    """A safe YAML loader that rejects a key repeated in one mapping."""
+
+
+# libyaml's parser (about 5x faster on netlists of thousands of elements), same constructor
+# and resolver; an invalid file is re-read with the pure-Python loader for its exact message
+_FastUniqueKeyLoader = (type("_FastUniqueKeyLoader", (_UniqueKeys, yaml.CSafeLoader), {})
+                        if getattr(yaml, "__with_libyaml__", False) else None)
+
+
+def resolve_files(value, base_dir, access, where):
+    """Make ``{file: relative/path}`` entries (waveform tables) absolute against ``base_dir``,
+    so a value keeps pointing at its own netlist's folder when another netlist extends it;
+    a path outside the allowed folders is refused here, before anything reads it."""
+    if isinstance(value, dict):
+        out = {}
+        for k, v in value.items():
+            if k == "file" and isinstance(v, str) and v and "${" not in v:
+                v = access.resolve(v, base_dir, "table file", where)
+            else:
+                v = resolve_files(v, base_dir, access, where)
+            out[k] = v
+        return out
+    if isinstance(value, list):
+        return [resolve_files(v, base_dir, access, where) for v in value]
+    return value
+
+
+# ``value: ${Pic}`` inside a flow mapping ``{...}`` is not valid YAML (the braces are flow
+# indicators), yet it is the documented netlist shape.  Before parsing, every ``${name}`` becomes
+# ``$(name)`` (same length, so YAML error columns stay right), and back afterwards.
+_REF_TEXT = re.compile(r"\$\{([A-Za-z_][A-Za-z0-9_]*)\}")
+_REF_SAFE = re.compile(r"\$\(([A-Za-z_][A-Za-z0-9_]*)\)")
+
+
+_ALIAS = re.compile(r"(?:^|[\s\[{,:])\*[^\s*]", re.M)  # a YAML alias (*name), or the odd false alarm
+
+
+def _may_nest_deeper(text, limit) -> bool:
+    """A cheap upper bound on the YAML nesting: flow brackets open at once plus the widest
+    indentation (each block level takes at least one column); True if it could exceed ``limit``."""
+    import numpy as np
+
+    br = np.frombuffer(re.sub(r"[^\[\]{}]", "", text).encode(), dtype=np.uint8)
+    if br.size and np.cumsum(np.where((br == ord("[")) | (br == ord("{")), 1, -1)).max() > limit // 2:
+        return True
+    indent = max((len(m.group(0)) for m in re.finditer(r"^[ \t?:-]+", text, re.M)), default=0)
+    return indent > limit // 2
+
+
+def _restore_refs(value, path, depth=0, memo=None, lim=None):
+    """``$(name)`` back to ``${name}``, checking the nesting depth and the length of strings.
+    A node shared through a YAML alias is converted once and stays shared (an alias bomb is
+    not expanded here)."""
+    if lim is None:
+        lim, memo = (limits.limit("YAML_DEPTH"), limits.limit("VALUE_CHARS")), {}
+    if depth > lim[0]:
+        raise NetlistError(f"YAML nested more than {depth - 1} levels deep {limits.how_to_raise('YAML_DEPTH')}",
+                           file=path)
+    if isinstance(value, str):
+        if len(value) > lim[1]:
+            limits.check_value_length(value, {"file": path}, f"the value {excerpt(value, 40)}")
+        return _REF_SAFE.sub(lambda m: "${" + m.group(1) + "}", value) if "$(" in value else value
+    if isinstance(value, (list, dict)):
+        key = id(value)
+        if key in memo:
+            return memo[key][1]
+        if isinstance(value, list):
+            out = [_restore_refs(v, path, depth + 1, memo, lim) for v in value]
+        else:
+            out = {_restore_refs(k, path, depth + 1, memo, lim): _restore_refs(v, path, depth + 1, memo, lim)
+                   for k, v in value.items()}
+        memo[key] = (value, out)  # the original is kept alive, so its id is not reused
+        return out
+    return value
+
+
+def read_yaml_file(path, what="netlist"):
+    """Parse a YAML file (netlist or protocol) within the input limits (hemocircuit.limits),
+    rejecting repeated keys; ``${name}`` may stand unquoted in flow mappings.  Errors quote at
+    most a short excerpt of the file."""
+    if not os.path.exists(path):
+        raise NetlistError(f"{what} file not found: {path}")
+    if os.path.isdir(path):
+        raise NetlistError(f"{what} file {path} is a folder")
+    limits.check_file_size(path, what)
+    try:
+        with open(path, encoding="utf-8") as fh:
+            text = _REF_TEXT.sub(lambda m: "$(" + m.group(1) + ")", fh.read())
+        loader = _FastUniqueKeyLoader or UniqueKeyLoader
+        if _ALIAS.search(text) or _may_nest_deeper(text, limits.limit("YAML_DEPTH")):
+            # aliases can multiply the document, and libyaml's composer recurses (a crash, not
+            # an error, at tens of thousands of levels): scan the event stream first
+            limits.check_yaml(text, path, loader)
+        try:
+            data = yaml.load(text, Loader=loader)
+        except yaml.YAMLError:
+            data = yaml.load(text, Loader=UniqueKeyLoader)  # raises again, with the snippet
+        data = _restore_refs(data, path)
+    except yaml.YAMLError as exc:
+        msg = str(exc)
+        raise NetlistError(f"not valid YAML: {msg[:600]}{'...' if len(msg) > 600 else ''}", file=path) from None
+    except (UnicodeDecodeError, OSError) as exc:
+        raise NetlistError(f"cannot read ({type(exc).__name__}): not a UTF-8 text file?", file=path) from None
+    except (RecursionError, MemoryError):
+        raise NetlistError(f"the YAML is too deeply nested or too large to read {limits.how_to_raise('YAML_DEPTH')}",
+                           file=path) from None
+    return data
+
+
+def _read_yaml(path):
+    data = read_yaml_file(path)
+    if not isinstance(data, dict):
+        raise NetlistError("a netlist is a YAML mapping with at least 'elements' (or 'extends')", file=path)
+    unknown = sorted(set(map(str, data)) - TOP_KEYS)
+    if unknown:
+        shown = ", ".join(excerpt(k, 40) for k in unknown[:5]) + (f" and {len(unknown) - 5} more"
+                                                                  if len(unknown) > 5 else "")
+        raise NetlistError(f"unknown top-level key(s) {shown}{did_you_mean(unknown[0], TOP_KEYS)}; allowed: "
+                           f"{sorted(TOP_KEYS)}", file=path)
+    return data
+
+
+def _element_list(items, path, access, what="elements"):
+    if items is None:
+        return []
+    if not isinstance(items, list):
+        raise NetlistError(f"'{what}' must be a list of element mappings", file=path)
+    limits.check_elements(len(items), path)
+    out = []
+    for i, item in enumerate(items):
+        if not isinstance(item, dict):
+            raise NetlistError(f"{what}[{i}] is not a mapping: {excerpt(item)}", file=path)
+        eid = item.get("id")
+        if not isinstance(eid, str) or not eid or not re.match(r"^[A-Za-z_][A-Za-z0-9_]*$", eid):
+            raise NetlistError(f"{what}[{i}] needs an 'id' (letters, digits, _; not starting with a digit), "
+                               f"got {excerpt(eid, 40)}", file=path)
+        etype = item.get("type")
+        if not isinstance(etype, str):
+            raise NetlistError("needs a 'type'", file=path, element=eid)
+        nodes = item.get("nodes")
+        if not isinstance(nodes, list) or not all(isinstance(n, (str, int)) and not isinstance(n, bool)
+                                                  for n in nodes):
+            raise NetlistError("'nodes' must be a list of node names", file=path, element=eid)
+        values = {str(k): resolve_files(v, os.path.dirname(path), access, {"file": path, "element": eid})
+                  for k, v in item.items() if k not in ELEMENT_KEYS}
+        out.append(ElementSpec(eid, etype, [str(n) for n in nodes], values, path))
+    return out
+
+
+def _load_raw(path, chain, access):
+    path = os.path.abspath(path)
+    if path in chain:
+        raise NetlistError(f"'extends' cycle: {' -> '.join(chain + [path])}", file=path)
+    data = _read_yaml(path)
+    base_dir = os.path.dirname(path)
+    params = data.get("parameters") or {}
+    if not isinstance(params, dict):
+        raise NetlistError("'parameters' must be a mapping name -> quantity", file=path)
+    constraints = data.get("constraints") or []
+    if not isinstance(constraints, list):
+        raise NetlistError("'constraints' must be a list", file=path)
+    for c in constraints:
+        if not isinstance(c, dict) or not isinstance(c.get("node"), (str, int)) or isinstance(c.get("node"), bool):
+            raise NetlistError(f"each constraint is a mapping {{node: NAME, volume: ...}} or {{node: NAME, pressure: "
+                               f"..., when: {{...}}}}; got {excerpt(c)}", file=path)
+    constraints = resolve_files(constraints, base_dir, access, {"file": path})  # tables in 'when:'
+    params = resolve_files(params, base_dir, access, {"file": path})
+    if "extends" in data:
+        parent = data["extends"]
+        if not isinstance(parent, str):
+            raise NetlistError("'extends' must be a file name", file=path)
+        ppath = access.resolve(parent, base_dir, "'extends'", {"file": path})
+        base = _load_raw(ppath, chain + [path], access)
+        elements = copy.deepcopy(base["elements"])
+        merged_params = {**base["parameters"], **params}
+        constraints = base["constraints"] + constraints
+        if "elements" in data:
+            raise NetlistError("a netlist that 'extends' another states its difference with add/remove/change, "
+                               "not 'elements'", file=path)
+        ids = [e.id for e in elements]
+        remove = data.get("remove") or []
+        if not isinstance(remove, list):
+            raise NetlistError("'remove' must be a list of element ids", file=path)
+        for rid in remove:
+            if rid not in ids:
+                raise NetlistError(f"cannot remove '{rid}': no such element in {ppath}{did_you_mean(rid, ids)}",
+                                   file=path, element=str(rid))
+        elements = [e for e in elements if e.id not in set(remove)]
+        change = data.get("change") or {}
+        if not isinstance(change, dict):
+            raise NetlistError("'change' must be a mapping {ID: {param: value}}", file=path)
+        for cid, kv in change.items():
+            match = [e for e in elements if e.id == cid]
+            if not match:
+                raise NetlistError(f"cannot change '{cid}': no such element{did_you_mean(cid, ids)}", file=path,
+                                   element=str(cid))
+            if not isinstance(kv, dict):
+                raise NetlistError("'change' entries must be mappings {param: value}", file=path, element=cid)
+            for k, v in kv.items():
+                if k == "id":
+                    raise NetlistError("cannot change an element's id", file=path, element=cid)
+                if k == "type":
+                    match[0].type = v if isinstance(v, str) else str(v)
+                elif k == "nodes":
+                    if not isinstance(v, list) or not all(isinstance(n, (str, int)) and not isinstance(n, bool)
+                                                          for n in v):
+                        raise NetlistError("'nodes' must be a list of node names", file=path, element=cid)
+                    match[0].nodes = [str(n) for n in v]
+                else:
+                    match[0].values[str(k)] = resolve_files(v, base_dir, access, {"file": path, "element": cid})
+                match[0].file = path
+        elements += _element_list(data.get("add"), path, access, "add")
+        name = data.get("name", base["name"])
+        description = data.get("description", "")
+        outputs, outputs_file = (_outputs(data["outputs"], path), path) if "outputs" in data else \
+            (base["outputs"], base["outputs_file"])
+        inp, input_file = (_input(data["input"], path), path) if "input" in data else (base["input"], base["input_file"])
+    else:
+        for key in ("add", "remove", "change"):
+            if key in data:
+                raise NetlistError(f"'{key}' needs 'extends' (it edits a base netlist)", file=path)
+        if "elements" not in data:
+            raise NetlistError("a netlist needs 'elements' (or 'extends')", file=path)
+        elements = _element_list(data["elements"], path, access)
+        merged_params = dict(params)
+        name = data.get("name", os.path.splitext(os.path.basename(path))[0])
+        description = data.get("description", "")
+        outputs, outputs_file = (_outputs(data["outputs"], path), path) if "outputs" in data else ({}, None)
+        inp, input_file = (_input(data["input"], path), path) if "input" in data else (None, None)
+    derived = data.get("derived") or {}
+    if not isinstance(derived, dict) or not all(isinstance(v, dict) and "expr" in v for v in derived.values()):
+        raise NetlistError("'derived' must be a mapping name -> {expr: '<expression of columns>', unit: ...}",
+                           file=path)
+    derived = {**(base["derived"] if "extends" in data else {}), **derived}
+    return {"elements": elements, "parameters": merged_params, "constraints": constraints, "name": name,
+            "description": description, "outputs": outputs, "base_dir": base_dir, "derived": derived,
+            "outputs_file": outputs_file, "input": inp, "input_file": input_file}
+
+
+def _outputs(value, path):
+    """``outputs:`` -> {use: [names]}: a list (the 'default' use) or a mapping use -> list."""
+    from .outputs import USES
+
+    if value is None:
+        return {}
+    if isinstance(value, list):
+        value = {"default": value}
+    if not isinstance(value, dict):
+        raise NetlistError("'outputs' must be a list of column names, or a mapping {use: [column names]} "
+                           f"with uses {sorted(USES)}", file=path)
+    out = {}
+    for use, names in value.items():
+        if use not in USES:
+            import difflib
+            near = difflib.get_close_matches(str(use), list(USES), n=1)
+            raise NetlistError(f"outputs: unknown use {use!r}" + (f" (did you mean {near[0]!r}?)" if near else "")
+                               + f"; uses: {sorted(USES)}", file=path)
+        if not isinstance(names, list) or not all(isinstance(n, str) and n for n in names):
+            raise NetlistError(f"outputs{'' if use == 'default' else '.' + str(use)} must be a list of column names",
+                               file=path)
+        out[use] = list(names)
+    return out
+
+
+def _input(value, path):
+    if not isinstance(value, str) or not value:
+        raise NetlistError("'input' must be a source element id (or ID.PARAM)", file=path)
+    return value
+
+
+def _substitute(value, params, where):
+    """Replace ${name} references (recursively through lists and mappings); the result may
+    not grow beyond the VALUE_CHARS limit (references that double at each level)."""
+    if isinstance(value, str):
+        full = _REF.fullmatch(value.strip())
+        if full:
+            return params[_known(full.group(1), params, where)]
+
+        def repl(m):
+            return f"({params[_known(m.group(1), params, where)]})"
+        out = _REF.sub(repl, value)
+        limits.check_value_length(out, where, f"the value {excerpt(value, 40)} after ${{}} substitution")
+        return out
+    if isinstance(value, list):
+        return [_substitute(v, params, where) for v in value]
+    if isinstance(value, dict):
+        return {k: _substitute(v, params, where) for k, v in value.items()}
+    return value
+
+
+def _known(name, params, where):
+    if name not in params:
+        raise NetlistError(f"unknown parameter ${{{name}}}{did_you_mean(name, params)}; defined: "
+                           f"{sorted(params)[:50]}", **where)
+    return name
+
+
+def _refs(value):
+    if isinstance(value, str):
+        return _REF.findall(value)
+    if isinstance(value, list):
+        return [r for v in value for r in _refs(v)]
+    if isinstance(value, dict):
+        return [r for v in value.values() for r in _refs(v)]
+    return []
+
+
+def _resolve_parameters(params, path):
+    """Substitute the parameters into each other (a parameter may reference others, in any
+    order); a cycle of references is an error naming it."""
+    done: dict = {}
+
+    def resolve(name, stack):
+        if name in done:
+            return done[name]
+        if name in stack:
+            cycle = " -> ".join(stack[stack.index(name):] + [name])
+            raise NetlistError(f"parameters refer to each other in a cycle: {cycle}", file=path)
+        stack.append(name)
+        where = {"file": path}
+        for ref in _refs(params[name]):
+            if ref in params:
+                resolve(ref, stack)
+        try:
+            done[name] = _substitute(params[name], done, where)
+        except NetlistError as exc:
+            raise NetlistError(f"parameter '{name}': {exc.bare_message}", file=path) from None
+        stack.pop()
+        return done[name]
+
+    for name in params:
+        resolve(name, [])
+    return done
+
+
+def load_netlist(path: str, allow_paths=None) -> Netlist:
+    """Read a netlist file (following ``extends``), substitute parameters, check ids are unique.
+
+    Files named inside (``extends``, table ``file:``) must lie in the allowed folders (see
+    :mod:`hemocircuit.access`); ``allow_paths`` adds folders."""
+    access = Access.for_netlist(path, allow_paths)
+    raw = _load_raw(path, [], access)
+    limits.check_elements(len(raw["elements"]), path)
+    params = _resolve_parameters(dict(raw["parameters"]), path)
+    seen = {}
+    for e in raw["elements"]:
+        if e.id in seen:
+            raise NetlistError(f"duplicate element id '{e.id}' (also in {seen[e.id]})", file=e.file, element=e.id)
+        seen[e.id] = e.file
+        where = {"file": e.file, "element": e.id}
+        if any(_refs(v) for v in e.values.values()):
+            e.values = _substitute(e.values, params, where)
+            # table file names that came from ${} parameters: resolved and checked now
+            e.values = resolve_files(e.values, os.path.dirname(e.file), access, where)
+    return Netlist(name=str(raw["name"]), description=str(raw["description"] or ""), elements=raw["elements"],
+                   parameters=params, constraints=raw["constraints"], file=os.path.abspath(path),
+                   base_dir=raw["base_dir"], outputs=dict(raw["outputs"] or {}), derived=dict(raw["derived"]),
+                   input=raw["input"], outputs_file=raw["outputs_file"], input_file=raw["input_file"],
+                   allowed=list(access.folders))

@@ -1,0 +1,55 @@
+"""Finding component types: scan the ``hemocircuit.components`` package, then entry points.
+
+No central list to edit: a module (or sub-package) in ``components/`` that defines a
+:class:`~hemocircuit.component.Component` subclass with a ``type_name`` is a component type.
+Third parties register theirs under the entry-point group ``hemocircuit.components``
+(the entry point names a Component subclass or a module containing some).
+"""
+from __future__ import annotations
+
+import functools
+import importlib
+import inspect
+import pkgutil
+from importlib import metadata
+
+from .component import Component
+from .errors import HemocircuitError
+
+ENTRY_POINT_GROUP = "hemocircuit.components"
+
+
+def _classes_in(module):
+    for _, obj in inspect.getmembers(module, inspect.isclass):
+        if issubclass(obj, Component) and obj is not Component and obj.type_name:
+            yield obj
+
+
+@functools.lru_cache(maxsize=1)
+def component_types() -> dict[str, type[Component]]:
+    """Map type name -> Component subclass, for every component found."""
+    from . import components as pkg
+
+    found: dict[str, type[Component]] = {}
+
+    def add(cls, origin):
+        other = found.get(cls.type_name)
+        if other is not None and other is not cls:
+            raise HemocircuitError(f"component type '{cls.type_name}' is defined twice: "
+                                   f"{other.__module__} and {origin}")
+        found[cls.type_name] = cls
+
+    for info in pkgutil.iter_modules(pkg.__path__, pkg.__name__ + "."):
+        module = importlib.import_module(info.name)
+        for cls in _classes_in(module):
+            add(cls, info.name)
+    for ep in metadata.entry_points(group=ENTRY_POINT_GROUP):
+        obj = ep.load()
+        classes = [obj] if inspect.isclass(obj) else list(_classes_in(obj))
+        for cls in classes:
+            add(cls, f"entry point {ep.name}")
+    return found
+
+
+def get_type(name: str) -> type[Component] | None:
+    return component_types().get(name)

@@ -1,0 +1,243 @@
+"""Run svZeroDSolver test cases with their simulation semantics and compare with their results.
+
+A case folder is laid out like ``../shared/svzerod/``: ``cases/NAME.json`` and
+``results/result_NAME.json`` / ``converged/result_NAME.json`` (pandas ``to_json`` of their
+output: per vessel ``name, time, flow_in, flow_out, pressure_in, pressure_out`` or, with
+``output_variable_based``, ``name, time, y``).
+
+Their semantics (src/solve/SimulationParameters.cpp, Solver.cpp): time step T/(N-1) for N
+points per cardiac cycle T; ``number_of_cardiac_cycles`` cycles; by default only the last cycle
+is written, its times shifted to start at 0 (``output_all_cycles`` writes every step from 0);
+``output_mean_only`` writes the mean over the written rows; ``steady_initial`` (their default)
+starts from a steady state with the time series at their means.  Here the start is always the
+true operating point of the model with the time series at their means (theirs is 31
+pseudo-time steps, so only rows after the first cycle are compared for all-cycles output).
+
+Error of a variable: max |ours - theirs| over the compared rows, divided by the range of theirs
+over those rows (by max |theirs| when the range is below 1e-9 of it: steady and mean rows).
+"""
+from __future__ import annotations
+
+import glob
+import json
+import os
+import re
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import HemocircuitError
+from .importer import import_svzerod, write_netlist
+
+VALVE_CHAMBER_TYPES = {"ValveTanh", "PiecewiseValve", "ChamberElastanceInductor", "LinearElastanceChamber",
+                       "ChamberSphere", "ClosedLoopRCR", "ClosedLoopHeartAndPulmonary", "ClosedLoopCoronaryLeft",
+                       "ClosedLoopCoronaryRight"}
+
+
+@dataclass
+class CaseResult:
+    name: str
+    types: list = field(default_factory=list)
+    err_p: float = float("nan")
+    err_q: float = float("nan")
+    tol_p: float = float("nan")
+    tol_q: float = float("nan")
+    ok: bool = False
+    ours_s: float = float("nan")
+    theirs: str = ""
+    note: str = ""
+    worst: str = ""
+
+
+def tolerances(name, model):
+    """(pressure tol, flow tol) of the issue's acceptance rules for this case."""
+    if set(model.block_types) & VALVE_CHAMBER_TYPES:
+        return 1e-2, 2e-2
+    if name == "pulsatileFlow_CRL":
+        return 2e-2, 2e-2
+    steady = all(not isinstance(v, dict) for e in model.netlist["elements"] for v in e.values())
+    return (1e-6, 1e-6) if steady else (1e-3, 1e-3)
+
+
+def their_times(readme):
+    """{case: their time text} from the README's speed table, when present."""
+    out = {}
+    if os.path.isfile(readme):
+        for line in open(readme):
+            m = re.match(r"\|\s*(\w+)\s*\|[^|]*\|\s*([^|]+?)\s*\|\s*$", line)
+            if m and m.group(1) not in ("case",):
+                out[m.group(1)] = m.group(2)
+    return out
+
+
+def read_result(path):
+    """{their variable name: (times, values)} of a result file."""
+    with open(path) as fh:
+        d = json.load(fh)
+    rows = sorted(d["name"], key=int)
+    names = [d["name"][r] for r in rows]
+    times = np.array([np.nan if d["time"][r] is None else d["time"][r] for r in rows], float)
+    out = {}
+    if "y" in d:
+        for n in dict.fromkeys(names):
+            idx = [i for i, x in enumerate(names) if x == n]
+            out[n] = (times[idx], np.array([d["y"][rows[i]] for i in idx], float))
+    else:
+        for n in dict.fromkeys(names):
+            idx = [i for i, x in enumerate(names) if x == n]
+            for col in ("flow_in", "flow_out", "pressure_in", "pressure_out"):
+                out[f"{n}:{col}"] = (times[idx], np.array([d[col][rows[i]] for i in idx], float))
+    return out
+
+
+def simulate_case(model, rtol=1e-9, timed_runs=1):
+    """Our run with their semantics: (rows {column: values} at their output times, our output
+    times relative to their convention, wall time of the in-process solve [s])."""
+    import tempfile
+
+    from ..analyses.op import operating_point
+    from ..analyses.transient import simulate
+    from ..circuit import load
+    from ..ic import apply_ic
+
+    T, N, ncyc = model.period, model.points, model.n_cycles
+    dt = T / (N - 1)
+    with tempfile.TemporaryDirectory(prefix="hemocircuit_svz_") as d:
+        write_netlist(model.netlist, os.path.join(d, "m.yaml"))
+        write_netlist(model.mean_netlist, os.path.join(d, "mean.yaml"))
+        c = load(os.path.join(d, "m.yaml"))
+        cm = load(os.path.join(d, "mean.yaml"))
+    t_end = ncyc * T
+    best = np.inf
+    for _ in range(max(1, timed_runs)):
+        t0 = time.perf_counter()
+        if model.initial and (model.closed or not model.sim.get("steady_initial", True)):
+            # their start: the initial condition (0 where not given); a closed loop keeps the
+            # blood volume of that start whatever their steady_initial does
+            x0 = apply_ic(c, np.zeros(c.nx), model.initial)
+        else:  # our operating point for their steady_initial, with the states they set
+            x0 = apply_ic(c, operating_point(cm).x, model.initial_given)
+        if c.nx == 0:  # no states: the outputs are algebraic functions of time
+            t = np.arange(0, (N - 1) * ncyc + 1) * dt
+            res = c.outputs(t, np.zeros((t.size, 0)))
+        else:
+            res = simulate(c, t_end, dt=dt, x0=x0, rtol=rtol)
+            t = np.asarray(res.t)
+        best = min(best, time.perf_counter() - t0)
+    k = np.rint(t / dt).astype(int)
+    if model.sim.get("output_all_cycles"):
+        keep = np.ones(t.size, bool)
+        t_out = k * dt
+    else:
+        first = (ncyc - 1) * (N - 1)
+        keep = k >= first
+        t_out = (k - first) * dt
+    return res, keep, t_out[keep], best
+
+
+def compare(model, res, keep, t_out, theirs):
+    """(max pressure error, max flow error, worst variable, note) against their rows."""
+    all_cycles = bool(model.sim.get("output_all_cycles"))
+    mean_only = bool(model.sim.get("output_mean_only"))
+    errs = {"P": (0.0, ""), "Q": (0.0, "")}
+    missing = []
+    for name, (tt, yy) in theirs.items():
+        col = model.columns.get(name)
+        if col is None:
+            if not name.startswith("valve_status"):
+                missing.append(name)
+            continue
+        ours = np.asarray(res[col], float)[keep]
+        kind = "Q" if ("flow" in name) else "P"  # chamber volumes count with the pressures
+        ours = ours * _unit_factor(model, "Q" if kind == "Q" else ("V" if name.startswith("Vc:") else "P"))
+        if mean_only:
+            o, y = np.array([ours.mean()]), yy
+        else:
+            idx = np.rint(tt / (t_out[1] - t_out[0]) if t_out.size > 1 else 0).astype(int)
+            o = ours[idx]
+            y = yy
+            if all_cycles:  # compare after the first cycle (their start differs from ours)
+                sel = tt >= model.period * (1 - 1e-9)
+                o, y = o[sel], y[sel]
+        rng = np.ptp(y) if y.size else 0.0
+        big = np.max(np.abs(y)) if y.size else 0.0
+        scale = rng if rng > 1e-9 * big else (big if big > 0 else 1.0)
+        e = float(np.max(np.abs(o - y)) / scale) if y.size else 0.0
+        if e > errs[kind][0] or not np.isfinite(e):
+            errs[kind] = (e, name)
+    note = f"no column for {len(missing)} of their variables ({missing[0]}, ...)" if missing else ""
+    worst = max(errs.values(), key=lambda v: v[0])[1]
+    return errs["P"][0], errs["Q"][0], worst, note
+
+
+def _unit_factor(model, kind):
+    """Factor from our unit (mmHg, mL/s, mL) to the model's (theirs) for P, Q or V."""
+    from ..units import parse_quantity
+
+    return parse_quantity({"P": "1 mmHg", "Q": "1 mL/s", "V": "1 mL"}[kind], model.units[kind])
+
+
+def case_units(cfg):
+    """Unit system of a case: 'SI' when its top-level comments say m^3 (their Regazzoni
+    models), else 'cgs' (their convention).  Models in mmHg need no special case: every
+    pressure-carrying parameter scales together, so 'cgs' gives the same numbers."""
+    text = " ".join(str(v) for k, v in cfg.items() if k.startswith("_"))
+    return "SI" if re.search(r"m\^3|m\*\*3", text) else "cgs"
+
+
+def case_rtol(model):
+    """Integrator tolerance: 1e-9 for the steady and simple pulsatile cases (compared at 1e-6
+    and 1e-3), 1e-7 with valves, chambers or the closed-loop heart (compared at 1e-2): their
+    switching makes 1e-9 cost many tiny steps (the heart's valves stall the integrator)."""
+    return 1e-7 if set(model.block_types) & VALVE_CHAMBER_TYPES else 1e-9
+
+
+def run_case(case_path, against="converged", timed_runs=1, rtol=None):
+    name = os.path.splitext(os.path.basename(case_path))[0]
+    folder = os.path.dirname(os.path.dirname(os.path.abspath(case_path)))
+    r = CaseResult(name)
+    r.theirs = their_times(os.path.join(folder, "README.md")).get(name, "")
+    try:
+        with open(case_path) as fh:
+            model = import_svzerod(case_path, units=case_units(json.load(fh)))
+        r.types = model.block_types
+        r.tol_p, r.tol_q = tolerances(name, model)
+        res, keep, t_out, wall = simulate_case(model, rtol=rtol or case_rtol(model), timed_runs=timed_runs)
+        r.ours_s = wall
+        theirs = read_result(os.path.join(folder, against, f"result_{name}.json"))
+        r.err_p, r.err_q, r.worst, r.note = compare(model, res, keep, t_out, theirs)
+        r.ok = r.err_p <= r.tol_p and r.err_q <= r.tol_q and not r.note
+    except HemocircuitError as exc:
+        r.note = f"{type(exc).__name__}: {exc}"
+        try:
+            with open(case_path) as fh:
+                cfg = json.load(fh)
+            r.types = sorted({b.get("zero_d_element_type") or b.get("junction_type") or b.get("bc_type")
+                              or b.get("type") or b.get("closed_loop_type") or "?"
+                              for k in ("vessels", "junctions", "boundary_conditions", "chambers", "valves",
+                                        "closed_loop_blocks") for b in cfg.get(k) or []})
+        except (OSError, ValueError):
+            pass
+    return r
+
+
+def run_folder(folder, against="converged", cases=None, timed_runs=1, rtol=None):
+    paths = sorted(glob.glob(os.path.join(folder, "cases", "*.json")))
+    if cases:
+        paths = [p for p in paths if os.path.splitext(os.path.basename(p))[0] in cases]
+    return [run_case(p, against, timed_runs, rtol) for p in paths]
+
+
+def format_table(rows):
+    head = f"{'case':40s} {'blocks':48s} {'err P':>9s} {'err Q':>9s} {'tol P/Q':>13s} {'ok':4s} {'ours':>9s} {'theirs':>12s}"
+    lines = [head, "-" * len(head)]
+    for r in rows:
+        lines.append(f"{r.name:40s} {','.join(r.types)[:48]:48s} {r.err_p:9.2e} {r.err_q:9.2e} "
+                     f"{r.tol_p:6.0e}/{r.tol_q:<6.0e} {'pass' if r.ok else 'FAIL':4s} "
+                     f"{r.ours_s * 1e3:7.1f}ms {r.theirs:>12s}")
+        if r.note:
+            lines.append(f"    {r.note}")
+    n_ok = sum(r.ok for r in rows)
+    lines.append(f"{n_ok} of {len(rows)} cases pass")
+    return "\n".join(lines)

@@ -1,0 +1,594 @@
+"""Import an svZeroDSolver JSON model as an ordinary hemocircuit netlist.
+
+Their JSON carries no units; ``units`` names the system of the numbers (``cgs``: pressure
+dyn/cm^2, flow mL/s, volume mL, time s, as in their cases; ``mmHg``: mmHg, mL/s, mL, s).
+Every value is written with its unit, so the netlist converts to the circuit's mmHg once,
+at load time.
+
+Mapping (one element per block, named after it; blocks in components/svzerod/):
+  vessels  BloodVessel -> blood_vessel, BloodVesselCRL -> blood_vessel_crl
+           (nodes [inlet, outlet, ground]; options capacitive/inductive from C, L != 0)
+  junctions NORMAL_JUNCTION -> one node named after the junction (ideal: equal pressures,
+           mass conservation); BloodVesselJunction -> one blood_vessel per outlet,
+           ``J_outletname`` (their equations are exactly parallel R + stenosis + L branches)
+  BCs      FLOW -> flow_source, PRESSURE -> pressure_source (their periodic time series as a
+           pwl table repeated over the simulated cycles + 1), RESISTANCE -> resistance_bc,
+           RCR -> rcr_bc, CORONARY -> coronary_bc
+Connection nodes are named ``A__B`` (upstream block, downstream block), a normal junction's
+node after the junction.  ``SvzModel.columns`` maps their output names (``pressure:A:B``,
+``flow:A:B`` and, per vessel, pressure_in/out, flow_in/out) to hemocircuit output columns.
+"""
+from __future__ import annotations
+
+import json
+import os
+import re
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import NetlistError
+
+UNIT_SYSTEMS = {
+    "cgs": {"P": "dyn/cm**2", "Q": "mL/s", "V": "mL", "t": "s"},
+    "mmHg": {"P": "mmHg", "Q": "mL/s", "V": "mL", "t": "s"},
+    "SI": {"P": "Pa", "Q": "m**3/s", "V": "m**3", "t": "s"},
+}
+
+SIM_DEFAULTS = {"steady_initial": True, "output_all_cycles": False, "output_variable_based": False,
+                "output_mean_only": False, "output_derivative": False, "output_interval": 1,
+                "absolute_tolerance": 1e-8}
+
+SUPPORTED_BC = ("FLOW", "PRESSURE", "RESISTANCE", "RCR", "CORONARY", "ClosedLoopRCR")
+SUPPORTED_VALVES = ("ValveTanh", "PiecewiseValve")
+SUPPORTED_CHAMBERS = ("ChamberElastanceInductor", "LinearElastanceChamber")
+SUPPORTED_CLOSED_LOOP = ("ClosedLoopHeartAndPulmonary",)
+#: their block names of the heart and its two junctions (SimulationParameters.cpp, create_closed_loop)
+HEART, HEART_IN, HEART_OUT = "CLH", "J_heart_inlet", "J_heart_outlet"
+SUPPORTED_VESSELS = ("BloodVessel", "BloodVesselCRL")
+
+
+@dataclass
+class SvzModel:
+    """An imported model: the netlist (a dict, YAML-ready), their simulation settings and the
+    map from their output names to hemocircuit columns."""
+
+    name: str
+    netlist: dict
+    period: float
+    sim: dict
+    columns: dict = field(default_factory=dict)  # their name -> (our column, sign)
+    block_types: list = field(default_factory=list)
+    vessels: list = field(default_factory=list)  # vessel names (their per-block output)
+    units: dict = field(default_factory=dict)
+    mean_netlist: dict | None = None  # time series at their means (their steady_initial)
+    initial: dict = field(default_factory=dict)  # {ID.STATE: quantity}: their initial_condition
+    closed: bool = False  # a closed loop (no boundary condition to ground): volume conserved
+    initial_given: dict = field(default_factory=dict)  # the states their initial_condition sets
+
+    @property
+    def n_cycles(self):
+        return int(self.sim["number_of_cardiac_cycles"])
+
+    @property
+    def points(self):
+        return int(self.sim["number_of_time_pts_per_cardiac_cycle"])
+
+
+def _err(msg, block=None, path=None):
+    return NetlistError(msg, file=path, element=block)
+
+
+def _ident(name, path):
+    s = re.sub(r"\W", "_", str(name))
+    if not s or s[0].isdigit():
+        s = "b_" + s
+    return s
+
+
+def _fmt(x, unit):
+    return f"{float(x)!r} {unit}"
+
+
+class _Importer:
+    def __init__(self, cfg, path, units, extra_cycles=1):
+        self.cfg, self.path = cfg, path
+        if units not in UNIT_SYSTEMS:
+            raise _err(f"unknown unit system {units!r}; choose one of {sorted(UNIT_SYSTEMS)}", path=path)
+        self.u = UNIT_SYSTEMS[units]
+        P = self.u["P"]
+        V, Q = self.u["V"], self.u["Q"]
+        self.uR, self.uC, self.uL = f"({P})/({Q})", f"({V})/({P})", f"({P})/({Q})*s"
+        self.uS = f"({P})/({Q})**2"
+        self.uE = f"({P})/({V})"
+        self.extra_cycles = extra_cycles
+        self.elements, self.columns, self.types = [], {}, set()
+        self.chamber_elements = []
+        self.ids = {}
+
+    # --- helpers ------------------------------------------------------------------------
+    def id_of(self, name):
+        ident = _ident(name, self.path)
+        if ident in self.ids.values() and self.ids.get(name) != ident:
+            raise _err(f"block names {name!r} and another one map to the same element id {ident!r}", name, self.path)
+        self.ids[name] = ident
+        return ident
+
+    def value(self, block, values, key, default=None):
+        if key not in values:
+            if default is not None:
+                return default
+            raise _err(f"block '{block}': missing value '{key}'", block, self.path)
+        v = values[key]
+        if isinstance(v, bool) or not isinstance(v, (int, float, list)):
+            raise _err(f"block '{block}': value '{key}' must be a number or a list, got {v!r}", block, self.path)
+        return v
+
+    def series(self, block, values, key, unit, steady=False):
+        """A constant, or a periodic time series repeated over the simulated cycles."""
+        v = self.value(block, values, key)
+        if not isinstance(v, list):
+            return _fmt(v, unit), float(v)
+        if len(v) == 1:
+            return _fmt(v[0], unit), float(v[0])
+        t = values.get("t")
+        if not isinstance(t, list) or len(t) != len(v):
+            raise _err(f"block '{block}': time series '{key}' needs a list 't' of the same length "
+                       f"({len(v)} values, {'no t' if not isinstance(t, list) else f'{len(t)} times'})",
+                       block, self.path)
+        t = np.asarray(t, float)
+        vals = np.asarray(v, float)
+        if np.any(np.diff(t) <= 0):
+            raise _err(f"block '{block}': the times 't' must increase", block, self.path)
+        period = float(t[-1] - t[0])
+        self.note_period(period, block)
+        mean = float(np.mean(vals))  # their Parameter::to_steady: mean of the samples
+        if steady or np.all(vals == vals[0]):  # a constant series stays a constant
+            return _fmt(mean, unit), mean
+        rows = []
+        for k in range(self.n_cycles + self.extra_cycles):
+            for tt, vv in zip(t - t[0] + k * period, vals):
+                rows.append([_fmt(tt, "s"), _fmt(vv, unit)])
+        return {"pwl": rows}, mean
+
+    def note_period(self, period, block):
+        if self.period is None:
+            self.period, self.period_block = period, block
+        elif self.period != period:
+            raise _err(f"block '{block}': its time series has period {period!r} s, but block "
+                       f"'{self.period_block}' has {self.period!r} s (svZeroDSolver needs one cardiac period)",
+                       block, self.path)
+
+    def add(self, eid, typ, nodes, **vals):
+        self.elements.append({"id": eid, "type": typ, "nodes": nodes, **vals})
+
+    # --- the model ------------------------------------------------------------------------
+    def run(self, steady=False):
+        cfg, path = self.cfg, self.path
+        if not isinstance(cfg, dict) or "simulation_parameters" not in cfg:
+            raise _err("not an svZeroDSolver model: no 'simulation_parameters'", path=path)
+        sim = {**SIM_DEFAULTS, **cfg["simulation_parameters"]}
+        for key in ("number_of_cardiac_cycles", "number_of_time_pts_per_cardiac_cycle"):
+            if key not in sim:
+                raise _err(f"simulation_parameters: missing '{key}'", path=path)
+        self.sim = sim
+        self.n_cycles = int(sim["number_of_cardiac_cycles"])
+        self.period, self.period_block = None, None
+        P = self.u["P"]
+
+        vessels = cfg.get("vessels") or []
+        by_id = {}
+        for v in vessels:
+            for key in ("vessel_name", "vessel_id", "zero_d_element_type", "zero_d_element_values"):
+                if key not in v:
+                    raise _err(f"vessel {v.get('vessel_name', v.get('vessel_id', '?'))!r}: missing '{key}'",
+                               v.get("vessel_name"), path)
+            by_id[v["vessel_id"]] = v["vessel_name"]
+        bcs = {b.get("bc_name"): b for b in cfg.get("boundary_conditions") or []}
+        valves = {b.get("name"): b for b in cfg.get("valves") or []}
+        chambers = {b.get("name"): b for b in cfg.get("chambers") or []}
+        for kind, blocks, types in (("valve", valves, SUPPORTED_VALVES), ("chamber", chambers, SUPPORTED_CHAMBERS)):
+            for name, b in blocks.items():
+                if b.get("type") not in types:
+                    raise _err(f"{kind} '{name}': unknown or unsupported type {b.get('type')!r} "
+                               f"(supported: {', '.join(types)})", name, path)
+        heart = None
+        for b in cfg.get("closed_loop_blocks") or []:
+            typ = b.get("closed_loop_type")
+            if typ not in SUPPORTED_CLOSED_LOOP:
+                raise _err(f"closed-loop block {typ!r}: unknown or unsupported closed_loop_type "
+                           f"(supported: {', '.join(SUPPORTED_CLOSED_LOOP)})", typ, path)
+            if heart is not None:
+                raise _err("only one ClosedLoopHeartAndPulmonary block is allowed (as in svZeroDSolver)", HEART, path)
+            heart = b
+
+        # connections (upstream block, downstream block), as their SimulationParameters.cpp builds them
+        conns = []
+        for v in vessels:
+            bc = v.get("boundary_conditions") or {}
+            if "inlet" in bc:
+                conns.append((bc["inlet"], v["vessel_name"]))
+            if "outlet" in bc:
+                conns.append((v["vessel_name"], bc["outlet"]))
+        junctions = {}
+        for j in cfg.get("junctions") or []:
+            name = j.get("junction_name")
+            jt = j.get("junction_type", "NORMAL_JUNCTION")
+            if jt not in ("NORMAL_JUNCTION", "internal_junction", "BloodVesselJunction"):
+                raise _err(f"junction '{name}': unknown junction_type {jt!r} "
+                           "(NORMAL_JUNCTION, internal_junction, BloodVesselJunction)", name, path)
+            ins = [by_id.get(i, i) for i in j.get("inlet_vessels", [])] + list(j.get("inlet_blocks", []))
+            outs = [by_id.get(i, i) for i in j.get("outlet_vessels", [])] + list(j.get("outlet_blocks", []))
+            for i in j.get("inlet_vessels", []) + j.get("outlet_vessels", []):
+                if i not in by_id:
+                    raise _err(f"junction '{name}': no vessel with id {i}", name, path)
+            junctions[name] = (jt, ins, outs, j)
+            conns += [(i, name) for i in ins] + [(name, o) for o in outs]
+            self.types.add(jt if jt != "internal_junction" else "NORMAL_JUNCTION")
+        for name, b in valves.items():
+            prm = b.get("params") or {}
+            for key in ("upstream_block", "downstream_block"):
+                if key not in prm:
+                    raise _err(f"valve '{name}': missing params.{key}", name, path)
+            conns += [(prm["upstream_block"], name), (name, prm["downstream_block"])]
+        closed_bcs = [n for n, b in bcs.items() if b.get("bc_type") == "ClosedLoopRCR"
+                      and (b.get("bc_values") or {}).get("closed_loop_outlet") is True]
+        if heart is not None:
+            self.types.add("ClosedLoopHeartAndPulmonary")
+            for jn, ins, outs in ((HEART_IN, closed_bcs, [HEART]), (HEART_OUT, [HEART], list(heart.get("outlet_blocks") or []))):
+                junctions[jn] = ("NORMAL_JUNCTION", ins, outs, {})
+                conns += [(i, jn) for i in ins] + [(jn, o) for o in outs]
+        elif closed_bcs:
+            raise _err(f"boundary condition '{closed_bcs[0]}': closed_loop_outlet needs a ClosedLoopHeartAndPulmonary "
+                       "block in 'closed_loop_blocks'", closed_bcs[0], path)
+
+        def node(a, b):
+            for x in (a, b):
+                if x in junctions and junctions[x][0] != "BloodVesselJunction":
+                    return _ident(x, path)
+            return f"{_ident(a, path)}__{_ident(b, path)}"
+
+        inlet, outlet = {}, {}
+        for a, b in conns:
+            outlet.setdefault(a, []).append(b)
+            inlet.setdefault(b, []).append(a)
+        known = set(by_id.values()) | set(bcs) | set(junctions) | set(valves) | set(chambers) | (
+            {HEART} if heart is not None else set())
+        for a, b in conns:
+            for x in (a, b):
+                if x not in known:
+                    raise _err(f"connection {a} -> {b}: no block named '{x}'", x, path)
+
+        def two_port(kind, name):
+            ins, outs = inlet.get(name, []), outlet.get(name, [])
+            if len(ins) != 1 or len(outs) != 1:
+                raise _err(f"{kind} '{name}': needs exactly one upstream and one downstream block, has "
+                           f"{ins or 'none'} and {outs or 'none'}", name, path)
+            return node(ins[0], name), node(name, outs[0])
+
+        # their initial_condition: values by variable name (pressure_all / flow_all defaults)
+        ic_cfg = cfg.get("initial_condition") or {}
+        if not isinstance(ic_cfg, dict):
+            raise _err("'initial_condition' must be a mapping variable name -> value", path=path)
+
+        hits = []  # set when a value comes from their initial_condition (not a default)
+
+        def ic(name, default=0.0):
+            if name in ic_cfg:
+                hits.append(name)
+                return float(ic_cfg[name])
+            if name.startswith(("pressure:", "P_c:")) and "pressure_all" in ic_cfg:
+                return float(ic_cfg["pressure_all"])
+            if name.startswith("flow:") and "flow_all" in ic_cfg:
+                return float(ic_cfg["flow_all"])
+            return default
+
+        V, Q = self.u["V"], self.u["Q"]
+        self.initial, self.initial_given, self.store_volume = {}, {}, 0.0
+
+        def start(eid, state, value, unit, store=False):
+            self.initial[f"{eid}.{state}"] = _fmt(value, unit)
+            if hits:
+                self.initial_given[f"{eid}.{state}"] = _fmt(value, unit)
+                hits.clear()
+            if store:
+                self.store_volume += value
+
+        # vessels
+        q_in, q_out = {}, {}
+        for v in vessels:
+            name, typ = v["vessel_name"], v["zero_d_element_type"]
+            self.types.add(typ)
+            if typ not in SUPPORTED_VESSELS:
+                raise _err(f"vessel '{name}': unknown zero_d_element_type {typ!r} (supported: {SUPPORTED_VESSELS})",
+                           name, path)
+            vals = v["zero_d_element_values"]
+            R = self.value(name, vals, "R_poiseuille")
+            C, L = float(vals.get("C", 0.0)), float(vals.get("L", 0.0))
+            S = float(vals.get("stenosis_coefficient", 0.0))
+            n_in, n_out = two_port("vessel", name)
+            up, down = inlet[name][0], outlet[name][0]
+            eid = self.id_of(name)
+            self.add(eid, "blood_vessel" if typ == "BloodVessel" else "blood_vessel_crl", [n_in, n_out, "ground"],
+                     R_poiseuille=_fmt(R, self.uR), C=_fmt(C, self.uC), L=_fmt(L, self.uL),
+                     stenosis_coefficient=_fmt(S, self.uS), capacitive=C != 0.0, inductive=L != 0.0)
+            q_in[name], q_out[name] = f"{eid}.Q_in", f"{eid}.Q_out"
+            p0, qi, qo = ic(f"pressure:{up}:{name}"), ic(f"flow:{up}:{name}"), ic(f"flow:{name}:{down}")
+            if C != 0.0:  # their capacitor pressure: P_in (CRL), P_in - (R + S|Q_in|) Q_in (BloodVessel)
+                pc = p0 if typ == "BloodVesselCRL" else p0 - (float(R) + S * abs(qi)) * qi
+                start(eid, "V", C * pc, V, store=True)
+            if L != 0.0:
+                start(eid, "Q_out", qo, Q)
+
+        # junctions with resistances: one vessel per outlet
+        for name, (jt, ins, outs, j) in junctions.items():
+            if jt != "BloodVesselJunction":
+                continue
+            if len(ins) != 1:
+                raise _err(f"junction '{name}': a BloodVesselJunction has exactly one inlet", name, path)
+            jv = j.get("junction_values") or {}
+            Rs = self.value(name, jv, "R_poiseuille")
+            Ls = jv.get("L", [0.0] * len(outs))
+            Ss = jv.get("stenosis_coefficient", [0.0] * len(outs))
+            for key, lst in (("R_poiseuille", Rs), ("L", Ls), ("stenosis_coefficient", Ss)):
+                if not isinstance(lst, list) or len(lst) != len(outs):
+                    raise _err(f"junction '{name}': '{key}' needs one value per outlet ({len(outs)})", name, path)
+            for o, R, L, S in zip(outs, Rs, Ls, Ss):
+                eid = self.id_of(f"{name}_{o}")
+                self.add(eid, "blood_vessel", [node(ins[0], name), node(name, o), "ground"],
+                         R_poiseuille=_fmt(R, self.uR), L=_fmt(L, self.uL), stenosis_coefficient=_fmt(S, self.uS),
+                         inductive=float(L) != 0.0)
+                q_in[name + "->" + o] = f"{eid}.Q_out"
+                if float(L) != 0.0:
+                    start(eid, "Q_out", ic(f"flow:{name}:{o}"), Q)
+
+        # valves
+        for name, b in valves.items():
+            typ, prm = b["type"], b.get("params") or {}
+            self.types.add(typ)
+            eid = self.id_of(name)
+            kw = {k: _fmt(self.value(name, prm, k), self.uR) for k in ("Rmin", "Rmax")}
+            if typ == "ValveTanh":
+                kw["steepness"] = _fmt(self.value(name, prm, "Steepness"), f"1/({P})")
+            self.add(eid, "valve_tanh" if typ == "ValveTanh" else "piecewise_valve", list(two_port("valve", name)), **kw)
+            q_in[name] = q_out[name] = f"{eid}.Q"
+
+        # chambers
+        for name, b in chambers.items():
+            typ, vals = b["type"], b.get("values") or {}
+            self.types.add(typ)
+            eid = self.id_of(name)
+            act = self.activation(name, b.get("activation_function"))
+            if typ == "ChamberElastanceInductor":
+                kw = {k: _fmt(self.value(name, vals, k), self.uE) for k in ("Emax", "Emin")}
+                kw.update({k: _fmt(self.value(name, vals, k), V) for k in ("Vrd", "Vrs")})
+                kw["Impedance"] = _fmt(self.value(name, vals, "Impedance"), self.uL)
+                ctype = "chamber_elastance_inductor"
+            else:
+                kw = {k: _fmt(self.value(name, vals, k), self.uE) for k in ("Emax", "Epass")}
+                kw["Vrest"] = _fmt(self.value(name, vals, "Vrest"), V)
+                ctype = "linear_elastance_chamber"
+            self.chamber_elements.append((eid, act))
+            self.add(eid, ctype, list(two_port("chamber", name)) + ["ground"], **kw, **act)
+            q_in[name], q_out[name] = f"{eid}.Q_in", f"{eid}.Q_out"
+            start(eid, "Vc", ic(f"Vc:{name}"), V, store=True)
+            if typ == "ChamberElastanceInductor":
+                start(eid, "Q_out", ic(f"flow:{name}:{outlet[name][0]}"), Q)
+
+        # the closed-loop heart
+        if heart is not None:
+            prm = heart.get("parameters") or {}
+            eid = self.id_of(HEART)
+            hp = self.heart_values(prm)
+            period = heart.get("cardiac_cycle_period")
+            if not isinstance(period, (int, float)) or isinstance(period, bool) or period <= 0:
+                raise _err("ClosedLoopHeartAndPulmonary: 'cardiac_cycle_period' must be a positive number", HEART, path)
+            self.note_period(float(period), HEART)
+            self.add(eid, "closed_loop_heart_pulmonary", [node(HEART_IN, HEART), node(HEART, HEART_OUT), "ground"],
+                     period=_fmt(period, "s"), **hp)
+            q_in[HEART], q_out[HEART] = f"{eid}.Q_in", f"{eid}.Q_out"
+            for st in ("V_RA", "V_RV", "V_LA", "V_LV"):
+                start(eid, st, ic(f"{st}:{HEART}"), V, store=True)
+            for st in ("Q_RA", "Q_RV", "Q_LA", "Q_LV"):
+                start(eid, st, ic(f"{st}:{HEART}"), Q)
+            start(eid, "V_pul", float(prm["Cp"]) * ic(f"P_pul:{HEART}"), V)
+            start(eid, "V_ao", float(prm["Cpa"]) * ic(f"pressure:{HEART}:{HEART_OUT}"), V, store=True)
+
+        # boundary conditions
+        flow_col = {}
+        self.closed = not any(b.get("bc_type") != "ClosedLoopRCR" for b in bcs.values())
+        for name, b in bcs.items():
+            typ = b.get("bc_type")
+            self.types.add(typ)
+            vals = b.get("bc_values")
+            if not isinstance(vals, dict):
+                raise _err(f"boundary condition '{name}': missing 'bc_values'", name, path)
+            eid = self.id_of(name)
+            if typ == "ClosedLoopRCR":
+                n_in, n_out = two_port("boundary condition", name)
+                C = self.value(name, vals, "C")
+                self.add(eid, "closed_loop_rcr", [n_in, n_out, "ground"], Rp=_fmt(self.value(name, vals, "Rp"), self.uR),
+                         C=_fmt(C, self.uC), Rd=_fmt(self.value(name, vals, "Rd"), self.uR))
+                q_in[name], q_out[name] = f"{eid}.Q_in", f"{eid}.Q_out"
+                start(eid, "V", float(C) * ic(f"P_c:{name}"), V, store=True)
+                continue
+            ins, outs = inlet.get(name, []), outlet.get(name, [])
+            if len(ins) + len(outs) != 1:
+                raise _err(f"boundary condition '{name}': connected to {len(ins) + len(outs)} blocks, needs 1",
+                           name, path)
+            nd = node(name, outs[0]) if outs else node(ins[0], name)
+            if typ == "FLOW":
+                q, _ = self.series(name, vals, "Q", Q, steady)
+                self.add(eid, "flow_source", ["ground", nd] if outs else [nd, "ground"], value=q)
+                flow_col[name] = f"Q({eid})"
+            elif typ == "PRESSURE":
+                p_, _ = self.series(name, vals, "P", P, steady)
+                self.add(eid, "pressure_source", [nd, "ground"], value=p_)
+            elif typ == "RESISTANCE":
+                pd, _ = self.series(name, vals, "Pd", P, steady)
+                self.add(eid, "resistance_bc", [nd, "ground"], R=_fmt(self.value(name, vals, "R"), self.uR), Pd=pd)
+            elif typ == "RCR":
+                pd, _ = self.series(name, vals, "Pd", P, steady) if "Pd" in vals else (_fmt(0.0, P), 0.0)
+                C = self.value(name, vals, "C")
+                self.add(eid, "rcr_bc", [nd, "ground"], Rp=_fmt(self.value(name, vals, "Rp"), self.uR),
+                         C=_fmt(C, self.uC), Rd=_fmt(self.value(name, vals, "Rd"), self.uR), Pd=pd)
+                start(eid, "V", float(C) * ic(f"P_c:{name}"), V)
+            elif typ == "CORONARY":
+                pim, _ = self.series(name, vals, "Pim", P, steady)
+                self.add(eid, "coronary_bc", [nd, "ground"],
+                         **{k: _fmt(self.value(name, vals, k), self.uR) for k in ("Ra1", "Ra2", "Rv1")},
+                         **{k: _fmt(self.value(name, vals, k), self.uC) for k in ("Ca", "Cc")},
+                         Pim=pim, P_v=_fmt(self.value(name, vals, "P_v"), P))
+            else:
+                raise _err(f"boundary condition '{name}': unknown or unsupported bc_type {typ!r} "
+                           f"(supported: {', '.join(SUPPORTED_BC)})", name, path)
+
+        # cardiac period: from the time series or the heart, else simulation_parameters, else 1 s
+        sp = sim.get("cardiac_period")
+        if sp is not None and self.period is not None and float(sp) != self.period:
+            raise _err(f"simulation_parameters: cardiac_period {sp!r} s differs from the period "
+                       f"{self.period!r} s of block '{self.period_block}'", self.period_block, path)
+        period = self.period if self.period is not None else (float(sp) if sp is not None else 1.0)
+        for eid, act in self.chamber_elements:  # activation functions use the model's period
+            for e in self.elements:
+                if e["id"] == eid:
+                    e["period"] = _fmt(period, "s")
+
+        # their output names -> our columns
+        cols = {}
+        for a, b in conns:
+            nd = node(a, b)
+            cols[f"pressure:{a}:{b}"] = f"P({nd})"
+            if a in q_out:
+                fc = q_out[a]
+            elif b in q_in:
+                fc = q_in[b]
+            elif a in junctions and (a + "->" + b) in q_in:
+                fc = q_in[a + "->" + b]
+            elif a in flow_col:
+                fc = flow_col[a]
+            elif b in flow_col:
+                fc = flow_col[b]
+            else:
+                fc = None
+            if fc is not None:
+                cols[f"flow:{a}:{b}"] = fc
+        for name in chambers:
+            cols[f"Vc:{name}"] = f"V({self.ids[name]})"  # a volume store
+        for name, b in bcs.items():
+            if b.get("bc_type") in ("RCR", "ClosedLoopRCR"):
+                cols[f"P_c:{name}"] = f"{self.ids[name]}.P_c"
+        for v in vessels:
+            name = v["vessel_name"]
+            cols[f"{name}:flow_in"] = q_in[name]
+            cols[f"{name}:flow_out"] = q_out[name]
+            cols[f"{name}:pressure_in"] = f"P({node(inlet[name][0], name)})"
+            cols[f"{name}:pressure_out"] = f"P({node(name, outlet[name][0])})"
+        self.columns = cols
+        self.period_value = period
+        self.law_node = node(HEART_IN, HEART) if heart is not None else (
+            self.elements[0]["nodes"][0] if self.elements else None)
+        return [v["vessel_name"] for v in vessels]
+
+    def activation(self, name, af):
+        """Their activation_function mapping -> the chamber's option and parameters."""
+        from hemocircuit.components.svzerod.activation import ACT_PARAMS, KINDS, USED
+
+        if not isinstance(af, dict) or not isinstance(af.get("type"), str):
+            raise _err(f"chamber '{name}': needs 'activation_function' with a 'type' ({', '.join(KINDS)})",
+                       name, self.path)
+        kind = af["type"]
+        if kind not in KINDS:
+            raise _err(f"chamber '{name}': activation function {kind!r} is not supported "
+                       f"(supported: {', '.join(KINDS)})", name, self.path)
+        unknown = sorted(k for k in af if k != "type" and not k.startswith("_") and k not in USED[kind])
+        if unknown:
+            raise _err(f"chamber '{name}': unknown parameter(s) {unknown} for activation {kind} "
+                       f"(it takes {', '.join(USED[kind])})", name, self.path)
+        units = dict(ACT_PARAMS)
+        out = {"activation": kind}
+        for k in USED[kind]:
+            v = self.value(name, af, k)
+            out[k] = _fmt(v, "s") if units[k] == "s" else float(v)
+        return out
+
+    def heart_values(self, prm):
+        """Their ClosedLoopHeartAndPulmonary parameters with units of this unit system."""
+        from hemocircuit.components.svzerod.closed_loop_heart_pulmonary import _P
+
+        P, V = self.u["P"], self.u["V"]
+        ours = {"mmHg*s/mL": self.uR, "mmHg*s**2/mL": self.uL, "mL/mmHg": self.uC, "mmHg/mL": self.uE,
+                "mmHg": P, "mL": V, "1/mL": f"1/({V})"}
+        out = {}
+        for k, (unit, _) in _P.items():
+            if k == "period":
+                continue
+            v = self.value(HEART, prm, k)
+            out[k] = float(v) if unit == "dimensionless" else _fmt(v, ours[unit])
+        unknown = sorted(k for k in prm if not k.startswith("_") and k not in _P)
+        if unknown:
+            raise _err(f"ClosedLoopHeartAndPulmonary: unknown parameter(s) {unknown}", HEART, self.path)
+        return out
+
+
+def _read(path_or_cfg):
+    if isinstance(path_or_cfg, dict):
+        return path_or_cfg, None
+    path = str(path_or_cfg)
+    try:
+        with open(path) as fh:
+            return json.load(fh), path
+    except OSError as exc:
+        raise NetlistError(f"cannot read {path}: {exc.strerror}", file=path) from None
+    except json.JSONDecodeError as exc:
+        raise NetlistError(f"not valid JSON: {exc}", file=path) from None
+
+
+def import_svzerod(path_or_cfg, units: str = "cgs", extra_cycles: int = 1) -> SvzModel:
+    """Read an svZeroDSolver JSON model (a path or the parsed dict) into an :class:`SvzModel`."""
+    cfg, path = _read(path_or_cfg)
+    imp = _Importer(cfg, path, units, extra_cycles)
+    vessels = imp.run()
+    name = os.path.splitext(os.path.basename(path))[0] if path else "svzerod_model"
+    sim = {k: v for k, v in imp.sim.items()}
+    header = {
+        "name": _ident(name, path),
+        "description": (f"imported from svZeroDSolver model {os.path.basename(path) if path else '(dict)'} "
+                        f"(units {units}: pressure {imp.u['P']}); cardiac period {imp.period_value!r} s; "
+                        f"their simulation_parameters: {json.dumps(cfg['simulation_parameters'])}"),
+        "parameters": {"cardiac_period": _fmt(imp.period_value, "s"),
+                       "number_of_cardiac_cycles": imp.n_cycles,
+                       "number_of_time_pts_per_cardiac_cycle": int(sim["number_of_time_pts_per_cardiac_cycle"])},
+    }
+    netlist = {**header, "elements": imp.elements}
+    if imp.closed:  # the conserved blood volume is that of their initial condition
+        netlist["constraints"] = [{"node": imp.law_node, "volume": _fmt(imp.store_volume, imp.u["V"])}]
+    steady = _Importer(cfg, path, units, extra_cycles)
+    steady.run(steady=True)
+    mean_netlist = {**header, "name": header["name"] + "_mean", "elements": steady.elements}
+    if imp.closed:
+        mean_netlist["constraints"] = netlist["constraints"]
+    return SvzModel(name, netlist, imp.period_value, sim, imp.columns, sorted(imp.types), vessels,
+                    imp.u, mean_netlist, imp.initial, imp.closed, imp.initial_given)
+
+
+def write_netlist(netlist: dict, out_path: str):
+    """Write a netlist dict as YAML (block style, one element per mapping)."""
+    import yaml
+
+    with open(out_path, "w") as fh:
+        yaml.safe_dump(netlist, fh, sort_keys=False, default_flow_style=None, width=120)
+
+
+def load_svzerod(path, units: str = "cgs", mean: bool = False):
+    """The assembled Circuit of an svZeroDSolver JSON model (through a temporary netlist file,
+    so it is exactly what ``import-svzerod`` writes).  ``mean``: time series at their means."""
+    import tempfile
+
+    from ..circuit import load
+
+    model = import_svzerod(path, units)
+    with tempfile.TemporaryDirectory(prefix="hemocircuit_svz_") as d:
+        out = os.path.join(d, model.netlist["name"] + ".yaml")
+        write_netlist(model.mean_netlist if mean else model.netlist, out)
+        return load(out)

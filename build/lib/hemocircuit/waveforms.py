@@ -1,0 +1,192 @@
+"""Time-dependent source values: steps, piecewise-linear/constant tables, sines and sums.
+
+Netlist forms (every number with a unit; the source's own unit gives the value dimension):
+  value: 80 mmHg                                   constant
+  value: {steps: [[0 s, 80 mmHg], [10 s, 72 mmHg]]}   value from each time on (alias: pwc)
+  value: {pwl: [[0 s, 80 mmHg], [5 s, 90 mmHg]]}      linear interpolation, held outside
+  value: {pwl: {file: table.csv}}                  CSV (two columns, header 'time [s],value [mmHg]')
+  value: {sine: {offset: 80 mmHg, amplitude: 8 mmHg, frequency: 0.1 Hz, phase: 0 deg, start: 0 s}}
+  value: {sum: [<waveform>, <waveform>, ...]}
+Tables are parsed at load time; evaluation is plain numpy.  ``breakpoints()`` lists the times
+where the value or its slope jumps, so the transient solver restarts there.
+"""
+from __future__ import annotations
+
+import csv
+import os
+import re
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import limits
+from .errors import NetlistError, did_you_mean, excerpt
+from .units import UnitError, parse_quantity
+
+
+class Waveform:
+    def __call__(self, t: float) -> float:
+        raise NotImplementedError
+
+    def breakpoints(self) -> list[float]:
+        return []
+
+
+@dataclass
+class Constant(Waveform):
+    value: float
+
+    def __call__(self, t):
+        return self.value
+
+
+@dataclass
+class Table(Waveform):
+    times: np.ndarray
+    values: np.ndarray
+    linear: bool
+
+    def __call__(self, t):
+        if self.linear:
+            return float(np.interp(t, self.times, self.values))
+        i = np.searchsorted(self.times, t, side="right") - 1
+        return float(self.values[max(i, 0)])
+
+    def breakpoints(self):
+        return [float(x) for x in self.times]
+
+
+@dataclass
+class Sine(Waveform):
+    offset: float
+    amplitude: float
+    frequency: float  # Hz
+    phase: float  # rad
+    start: float  # s
+
+    def __call__(self, t):
+        if t < self.start:
+            return self.offset
+        return self.offset + self.amplitude * np.sin(2 * np.pi * self.frequency * (t - self.start) + self.phase)
+
+    def breakpoints(self):
+        return [self.start]
+
+
+@dataclass
+class Sum(Waveform):
+    parts: list
+
+    def __call__(self, t):
+        return sum(p(t) for p in self.parts)
+
+    def breakpoints(self):
+        return sorted({b for p in self.parts for b in p.breakpoints()})
+
+
+def _table_rows(spec, base_dir, unit, where):
+    if isinstance(spec, dict) and "file" in spec:
+        if not isinstance(spec["file"], str) or not spec["file"] or len(spec) != 1:
+            raise NetlistError(f"a table file is given as {{file: NAME.csv}}, got {excerpt(spec)}", **where)
+        # netlists and protocols resolve and check the path against their allowed folders
+        # (hemocircuit.access) before it gets here; relative paths left are the API's own
+        path = spec["file"] if os.path.isabs(spec["file"]) else os.path.join(base_dir or ".", spec["file"])
+        if not os.path.isfile(path):
+            raise NetlistError(f"table file not found: {path}", **where)
+        limits.check_file_size(path, "table file")
+        try:
+            with open(path, newline="", encoding="utf-8") as fh:
+                rows = [r for r in csv.reader(fh) if r and not r[0].lstrip().startswith("#")]
+        except (OSError, UnicodeDecodeError, csv.Error) as exc:
+            raise NetlistError(f"table file {path}: cannot read ({type(exc).__name__}): not a CSV text file?",
+                               **where) from None
+        if len(rows) < 2:
+            raise NetlistError(f"table file {path}: needs a header 'time [s],value [UNIT]' and at least one row",
+                               **where)
+        if len(rows) > limits.limit("TABLE_ROWS") + 1:
+            raise NetlistError(f"table file {path}: {len(rows) - 1:,} rows {limits.how_to_raise('TABLE_ROWS')}",
+                               **where)
+        header, rows = rows[0], rows[1:]
+        units = []
+        for h in header[:2]:
+            m = re.search(r"\[(.{1,40})\]", h)
+            if not m:
+                raise NetlistError(f"table file {path}: the header (line 1, {excerpt(','.join(header), 40)}) must "
+                                   "give each column's unit in brackets: 'time [s],value [UNIT]'", **where)
+            units.append(m.group(1))
+        if len(units) < 2:
+            raise NetlistError(f"table file {path}: the header needs two columns 'time [s],value [UNIT]'", **where)
+        out = []
+        for i, r in enumerate(rows):
+            try:
+                if len(r) < 2:
+                    raise UnitError("expected two columns time,value")
+                out.append((parse_quantity(f"{r[0][:60]} {units[0]}", "s", "time"),
+                            parse_quantity(f"{r[1][:60]} {units[1]}", unit, "value")))
+            except UnitError as exc:
+                raise NetlistError(f"table file {path}, data row {i + 1}: {str(exc)[:200]}", **where) from None
+        return out
+    if not isinstance(spec, list) or not spec:
+        raise NetlistError("a table needs a non-empty list of [time, value] pairs or {file: ...}", **where)
+    if len(spec) > limits.limit("TABLE_ROWS"):
+        raise NetlistError(f"a table of {len(spec):,} rows {limits.how_to_raise('TABLE_ROWS')}", **where)
+    out = []
+    for i, row in enumerate(spec):
+        if not isinstance(row, (list, tuple)) or len(row) != 2:
+            raise NetlistError(f"table row {i + 1} {excerpt(row)} is not a [time, value] pair", **where)
+        out.append((parse_quantity(row[0], "s", f"table row {i + 1} time"),
+                    parse_quantity(row[1], unit, f"table row {i + 1} value")))
+    return out
+
+
+_SINE_FIELDS = ("offset", "amplitude", "frequency", "phase", "start")
+_KINDS = ("steps", "pwc", "pwl", "sine", "sum")
+
+
+def parse_waveform(spec, unit: str, base_dir=None, where=None) -> Waveform:
+    """Build a Waveform from a netlist value (constant or mapping)."""
+    where = where or {}
+    try:
+        if not isinstance(spec, dict):
+            return Constant(parse_quantity(spec, unit, "value"))
+        if len(spec) != 1:
+            raise NetlistError("a waveform has exactly one kind (steps, pwl, pwc, sine, sum); got "
+                               f"{excerpt(sorted(map(str, spec)))}", **where)
+        (kind, body), = spec.items()
+        if kind in ("steps", "pwc", "pwl"):
+            # stable sort on time only: rows with equal times keep their order (a jump)
+            rows = sorted(_table_rows(body, base_dir, unit, where), key=lambda r: r[0])
+            t = np.array([r[0] for r in rows])
+            v = np.array([r[1] for r in rows])
+            for what, arr, u in (("time", t, "s"), ("value", v, unit)):
+                bad = np.flatnonzero(~np.isfinite(arr))
+                if bad.size:
+                    raise NetlistError(f"{kind} table: every {what} must be finite; got {arr[bad[0]]} {u}", **where)
+            return Table(t, v, linear=(kind == "pwl"))
+        if kind == "sine":
+            if not isinstance(body, dict):
+                raise NetlistError("sine needs a mapping {offset, amplitude, frequency, phase, start}", **where)
+            unknown = set(body) - set(_SINE_FIELDS)
+            if unknown:
+                raise NetlistError(f"unknown sine field(s) {excerpt(sorted(map(str, unknown)))}"
+                                   f"{did_you_mean(sorted(map(str, unknown))[0], _SINE_FIELDS)}", **where)
+            fields = {}
+            for fname, funit in (("offset", unit), ("amplitude", unit), ("frequency", "Hz"), ("phase", "rad"),
+                                 ("start", "s")):
+                v = parse_quantity(body.get(fname, f"0 {funit}"), funit, f"sine {fname}")
+                if not np.isfinite(v):
+                    raise NetlistError(f"sine {fname} = {v} {funit}: must be finite", **where)
+                fields[fname] = v
+            if fields["frequency"] < 0:
+                raise NetlistError(f"sine frequency = {fields['frequency']:g} Hz: must be >= 0", **where)
+            return Sine(**fields)
+        if kind == "sum":
+            if not isinstance(body, list) or not body:
+                raise NetlistError("sum needs a non-empty list of waveforms", **where)
+            return Sum([parse_waveform(b, unit, base_dir, where) for b in body])
+        raise NetlistError(f"unknown waveform kind {excerpt(kind, 40)}{did_you_mean(kind, _KINDS)} "
+                           "(use steps, pwl, pwc, sine or sum)", **where)
+    except UnitError as exc:
+        raise NetlistError(str(exc), **where) from None
+    except (TypeError, ValueError) as exc:  # unhashable or odd YAML values in a waveform mapping
+        raise NetlistError(f"malformed waveform {excerpt(spec)}: {type(exc).__name__}", **where) from None
