@@ -61,16 +61,11 @@ def resolve_values(circuit, grids):
     return out
 
 
-def _is_option(circuit, path):
-    eid, _, name = path.partition(".")
-    return eid in circuit.elements and name in circuit.elements[eid].cls.options
-
-
 def build_batches(circuit, assignments):
     """[(batch circuit, [member indices])]: one batch per distinct set of structural options."""
     groups, group_opts = {}, {}
     for k, a in enumerate(assignments):
-        opts = {p: (yaml.safe_load(v) if isinstance(v, str) else v) for p, v in a.items() if _is_option(circuit, p)}
+        opts = {p: (yaml.safe_load(v) if isinstance(v, str) else v) for p, v in a.items() if circuit.is_option(p)}
         key = tuple(sorted((p, repr(v)) for p, v in opts.items()))
         groups.setdefault(key, []).append(k)
         group_opts[key] = opts
@@ -78,7 +73,7 @@ def build_batches(circuit, assignments):
     for key, members in groups.items():
         base = circuit.with_options(group_opts[key]) if key else circuit
         b = base.batch(len(members))
-        params = sorted({p for k in members for p in assignments[k] if not _is_option(circuit, p)})
+        params = sorted({p for k in members for p in assignments[k] if not circuit.is_option(p)})
         columns = {}
         for p in params:
             unit = b.param_unit(p)
@@ -104,7 +99,7 @@ def grid_columns(circuit, paths, assignments):
     cols, units = {}, {}
     for p in paths:
         vals = [a.get(p) for a in assignments]
-        if _is_option(circuit, p):
+        if circuit.is_option(p):
             cols[p] = np.array([yaml.safe_load(v) if isinstance(v, str) else v for v in vals], dtype=object)
             if all(isinstance(v, (bool, np.bool_)) for v in cols[p]):
                 cols[p] = cols[p].astype(bool)

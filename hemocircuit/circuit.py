@@ -589,6 +589,11 @@ class Circuit:
         e, gi, i, name = self.structure.schema.resolve(path)
         return e, self.groups[gi], i, name
 
+    def is_option(self, path) -> bool:
+        """Whether ID.NAME names a structural option (not a parameter) of an element."""
+        eid, _, name = str(path).partition(".")
+        return eid in self.elements and name in self.elements[eid].cls.options
+
     def param_unit(self, path):
         return self.parameters.unit(path)
 

@@ -76,7 +76,7 @@ def load_circuit(netlist, sets=None, protocol=None, allow_paths=None):
         problem = path_problem(c, k)
         if problem:
             raise HemocircuitError(f"--set {k}={v}: {problem}")
-    opts = {k: v for k, v in sets.items() if _is_option(c, k)}
+    opts = {k: v for k, v in sets.items() if c.is_option(k)}
     params = {k: v for k, v in sets.items() if k not in opts}
     try:
         if opts:
@@ -98,11 +98,6 @@ def events_only(proto):
     """The protocol without its ``initial`` settings (already applied by :func:`load_circuit`)."""
     import dataclasses
     return None if proto is None else dataclasses.replace(proto, initial={})
-
-
-def _is_option(c, path):
-    eid, _, name = path.partition(".")
-    return eid in c.elements and name in c.elements[eid].cls.options
 
 
 def _load(args, uses_events=False):

@@ -42,8 +42,7 @@ def parse(circuit, grid_args):
 
 
 def _check_path(circuit, path):
-    from .batch import _is_option
-    if _is_option(circuit, path):
+    if circuit.is_option(path):
         return
     eid = path.partition(".")[0]
     if eid not in circuit.elements:

@@ -132,7 +132,7 @@ class Protocol:
     def apply_initial(self, circuit, t0=0.0):
         """A copy of ``circuit`` with the ``initial`` settings, then the events at or before
         ``t0`` (the start: they hold from the start, so the starting operating point uses them)."""
-        opts = {k: v for k, v in self.initial.items() if _is_option(circuit, k)}
+        opts = {k: v for k, v in self.initial.items() if circuit.is_option(k)}
         c = circuit.with_options(opts) if opts else circuit
         try:
             c = c.with_values({k: v for k, v in self.initial.items() if k not in opts})
@@ -156,7 +156,7 @@ def _reject_bare_numbers(circuit, mapping, what, file):
     for path, value in mapping.items():
         if not isinstance(path, str):
             raise NetlistError(f"{what}: {path!r} is not an ID.PARAM path", file=file)
-        if _is_option(circuit, path):
+        if circuit.is_option(path):
             continue
         if not isinstance(value, (str, int, float, dict)) or isinstance(value, bool):
             raise NetlistError(f"{what}: {path} = {value!r} is not a quantity with a unit (or a waveform)",
@@ -171,8 +171,3 @@ def _reject_bare_numbers(circuit, mapping, what, file):
             parse_quantity(value, unit, path)
         except UnitError as exc:
             raise NetlistError(f"{what}: {exc}", file=file, element=path.partition(".")[0]) from None
-
-
-def _is_option(circuit, path):
-    eid, _, name = path.partition(".")
-    return eid in circuit.elements and name in circuit.elements[eid].cls.options

@@ -40,13 +40,8 @@ def _with_values(circuit, mapping, B=None):
     return c.with_values(mapping) if mapping else c
 
 
-def _is_option(circuit, path):
-    eid, _, name = path.partition(".")
-    return eid in circuit.elements and name in circuit.elements[eid].cls.options
-
-
 def _options_and_values(circuit, mapping):
-    opts = {k: v for k, v in mapping.items() if _is_option(circuit, k)}
+    opts = {k: v for k, v in mapping.items() if circuit.is_option(k)}
     return opts, {k: v for k, v in mapping.items() if k not in opts}
 
 

@@ -49,11 +49,6 @@ def _with_values(circuit, mapping):
                           for k, v in mapping.items()})
 
 
-def _is_option(circuit, path):
-    eid, _, name = path.partition(".")
-    return eid in circuit.elements and name in circuit.elements[eid].cls.options
-
-
 # ------------------------------------------------------------------------ objectives ----
 class Objective:
     """Base: ``labels``/``units`` of the m output components, ``evaluate_batch``."""
@@ -140,7 +135,7 @@ def _split_settings(circuit, at):
     """An ``at`` mapping -> (structural options, numeric settings)."""
     if not isinstance(at, dict):
         raise NetlistError(f"each 'at' entry must be a mapping ID.PARAM: value (got {at!r})")
-    opts = {k: v for k, v in at.items() if _is_option(circuit, k)}
+    opts = {k: v for k, v in at.items() if circuit.is_option(k)}
     nums = {k: v for k, v in at.items() if k not in opts}
     for k in nums:
         circuit.param_unit(k)  # clear error for a wrong path
@@ -233,7 +228,7 @@ class TranObjective(CircuitObjective):
         from ..protocol import Protocol
 
         proto = Protocol.load(protocol, circuit) if isinstance(protocol, str) else protocol
-        opts = {k: v for k, v in proto.initial.items() if _is_option(circuit, k)}
+        opts = {k: v for k, v in proto.initial.items() if circuit.is_option(k)}
         c0 = circuit.with_options(opts) if opts else circuit
         c0 = _with_values(c0, {k: v for k, v in proto.initial.items() if k not in opts})
         super().__init__(c0, columns, proto.events)
