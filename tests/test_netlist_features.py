@@ -304,7 +304,7 @@ def test_with_values_units_and_bounds():
             c.with_values({path: value})
         if "." in path and path.split(".")[0] in c.elements:
             assert ei.value.element == path.split(".")[0]
-    # failed sets change nothing
+    # the circuit given is unchanged by the failed with_values (circuits are immutable)
     assert c.parameters.values["Rla.R"][0] == 0.4 and c.parameters.values["Cv.k"][0] == pytest.approx(0.186)
 
 

@@ -17,7 +17,6 @@ from hemocircuit.results import Result
 from paths import NETLISTS
 
 BASE_RC = NETLISTS / "base_rc.yaml"
-pd = pytest.importorskip("pandas")
 
 
 @pytest.fixture(scope="module")
@@ -29,6 +28,7 @@ def rc():
 def test_csv_round_trip_pandas_and_load(rc, tmp_path):
     res = rc.simulate(2.0, dt=0.25, ic={"C1.V": "10 mL"}, rtol=1e-8)
     path = res.save(tmp_path / "run.csv")
+    pd = pytest.importorskip("pandas")
     df = pd.read_csv(path, comment="#")  # the provenance header is skipped
     assert list(df.columns) == [res.label(k) for k in res.keys()]
     assert list(df.columns)[:2] == ["time [s]", "P(in) [mmHg]"]
