@@ -70,11 +70,15 @@ def run_chunks(fn, chunks, scheduler=None, workers=None, progress=None, desc="ru
                 _run_processes(fn, chunks, workers, done, failures, bar)
             else:
                 client = _dask_client(scheduler)
-                futs = client.map(fn, chunks, pure=False)
-                from dask.distributed import as_completed as das_completed
-                index = {f.key: i for i, f in enumerate(futs)}
-                for f in das_completed(futs):
-                    done(index[f.key], _outcome(f, failures))
+                try:
+                    futs = client.map(fn, chunks, pure=False)
+                    from dask.distributed import as_completed as das_completed
+                    index = {f.key: i for i, f in enumerate(futs)}
+                    for f in das_completed(futs):
+                        done(index[f.key], _outcome(f, failures))
+                finally:
+                    if client is not scheduler:  # made here from an address: do not leak it
+                        client.close()
     except KeyboardInterrupt as exc:  # SIGINT, or SIGTERM through the CLI's handler
         raise Interrupted.of(exc, chunk_results=list(results)) from None
     return results

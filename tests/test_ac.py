@@ -198,3 +198,11 @@ def test_cli_ac(tmp_path, capsys):
     assert main(["ac", str(NETS / "arterial_compliance.yaml"), "--output", "Q(nope)"]) == 2
     assert "unknown output" in capsys.readouterr().err
     assert main(["ac", str(NETS / "arterial_compliance.yaml"), "--input", "Px"]) == 2
+
+
+def test_frequency_specs_with_prefixes_and_exponents():
+    """One parser for ac and freq: unit prefixes and exponents ('1e-3' is a number, not 1 e)."""
+    from hemocircuit.analyses.ac import parse_freqs
+    np.testing.assert_allclose(parse_freqs("10:100 mHz", 1), [0.01, 0.1])
+    np.testing.assert_allclose(parse_freqs("1e-3:1Hz", 1), [1e-3, 1e-2, 1e-1, 1.0])
+    np.testing.assert_allclose(parse_freqs("0.05,0.2Hz"), [0.05, 0.2])

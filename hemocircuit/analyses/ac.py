@@ -38,7 +38,7 @@ def parse_freqs(spec, per_decade=20):
     ends included), 'F1:F2:STEP Hz' (linear) or a list '0.01,0.1,1 Hz'."""
     if not isinstance(spec, str):
         return np.atleast_1d(np.asarray(spec, dtype=float))
-    text = re.sub(r"(\d)([A-Za-z])", r"\1 \2", spec.strip(), count=1)
+    text = re.sub(r"(\d)(?![eE][-+]?\d)([A-Za-z])", r"\1 \2", spec.strip(), count=1)  # '1e-3' stays whole
     parts = text.split(None, 1)
     body, unit = parts[0], (parts[1] if len(parts) > 1 else "Hz")
     try:

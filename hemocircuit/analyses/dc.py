@@ -84,8 +84,10 @@ def dc_sweep(circuit, param: str, values, progress=None):
                 try:
                     c = circuit.with_values({param: float(v)})
                     try:
-                        op = operating_point(c, x0=None if x_prev is None else x_prev)
+                        op = operating_point(c, x0=x_prev)
                     except HemocircuitError:  # continuation failed: retry from a fresh DC guess
+                        if x_prev is None:  # it was one already
+                            raise
                         op = operating_point(c)
                 except HemocircuitError as exc:
                     failed.append((float(v), str(exc)))

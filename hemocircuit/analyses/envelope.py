@@ -21,7 +21,7 @@ from ..batch import build_batches, expand_grid, grid_columns, parse_grid_arg, re
 from ..batch_integrator import integrate
 from .. import plausibility
 from ..errors import HemocircuitError
-from ..execution import finish_batch, member_results, run_chunks, split
+from ..execution import default_workers, finish_batch, member_results, run_chunks, split
 from ..derived import derived_units
 from ..io import pyplot, save_figure
 from ..provenance import clock, stamp
@@ -41,7 +41,8 @@ def _run_chunk(job):
     from .op import operating_points
     X0, opv, errors = operating_points(bc)
     good = np.array([e is None for e in errors])
-    free = [j for j in range(bc.nx) if j not in _law_states(bc)]
+    held = _law_states(bc)
+    free = [j for j in range(bc.nx) if j not in held]
     X0[:, free] += opt["kick"] * bc.state_scales[free]
     grid = np.arange(0.0, opt["t_end"] + 0.5 * opt["dt"], opt["dt"])
     out = [{"error": e} for e in errors]
@@ -60,38 +61,37 @@ def _run_chunk(job):
 
 def _summary(bc, k, r, grid, opv, kk, opt):
     """Statistics of member k of the integrated batch over the settled window."""
-    if True:
-        n_win = max(int(len(grid) * opt["window"]), 4)
-        if not r.ok[k]:
-            return {"error": r.message[k]}
-        cols = bc.subset([k]).outputs(grid, r.x[k])
-        findings = plausibility.check(bc, cols, t=grid)
-        if plausibility.errors(findings):
-            return {"error": "; ".join(map(str, plausibility.errors(findings)))}
-        cols = {name: v[-n_win:] for name, v in cols.items()}
-        tw = grid[-n_win:]
-        osc = {}
-        for o in opt["outputs"]:
-            y = cols[o]
-            half = len(y) // 2
-            osc[o] = bool(np.ptp(y) > opt["osc_tol"] * abs(np.mean(y)) and np.ptp(y[half:]) >= 0.5 * np.ptp(y[:half]))
-        y0 = cols[opt["outputs"][0]]
-        # means over whole periods: between the first and last upward crossing of the mean
-        z = y0 - y0.mean()
-        up = np.nonzero((z[:-1] < 0) & (z[1:] >= 0))[0]
-        sel = slice(up[0], up[-1] + 1) if any(osc.values()) and len(up) >= 2 else slice(None)
-        row = {}
-        for o in opt["outputs"]:
-            y = cols[o]
-            row.update({f"{o} min": float(y.min()), f"{o} max": float(y.max()), f"{o} mean": float(y[sel].mean()),
-                        f"{o} steady": float(opv[o][kk])})
-        row["oscillating"] = bool(any(osc.values()))
-        row["period [s]"] = _period(tw, y0) if row["oscillating"] else float("nan")
-        row["warnings"] = [str(f) for f in plausibility.warnings(findings)]
-        if opt.get("keep_series"):
-            row["series"] = {o: cols[o] for o in opt["keep_series"] if o in cols}
-            row["t"] = tw
-        return row
+    n_win = max(int(len(grid) * opt["window"]), 4)
+    if not r.ok[k]:
+        return {"error": r.message[k]}
+    cols = bc.subset([k]).outputs(grid, r.x[k])
+    findings = plausibility.check(bc, cols, t=grid)
+    if plausibility.errors(findings):
+        return {"error": "; ".join(map(str, plausibility.errors(findings)))}
+    cols = {name: v[-n_win:] for name, v in cols.items()}
+    tw = grid[-n_win:]
+    osc = {}
+    for o in opt["outputs"]:
+        y = cols[o]
+        half = len(y) // 2
+        osc[o] = bool(np.ptp(y) > opt["osc_tol"] * abs(np.mean(y)) and np.ptp(y[half:]) >= 0.5 * np.ptp(y[:half]))
+    y0 = cols[opt["outputs"][0]]
+    # means over whole periods: between the first and last upward crossing of the mean
+    z = y0 - y0.mean()
+    up = np.nonzero((z[:-1] < 0) & (z[1:] >= 0))[0]
+    sel = slice(up[0], up[-1] + 1) if any(osc.values()) and len(up) >= 2 else slice(None)
+    row = {}
+    for o in opt["outputs"]:
+        y = cols[o]
+        row.update({f"{o} min": float(y.min()), f"{o} max": float(y.max()), f"{o} mean": float(y[sel].mean()),
+                    f"{o} steady": float(opv[o][kk])})
+    row["oscillating"] = bool(any(osc.values()))
+    row["period [s]"] = _period(tw, y0) if row["oscillating"] else float("nan")
+    row["warnings"] = [str(f) for f in plausibility.warnings(findings)]
+    if opt.get("keep_series"):
+        row["series"] = {o: cols[o] for o in opt["keep_series"] if o in cols}
+        row["t"] = tw
+    return row
 
 
 def _period(t, y):
@@ -124,7 +124,7 @@ def envelope(circuit, sweep, grid=None, outputs=None, t_end=1000.0, dt=0.1, wind
     jobs, where = [], []
     for bc, idx in build_batches(circuit, assignments):
         # a few chunks per worker: the bar (runs done / total) moves while runs last minutes
-        n = min(len(idx), 4 * (workers or 2)) if scheduler != "serial" else 1
+        n = min(len(idx), 4 * (workers or default_workers())) if scheduler != "serial" else 1
         for chunk in split(list(range(len(idx))), n):
             jobs.append((bc.subset(chunk), opt))  # pickles without caches
             where.append([idx[j] for j in chunk])

@@ -25,7 +25,7 @@ from ..batch import build_batches, expand_grid, grid_columns, parse_grid_arg, re
 from ..batch_integrator import integrate
 from .. import plausibility
 from ..errors import HemocircuitError
-from ..execution import finish_batch, member_results, run_chunks, split
+from ..execution import default_workers, finish_batch, member_results, run_chunks, split
 from ..derived import derived_units
 from ..io import pyplot, save_figure
 from ..progress import advance
@@ -185,7 +185,7 @@ def frequency_response(circuit, freqs, outputs=None, input=None, step=0.1, ampli
     jobs, where = [], []
     for bc, idx in build_batches(circuit, assignments):
         # chunks of one batch keep contiguous members (similar frequencies) together
-        for chunk in split(list(idx), (workers or 2) if scheduler != "serial" else 1):
+        for chunk in split(list(idx), (workers or default_workers()) if scheduler != "serial" else 1):
             sub = bc.subset([idx.index(k) for k in chunk])  # pickles without caches
             jobs.append((sub, [descr[k] for k in chunk], opt))
             where.append(chunk)
@@ -201,7 +201,7 @@ def frequency_response(circuit, freqs, outputs=None, input=None, step=0.1, ampli
     res = FreqResult(circuit, paths, assignments, descr, by_member, outputs, inp_path)
     settings = dict(input=inp_path, outputs=outputs, frequencies=[float(f) for f in np.atleast_1d(freqs)],
                     grid={p: [str(v) for v in vals] for p, vals in grid}, step=step, amplitude=amplitude,
-                    settle_tol=settle_tol, n_periods=n_periods, block_periods=block_periods,
+                    settle_tol=settle_tol, n_periods=n_periods, block_periods=opt["block_periods"],
                     max_periods=max_periods, rtol=rtol, atol=rtol, samples_per_period=SAMPLES)
     stamp(res, "freq", circuit, settings, started)
     return finish_batch(res, stopped)
@@ -318,16 +318,6 @@ def register_cli(sub, common):
     sp.set_defaults(func=cmd_freq)
 
 
-def parse_freqs(text, per_decade):
-    import re
-    t = text.replace("Hz", "").strip()
-    if ":" in t:
-        a, b = (float(v) for v in t.split(":")[:2])
-        n = int(round(np.log10(b / a) * per_decade)) + 1
-        return np.logspace(np.log10(a), np.log10(b), max(n, 2))
-    return np.array([float(v) for v in re.split(r"[,\s]+", t) if v])
-
-
 def cmd_freq(args):
     from ..cli import _load, save_outputs
 
@@ -335,6 +325,7 @@ def cmd_freq(args):
     from ..outputs import default_outputs
 
     outputs = args.output or default_outputs(c, "freq")
+    from .ac import parse_freqs
     freqs = parse_freqs(args.freq, args.per_decade)
     grid = [parse_grid_arg(g) for g in (args.grid or [])]
     res = frequency_response(c, freqs, outputs, args.input, args.step / 100, args.amplitude / 100, grid,

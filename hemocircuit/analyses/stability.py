@@ -299,7 +299,9 @@ def stability_sweep(circuit, param=None, values=None, t=0.0, locate=True, xtol=N
         points += [None] * (len(vals) - len(points))
     events = []
     if locate and len(vals) > 1 and stopped is None:
-        step = float(np.min(np.abs(np.diff(vals)))) if len(vals) > 1 else 1.0
+        gaps = np.abs(np.diff(vals))
+        gaps = gaps[gaps > 0]  # a repeated value is no interval to bisect
+        step = float(np.min(gaps)) if gaps.size else 1.0
         events = _locate_events(circuit, param, vals, points, t, xtol or 1e-6 * step, 1e-3 * step)
     res = StabilityResult(param, unit, vals, points, events, failed, list(circuit.state_names))
     stamp(res, "stability", circuit, {"param": param, "values": values if isinstance(values, str) else None,
