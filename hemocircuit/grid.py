@@ -22,6 +22,7 @@ import time
 import numpy as np
 
 from .errors import HemocircuitError
+from .results import label_value
 
 
 def parse(circuit, grid_args):
@@ -184,7 +185,7 @@ def _point(r, item):
     """A member's failed entry [index values..., reason] as 'at PARAM=V: reason'."""
     *at, why = item
     names = r.index if len(r.index) == len(at) else [""] * len(at)
-    return f"at {', '.join(f'{n}={_fmt(v)}' if n else _fmt(v) for n, v in zip(names, at))}: {why}"
+    return f"at {', '.join(f'{n}={label_value(v)}' if n else label_value(v) for n, v in zip(names, at))}: {why}"
 
 
 def members(res, columns=None):
@@ -200,7 +201,7 @@ def members(res, columns=None):
     out = []
     for key in keys:
         mask = np.all([np.array([x == v for x in res[p].tolist()]) for p, v in zip(columns, key)], axis=0)
-        lab = ", ".join(f"{p}={_fmt(v)} {_unit(res.units.get(p, ''))}".rstrip() for p, v in zip(columns, key))
+        lab = ", ".join(f"{p}={label_value(v)} {_unit(res.units.get(p, ''))}".rstrip() for p, v in zip(columns, key))
         out.append((lab, mask))
     return out
 
@@ -209,5 +210,3 @@ def _unit(u):
     return "" if u in ("1", "dimensionless") else u
 
 
-def _fmt(v):
-    return f"{v:.4g}" if isinstance(v, (float, np.floating)) else str(v)

@@ -101,6 +101,11 @@ def _cell(v):
     return "" if v is None else str(v)
 
 
+def label_value(v) -> str:
+    """A grid or sweep value as written in plot legends and messages (4 significant figures)."""
+    return f"{v:.4g}" if isinstance(v, (float, np.floating)) else str(v)
+
+
 def _fmt(v, width=0):
     if isinstance(v, (bool, np.bool_)):
         s = "yes" if v else "no"

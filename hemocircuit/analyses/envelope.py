@@ -25,7 +25,7 @@ from ..execution import default_workers, finish_batch, member_results, run_chunk
 from ..derived import derived_units
 from ..io import pyplot, save_figure
 from ..provenance import clock, stamp
-from ..results import Result
+from ..results import Result, label_value
 
 
 def _law_states(c):
@@ -222,17 +222,13 @@ def plot_phase_plane(path, res, x_col, y_col):
     fig, ax = plt.subplots(figsize=(5.5, 4.5))
     for r, s in zip(res.rows(), res.series):
         if s and x_col in s and y_col in s:
-            lab = ", ".join(f"{k}={_fmt(r[k])}" for k in res.index)
+            lab = ", ".join(f"{k}={label_value(r[k])}" for k in res.index)
             ax.plot(s[x_col], s[y_col], lw=0.7, label=lab)
     ax.set_xlabel(x_col)
     ax.set_ylabel(y_col)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=6)
     save_figure(fig, path)
-
-
-def _fmt(v):
-    return f"{v:.4g}" if isinstance(v, float) else str(v)
 
 
 def register_cli(sub, common):

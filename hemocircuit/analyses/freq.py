@@ -30,7 +30,7 @@ from ..derived import derived_units
 from ..io import pyplot, save_figure
 from ..progress import advance
 from ..provenance import clock, stamp
-from ..results import Result
+from ..results import Result, label_value
 
 SAMPLES = 64  # per period
 
@@ -281,7 +281,7 @@ def plot_result(res, path, select=None, title=None):
             f = res["frequency"][sel]
             order = np.argsort(f)
             lab = o.split("/")[0] + ("" if not grid else " " + ", ".join(
-                f"{g}={_fmt_value(v)} {res.units.get(g, '')}".rstrip() for g, v in zip(grid, key)))
+                f"{g}={label_value(v)} {res.units.get(g, '')}".rstrip() for g, v in zip(grid, key)))
             line, = a1.semilogx(f[order], res[f"rel_gain({o})"][sel][order], styles[j % 4], marker=".", label=lab)
             a2.semilogx(f[order], res[f"phase({o})"][sel][order], styles[j % 4], marker=".", color=line.get_color(),
                         label=lab)
@@ -294,10 +294,6 @@ def plot_result(res, path, select=None, title=None):
     a1.set_title(title or res._title())
     save_figure(fig, path)
     return str(path)
-
-
-def _fmt_value(v):
-    return f"{v:.4g}" if isinstance(v, (float, np.floating)) else str(v)
 
 
 def register_cli(sub, common):
