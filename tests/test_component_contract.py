@@ -246,9 +246,12 @@ def test_sine_drive_breakpoints_follow_the_declared_parameters(name, netlist_sam
 
 
 # --------------------------------------------------------------- kernels -------------------
-def _close(got, ref, what):
+def _close(got, ref, what, scale_ref=None):
+    """got == ref to rounding: rtol 1e-10, atol 1e-12 x the largest |value| of ``scale_ref``
+    (default ``ref``)."""
     ref = np.asarray(ref, dtype=float)
-    scale = np.max(np.abs(ref[np.isfinite(ref)]), initial=0.0)
+    sref = ref if scale_ref is None else np.asarray(scale_ref, dtype=float)
+    scale = np.max(np.abs(sref[np.isfinite(sref)]), initial=0.0)
     np.testing.assert_allclose(got, ref, rtol=1e-10, atol=1e-12 * scale + 1e-300, equal_nan=True, err_msg=what)
 
 
@@ -269,6 +272,10 @@ def test_kernel_matches_the_numpy_hooks(name, netlist_samples):
             A_np = np.broadcast_to(A_np, (1, n, L, L))[0]
             b_np = np.broadcast_to(b_np, (1, n, L))[0]
             dx_np = np.broadcast_to(comp.derivatives(p, x, u, t, None), (1, n, S))[0]
+            # At an equilibrium (the netlists' samples) a rate is the near-cancelling difference of
+            # much larger terms, and its rounding is relative to those terms: the rates 0.1 % away
+            # from that state give their size.
+            dx_kick = np.broadcast_to(comp.derivatives(p, x * 1.001, u, t, None), (1, n, S))[0]
             ob_np = comp.observe(p, x, None, t, None)
             for e in range(n):
                 xe, ue = np.ascontiguousarray(x[0, e], dtype=float), np.ascontiguousarray(u[0, e], dtype=float)
@@ -281,7 +288,10 @@ def test_kernel_matches_the_numpy_hooks(name, netlist_samples):
                 where = f"{name} {comp.opts} element {e} t={t}"
                 _close(A, A_np[e], f"stamp A, {where}")
                 _close(b, b_np[e], f"stamp b, {where}")
-                _close(dx, dx_np[e], f"derivatives, {where}")
+                _close(dx, dx_np[e], f"derivatives, {where}", np.concatenate([dx_np[e], dx_kick[e]]))
+                xk = np.ascontiguousarray(xe * 1.001)
+                k.derivs(pmat[e], xk, ue, t, iopt, dx)
+                _close(dx, dx_kick[e], f"derivatives 0.1 % off the sampled states, {where}")
                 for j, o in enumerate(k.observables):
                     _close(out[j], np.broadcast_to(ob_np[o], (1, n))[0, e], f"observable {o}, {where}")
 
