@@ -20,7 +20,8 @@ transformed form u_i = sum_j Gamma_ij k_j of RODAS-type codes back to the classi
 RODAS-type methods assume a fairly exact Jacobian: the engine refreshes it every step for them
 (``jac_reuse`` = 1; reusing it over 2 or 3 steps doubled the step count of the vasomotion run).
 
-Packed array (read by the engine): [ns, gamma, q, jac_reuse, event_restart, soft_kinks, autonomous, 0,
+Packed array (read by the engine): [ns, gamma, q, jac_reuse, event_restart, soft_kinks, autonomous,
+local_jacobian,
 A (ns*ns, row major), G (ns*ns), b (ns), e (ns), c (ns), d (ns), reuse (ns)], where q is the
 order of the error estimate (step-size exponent 1/q), reuse[s] = 1 when stage s evaluates f at
 the same point as stage s-1 (ROS4-type methods; the engine then skips the evaluation).
@@ -141,9 +142,13 @@ def classical(name):
     return METHODS[name]()
 
 
-def packed(name=DEFAULT, jac_reuse=None, event_restart=1, soft_kinks=1, autonomous=0) -> np.ndarray:
+def packed(name=DEFAULT, jac_reuse=None, event_restart=1, soft_kinks=1, autonomous=0,
+           local_jacobian=1) -> np.ndarray:
     """The float64 array the engine reads (see the module docstring).  ``autonomous``: the
-    circuit has no waveform and no time-dependent element, so df/dt = 0 is not evaluated."""
+    circuit has no waveform and no time-dependent element, so df/dt = 0 is not evaluated.
+    ``local_jacobian``: the state Jacobian from element-local differences composed through
+    the nodal solve (engine_template.local_jacobian_into) where it applies, instead of one
+    whole right-hand side per state."""
     gamma, A, G, b, e, q = classical(name)
     ns = len(b)
     c = A.sum(axis=1)
@@ -153,5 +158,5 @@ def packed(name=DEFAULT, jac_reuse=None, event_restart=1, soft_kinks=1, autonomo
         if np.allclose(A[s], A[s - 1], rtol=0, atol=1e-14):
             reuse[s] = 1.0
     jr = JAC_REUSE[name] if jac_reuse is None else int(jac_reuse)
-    head = [ns, gamma, q, jr, event_restart, soft_kinks, autonomous, 0]
+    head = [ns, gamma, q, jr, event_restart, soft_kinks, autonomous, local_jacobian]
     return np.concatenate([head, A.ravel(), G.ravel(), b, e, c, d, reuse]).astype(np.float64)
