@@ -332,7 +332,7 @@ def rhs_batch(t, X, P, lay):
 
 
 # --- Rosenbrock(-W) integrator.  The tableau is a run-time argument (``tab``, packed by
-# hemocircuit.kernels.tableaus: ROS34PW2 by default, ROS34PW3, RODAS4, RODAS5P), so choosing a
+# hemocircuit.kernels.tableaus: RODAS5P by default, ROS34PW2, ROS34PW3, RODAS4), so choosing a
 # method never recompiles.
 FD_REL = 1e-7  # finite-difference step, relative to max(|x|, the state's scale): hemocircuit.derivatives' rule
 
