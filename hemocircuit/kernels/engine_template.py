@@ -25,7 +25,8 @@
 
 # _nrt=False on the functions that never allocate (and return no array): no reference counting
 # of the arrays they touch.  With it on, NRT's atomic increments/decrements of the layout's and
-# work tuple's arrays took 43 % of the vasomotion run's samples (perf); rhs 4.7 -> 1.8 us.
+# work tuple's arrays took 43 % of the vasomotion run's samples (perf); without it the run
+# takes 3.1x less CPU (docs/performance.md).
 # (Functions inlined with inline="always" take their caller's setting.)
 NEWTON_TOL = 1e-12
 NEWTON_MAXIT = 50
