@@ -17,7 +17,7 @@ import numpy as np
 
 from hemocircuit.component import Component, Observable, Option, Param, State, Storage, pressure_branch
 
-_jit = numba.njit(cache=True, nogil=True, error_model="numpy")
+_jit = numba.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 
 
 class _Store(Component):

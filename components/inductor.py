@@ -9,7 +9,7 @@ import numpy as np
 
 from hemocircuit.component import Component, Observable, Param, State, flow_branch
 
-_jit = numba.njit(cache=True, nogil=True, error_model="numpy")
+_jit = numba.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 
 
 # --- compiled path (hemocircuit.kernels contract) -------------------------------------------

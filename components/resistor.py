@@ -5,7 +5,7 @@ import numba
 
 from hemocircuit.component import Component, Param, two_terminal_conductance
 
-_jit = numba.njit(cache=True, nogil=True, error_model="numpy")
+_jit = numba.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 
 
 # --- compiled path (hemocircuit.kernels contract; p = [R], no states, no options) --------------

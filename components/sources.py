@@ -14,7 +14,7 @@ import numpy as np
 from hemocircuit.component import Component, Drive, Param, flow_branch, pressure_branch
 from hemocircuit.netlist import GROUND
 
-_jit = numba.njit(cache=True, nogil=True, error_model="numpy")
+_jit = numba.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 
 
 def _sine_term(p, t):

@@ -56,7 +56,7 @@ _R_FACTOR = M3_PER_ML / PA_PER_MMHG   # Pa*s/m^3 -> mmHg*s/mL (element._OBS["R"]
 _TWO_PI = 2 * np.pi
 _INF = math.inf
 
-_jit = numba.njit(cache=True, nogil=True, error_model="numpy")
+_jit = numba.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 
 
 # --- shared pieces (inlined by LLVM) ------------------------------------------------------

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-jit = numba.njit(cache=True, nogil=True, error_model="numpy")
+jit = numba.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 
 #: units of the blocks' parameters (the circuit's units: mmHg, mL, s)
 R_UNIT = "mmHg*s/mL"

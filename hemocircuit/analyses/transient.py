@@ -78,7 +78,7 @@ def simulate(circuit, t_end, dt=None, t0=0.0, x0=None, protocol=None, method="BD
     protocol: a Protocol (or path to a protocol YAML) with initial settings and timed events.
     ic: {ID.STATE: value} states to override in that start (x0 or the operating point), e.g.
         {'Cv.V': '20 mL'}; units allowed, plain numbers are in the state's unit (hemocircuit.ic).
-    engine: 'compiled' (numba Rosenbrock-W ROS34PW2, hemocircuit.kernels), 'scipy'
+    engine: 'compiled' (numba Rosenbrock RODAS5P, hemocircuit.kernels), 'scipy'
         (solve_ivp with ``method``), or 'auto': compiled when every component type has a
         kernel and ``method`` is left at its default, scipy otherwise.
     progress: a bar of the simulated time on stderr (default: :mod:`hemocircuit.progress`'s

@@ -29,6 +29,9 @@ from ``Component.kernel_options()`` (the structural options as integers, so one 
 serves every option combination of the type).  Shapes follow the Python-side component (L =
 len(local_nodes) + len(branches), S = len(states)); a kernel reads the options to know them.
 
+The built-in kernels are compiled with numba's ``_nrt=False`` (no reference counting of the
+arrays passed: they never allocate), as are the engine's functions that call them.
+
 A component without a kernel (``kernel()`` returns None) runs on the vectorised numpy path;
 circuits that contain one fall back to it as a whole.  Both paths must agree: the contract
 test compares them on every registered component type.

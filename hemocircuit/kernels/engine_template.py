@@ -23,6 +23,11 @@
 #   st (E,)          1 if its whole stamp is constant ("static": stamped once, into A0 and b0)
 # Units: as the numpy path -- pressures mmHg, flows mL/s, time s, states in declared units.
 
+# _nrt=False on the functions that never allocate (and return no array): no reference counting
+# of the arrays they touch.  With it on, NRT's atomic increments/decrements of the layout's and
+# work tuple's arrays took 43 % of the vasomotion run's samples (perf); without it the run
+# takes 3.1x less CPU (docs/performance.md).
+# (Functions inlined with inline="always" take their caller's setting.)
 NEWTON_TOL = 1e-12
 NEWTON_MAXIT = 50
 
@@ -105,7 +110,7 @@ def stamp_element(e, t, x, Pe, et, L, ep, ex, eu, ui, eo, io, u, Al, bl, ul, pl,
     elem_stamp(et[e], pl, xl, ul, t, il, Al, bl)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, _nrt=False)
 def prepare_static(t, x, P, lay, work):
     """A0 = the constant matrix stamps, b0 = the static elements' right-hand sides, for the
     parameters P (call again whenever P changes)."""
@@ -127,7 +132,7 @@ def prepare_static(t, x, P, lay, work):
     condense(lay, work)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, _nrt=False)
 def condense(lay, work):
     """Static condensation of the nodal system: the unknowns V that state-dependent matrix
     stamps touch are kept, the constant rest C is eliminated once per parameter set.  With
@@ -281,7 +286,7 @@ def solve_nodes(t, x, Pe, lay, work):
     return False
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, _nrt=False)
 def rhs_into(t, x, P, lay, work, dx):
     """dx/dt for states x at time t into dx.  Returns False on a singular nodal system
     (dx is then NaN)."""
@@ -328,41 +333,205 @@ def rhs_batch(t, X, P, lay):
 
 
 # --- Rosenbrock(-W) integrator.  The tableau is a run-time argument (``tab``, packed by
-# hemocircuit.kernels.tableaus: ROS34PW2 by default, ROS34PW3, RODAS4, RODAS5P), so choosing a
+# hemocircuit.kernels.tableaus: RODAS5P by default, ROS34PW2, ROS34PW3, RODAS4), so choosing a
 # method never recompiles.
 FD_REL = 1e-7  # finite-difference step, relative to max(|x|, the state's scale): hemocircuit.derivatives' rule
+
+
+@njit(cache=True, nogil=True)
+def make_jac_work(lay):
+    """Scratch arrays of local_jacobian_into: 0 base parameters Pe, 1 the full nodal matrix
+    (its LU), 2 its pivots, 3 base unknowns u, 4 base local residuals (at the eu offsets),
+    5 dD/du (nx, n+1), 6 one column dR/dx_j, 7 base derivatives, 8 stored local matrices
+    (at the eu offsets, Lm columns), 9 stored local right-hand sides, 10 1 if the element has
+    an expression parameter."""
+    (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st) = lay
+    Lm = 1
+    for e in range(et.shape[0]):
+        Lm = max(Lm, L[e])
+    nu = max(ui.shape[0], 1)
+    return (np.zeros(max(ep[-1], 1)), np.zeros((n + 1, n + 1)), np.zeros(n + 1, dtype=np.int64), np.zeros(n + 1),
+            np.zeros(nu), np.zeros((max(nx, 1), n + 1)), np.zeros(n + 1), np.zeros(max(nx, 1)),
+            np.zeros((nu, Lm)), np.zeros(nu), np.zeros(et.shape[0], dtype=np.int64))
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def local_jacobian_into(t, x, P, lay, work, jw, scales, J, xt):
+    """State Jacobian J (nx, nx) at (t, x) from element-local differences composed through the
+    nodal solve (as svZeroDSolver composes its blocks' derivatives), without a whole
+    right-hand side per column.  With f = D(x, u), R(x, u) = A(x) u - b(x) = 0 the nodal
+    system (linear in u):  du/dx = -A^-1 dR/dx  and  J = dD/dx + dD/du du/dx.  Each element
+    gives its columns of dR/dx, dD/dx (its own states; the elements with expression parameters
+    also those of the states their expressions read) and dD/du (its local unknowns) by forward
+    differences of its own stamp and derivs, same step rule as jacobian_into (FD_REL; FD_REL
+    max(|u|, 1) for an unknown in mmHg or mL/s).
+    Returns 0, or -1 when it does not apply (an element nonlinear in the pressures, a singular
+    nodal matrix): the caller then differences whole right-hand sides."""
+    (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st) = lay
+    if nonlin != 0:
+        return -1
+    Pb, A, piv, ub, rb, M, col, Db, Ab, bb, hasx = jw
+    u, Al, bl, ul, pl, xl, il, dl, A0, b0 = (work[4], work[5], work[6], work[7], work[9], work[10], work[11],
+                                             work[12], work[14], work[15])
+    E = et.shape[0]
+    Pe = effective_params(t, x, P, lay, work)
+    for i in range(Pb.shape[0]):
+        Pb[i] = Pe[i]
+    for e in range(E):
+        hasx[e] = 0
+        for k in range(xs.shape[0]):
+            if ep[e] <= xs[k] < ep[e + 1]:
+                hasx[e] = 1
+    # the full nodal system at x (as solve_nodes, without condensation); local stamps kept
+    for i in range(n + 1):
+        ub[i] = b0[i]
+        for k in range(n + 1):
+            A[i, k] = A0[i, k]
+    for e in range(E):
+        if st[e] == 1:
+            continue
+        stamp_element(e, t, x, Pb, et, L, ep, ex, eu, ui, eo, io, u, Al, bl, ul, pl, xl, il)
+        for i in range(L[e]):
+            r = ui[eu[e] + i]
+            ub[r] += bl[i]
+            bb[eu[e] + i] = bl[i]
+            for k in range(L[e]):
+                Ab[eu[e] + i, k] = Al[i, k]
+                if cm[e] == 0:
+                    A[r, ui[eu[e] + k]] += Al[i, k]
+    if not lu_factor(A, piv, n):
+        return -1
+    lu_apply(A, piv, ub, n)
+    ub[n] = 0.0
+    # base residuals, derivatives and dD/du
+    for i in range(M.shape[0]):
+        for k in range(n + 1):
+            M[i, k] = 0.0
+    for e in range(E):
+        if st[e] == 1:
+            continue
+        for i in range(L[e]):
+            acc = -bb[eu[e] + i]
+            for k in range(L[e]):
+                acc += Ab[eu[e] + i, k] * ub[ui[eu[e] + k]]
+            rb[eu[e] + i] = acc
+        if S[e] == 0:
+            continue
+        for i in range(L[e]):
+            ul[i] = ub[ui[eu[e] + i]]
+        load_element(e, x, Pb, ep, ex, eo, io, pl, xl, il)
+        elem_derivs(et[e], pl, xl, ul, t, il, dl)
+        for i in range(S[e]):
+            Db[ex[e] + i] = dl[i]
+        for k in range(L[e]):
+            g = ui[eu[e] + k]
+            if g >= n:
+                continue
+            hk = FD_REL * max(abs(ub[g]), 1.0)
+            ul[k] = ub[g] + hk
+            hk = ul[k] - ub[g]
+            elem_derivs(et[e], pl, xl, ul, t, il, dl)
+            for i in range(S[e]):
+                M[ex[e] + i, g] += (dl[i] - Db[ex[e] + i]) / hk
+            ul[k] = ub[g]
+    for i in range(nx):
+        xt[i] = x[i]
+    for e0 in range(E):
+        observed = False
+        if xs.shape[0] > 0:
+            for k in range(oe.shape[0]):
+                if oe[k] == e0:
+                    observed = True
+        for j in range(ex[e0], ex[e0 + 1]):
+            hj = FD_REL * max(abs(x[j]), scales[j])
+            xt[j] = x[j] + hj
+            hj = xt[j] - x[j]
+            Pt = Pb
+            if observed:  # expressions read e0's observables: parameters at the moved state
+                Pt = effective_params(t, xt, P, lay, work)
+            for i in range(n + 1):
+                col[i] = 0.0
+            for i in range(nx):
+                J[i, j] = 0.0
+            for e in range(E):
+                if e != e0 and not (observed and hasx[e] == 1):
+                    continue
+                stamp_element(e, t, xt, Pt, et, L, ep, ex, eu, ui, eo, io, u, Al, bl, ul, pl, xl, il)
+                for i in range(L[e]):
+                    r = ui[eu[e] + i]
+                    if r < n:
+                        acc = -bl[i]
+                        for k in range(L[e]):
+                            acc += Al[i, k] * ub[ui[eu[e] + k]]
+                        col[r] += (acc - rb[eu[e] + i]) / hj
+                if S[e] > 0:
+                    for i in range(L[e]):
+                        ul[i] = ub[ui[eu[e] + i]]
+                    load_element(e, xt, Pt, ep, ex, eo, io, pl, xl, il)
+                    elem_derivs(et[e], pl, xl, ul, t, il, dl)
+                    for i in range(S[e]):
+                        J[ex[e] + i, j] += (dl[i] - Db[ex[e] + i]) / hj
+            lu_apply(A, piv, col, n)  # -du/dx_j
+            for i in range(nx):
+                acc = J[i, j]
+                for g in range(n):
+                    acc -= M[i, g] * col[g]
+                J[i, j] = acc
+            xt[j] = x[j]
+    return 0
 
 
 # inlined (numba IR) into integrate, its one caller: numba links a callee's machine code into
 # every caller and LLVM optimises it again there, so each call level costs compile time
 @njit(cache=True, nogil=True, inline="always")
-def jacobian_into(t, x, f0, P, lay, work, scales, J, ft, xt, ftmp, autonomous):
-    """Forward-difference Jacobian J (nx, nx) and df/dt ft (nx,) at (t, x) with f0 = f(t, x)
-    (ft = 0 without an evaluation when the circuit is autonomous).
-    Returns the number of evaluations, or -1 if one failed (singular nodal system)."""
+def jacobian_into(t, x, f0, P, lay, work, jw, scales, J, ft, xt, ftmp, autonomous, local):
+    """Jacobian J (nx, nx) and df/dt ft (nx,) at (t, x) with f0 = f(t, x): element-local
+    (local_jacobian_into) when ``local`` and it applies, otherwise forward differences of
+    whole right-hand sides; ft by a forward difference in t (ft = 0 without an evaluation
+    when the circuit is autonomous).
+    Returns the number of right-hand-side evaluations, or -1 if one failed (singular nodal
+    system)."""
     nx = x.shape[0]
-    for i in range(nx):
-        xt[i] = x[i]
-    for j in range(nx):
-        hj = FD_REL * max(abs(x[j]), scales[j])
-        xt[j] = x[j] + hj
-        hj = xt[j] - x[j]
-        if not rhs_into(t, xt, P, lay, work, ftmp):
-            return -1
+    nev = 0
+    if not local or local_jacobian_into(t, x, P, lay, work, jw, scales, J, xt) < 0:
         for i in range(nx):
-            J[i, j] = (ftmp[i] - f0[i]) / hj
-        xt[j] = x[j]
+            xt[i] = x[i]
+        for j in range(nx):
+            hj = FD_REL * max(abs(x[j]), scales[j])
+            xt[j] = x[j] + hj
+            hj = xt[j] - x[j]
+            if not rhs_into(t, xt, P, lay, work, ftmp):
+                return -1
+            for i in range(nx):
+                J[i, j] = (ftmp[i] - f0[i]) / hj
+            xt[j] = x[j]
+        nev = nx
     if autonomous:
-        return nx
+        return nev
     ht = FD_REL * max(abs(t), 1.0)
     if not rhs_into(t + ht, x, P, lay, work, ftmp):
         return -1
     for i in range(nx):
         ft[i] = (ftmp[i] - f0[i]) / ht
-    return nx + 1
+    return nev + 1
 
 
 @njit(cache=True, nogil=True)
+def jacobian(t, x, P, lay, scales, local):
+    """State Jacobian (nx, nx) at (t, x) (allocating; for tests and single calls): element-local
+    if ``local`` (and it applies), else whole right-hand sides differenced."""
+    nx = x.shape[0]
+    work = make_work(lay)
+    jw = make_jac_work(lay)
+    prepare_static(t, x, P, lay, work)
+    f0 = np.empty(nx)
+    rhs_into(t, x, P, lay, work, f0)
+    J = np.zeros((nx, nx))
+    jacobian_into(t, x, f0, P, lay, work, jw, scales, J, np.zeros(nx), np.empty(nx), np.empty(nx), True, local)
+    return J
+
+
+@njit(cache=True, nogil=True, _nrt=False)
 def lu_factor(W, piv, m):
     """In-place LU with partial pivoting of the leading m x m block of W; False if singular.
     (The nodal system uses it with m = n, leaving out the ground slot; the integrator's W
@@ -370,7 +539,7 @@ def lu_factor(W, piv, m):
     return lu_factor_at(W, piv, m) < 0
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, _nrt=False)
 def lu_factor_at(W, piv, m):
     """lu_factor, returning -1 on success or the column where no nonzero pivot was left."""
     for c in range(m):
@@ -398,7 +567,7 @@ def lu_factor_at(W, piv, m):
     return -1
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, _nrt=False)
 def lu_apply(W, piv, v, m):
     """Solve with the factors of lu_factor (size m), in place on v[:m]."""
     for c in range(m):
@@ -419,7 +588,7 @@ def lu_apply(W, piv, v, m):
         v[i] = s / W[i, i]
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, _nrt=False)
 def hermite(x0, f0, x1, f1, h, s, out):
     a = (1 + 2 * s) * (1 - s) ** 2
     b = s * (1 - s) ** 2 * h
@@ -429,7 +598,7 @@ def hermite(x0, f0, x1, f1, h, s, out):
         out[i] = a * x0[i] + b * f0[i] + c * x1[i] + d * f1[i]
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, _nrt=False)
 def hermite_root(y0, d0, y1, d1):
     """First fraction s in [0, 1] where the cubic (values y0 > 0 >= y1, scaled slopes d0, d1)
     crosses zero (bisection, 50 halvings)."""
@@ -469,6 +638,7 @@ def integrate(t_out, x0, P, lay, scales, lim_i, lim_b, lim_r, breaks, rtol, atol
     ev_restart = tab[4] != 0.0
     soft_kinks = tab[5] != 0.0
     autonomous = tab[6] != 0.0  # no waveform or time-dependent element: df/dt = 0
+    local_jac = tab[7] != 0.0  # element-local Jacobian (local_jacobian_into) where it applies
     oA = 8  # offsets of A, G (ns x ns, row major), b, e, c, d, reuse (ns) in tab
     oG = oA + ns * ns
     oB = oG + ns * ns
@@ -477,6 +647,7 @@ def integrate(t_out, x0, P, lay, scales, lim_i, lim_b, lim_r, breaks, rtol, atol
     oD = oC + ns
     oR = oD + ns
     work = make_work(lay)
+    jw = make_jac_work(lay)
     x = x0.copy()
     f = np.empty(nx)
     fn = np.empty(nx)
@@ -521,7 +692,7 @@ def integrate(t_out, x0, P, lay, scales, lim_i, lim_b, lim_r, breaks, rtol, atol
         if ib < breaks.shape[0] and breaks[ib] < t_end:
             tb = breaks[ib]
         if age >= JAC_REUSE:
-            nj = jacobian_into(t, x, f, P, lay, work, scales, J, ft, xt, ftmp, autonomous)
+            nj = jacobian_into(t, x, f, P, lay, work, jw, scales, J, ft, xt, ftmp, autonomous, local_jac)
             if nj < 0:
                 status = -3
                 break

@@ -49,6 +49,13 @@ class CompiledSystem:
             return self.mod.rhs(float(t), x, P[0], self.lay)
         return self.mod.rhs_batch(float(t), np.ascontiguousarray(x), P, self.lay)
 
+    def jacobian(self, t, x, P, local=True):
+        """State Jacobian d(dx/dt)/dx (nx, nx) at (t, x) for one parameter row P (slots,):
+        element-local differences composed through the nodal solve (``local``, where they
+        apply) or one whole right-hand side per state -- the integrator's two ways."""
+        return self.mod.jacobian(float(t), np.asarray(x, dtype=float), np.asarray(P, dtype=float), self.lay,
+                                 self.scales, bool(local))
+
     def integrate(self, t_out, x0, P, rtol=1e-6, atol=None, breaks=(), h0=1e-3, hmax=np.inf,
                   max_steps=10_000_000, method=None, **tab_options):
         """States on the grid t_out (T,) from x0 at t_out[0] for one parameter row P (slots,).

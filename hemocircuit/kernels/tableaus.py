@@ -20,7 +20,8 @@ transformed form u_i = sum_j Gamma_ij k_j of RODAS-type codes back to the classi
 RODAS-type methods assume a fairly exact Jacobian: the engine refreshes it every step for them
 (``jac_reuse`` = 1; reusing it over 2 or 3 steps doubled the step count of the vasomotion run).
 
-Packed array (read by the engine): [ns, gamma, q, jac_reuse, event_restart, soft_kinks, autonomous, 0,
+Packed array (read by the engine): [ns, gamma, q, jac_reuse, event_restart, soft_kinks, autonomous,
+local_jacobian,
 A (ns*ns, row major), G (ns*ns), b (ns), e (ns), c (ns), d (ns), reuse (ns)], where q is the
 order of the error estimate (step-size exponent 1/q), reuse[s] = 1 when stage s evaluates f at
 the same point as stage s-1 (ROS4-type methods; the engine then skips the evaluation).
@@ -121,17 +122,16 @@ METHODS = {"ros34pw2": _ros34pw2, "ros34pw3": _ros34pw3, "rodas4": _rodas4, "rod
 #: accepted steps per Jacobian: W-methods stay consistent with an old one; RODAS-type need a
 #: fresh one more often (measured on the vasomotion run, docs/performance.md)
 JAC_REUSE = {"ros34pw2": 6, "ros34pw3": 6, "rodas4": 1, "rodas5p": 1}
-#: the engine's method at tight tolerances: RODAS5P (order 5, fresh Jacobian) takes the least
-#: CPU at rtol <= 1e-6; at rtol >= 1e-5 ROS34PW2 (order 3, Jacobian reused) is ~12 % cheaper
-#: (vasomotion run, docs/performance.md)
+#: the engine's method at every tolerance: RODAS5P (order 5, fresh element-local Jacobian each
+#: step).  With the element-local Jacobian it costs the same CPU as ROS34PW2 (Jacobian reused
+#: over 6 steps) at rtol 1e-5 and is 55x closer to the reference cycle (1.3e-5 against 7.1e-4);
+#: it is the cheapest at rtol <= 1e-6 (vasomotion run, docs/performance.md)
 DEFAULT = "rodas5p"
-LOOSE = "ros34pw2"
-LOOSE_RTOL = 1e-5
 
 
 def default_method(rtol):
-    """The method used when none is named: by tolerance (see DEFAULT, LOOSE)."""
-    return LOOSE if rtol >= LOOSE_RTOL else DEFAULT
+    """The method used when none is named (see DEFAULT; the same at every tolerance)."""
+    return DEFAULT
 
 
 def classical(name):
@@ -141,9 +141,13 @@ def classical(name):
     return METHODS[name]()
 
 
-def packed(name=DEFAULT, jac_reuse=None, event_restart=1, soft_kinks=1, autonomous=0) -> np.ndarray:
+def packed(name=DEFAULT, jac_reuse=None, event_restart=1, soft_kinks=1, autonomous=0,
+           local_jacobian=1) -> np.ndarray:
     """The float64 array the engine reads (see the module docstring).  ``autonomous``: the
-    circuit has no waveform and no time-dependent element, so df/dt = 0 is not evaluated."""
+    circuit has no waveform and no time-dependent element, so df/dt = 0 is not evaluated.
+    ``local_jacobian``: the state Jacobian from element-local differences composed through
+    the nodal solve (engine_template.local_jacobian_into) where it applies, instead of one
+    whole right-hand side per state."""
     gamma, A, G, b, e, q = classical(name)
     ns = len(b)
     c = A.sum(axis=1)
@@ -153,5 +157,5 @@ def packed(name=DEFAULT, jac_reuse=None, event_restart=1, soft_kinks=1, autonomo
         if np.allclose(A[s], A[s - 1], rtol=0, atol=1e-14):
             reuse[s] = 1.0
     jr = JAC_REUSE[name] if jac_reuse is None else int(jac_reuse)
-    head = [ns, gamma, q, jr, event_restart, soft_kinks, autonomous, 0]
+    head = [ns, gamma, q, jr, event_restart, soft_kinks, autonomous, local_jacobian]
     return np.concatenate([head, A.ravel(), G.ravel(), b, e, c, d, reuse]).astype(np.float64)
