@@ -30,10 +30,16 @@ def default_workers() -> int:
     return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))
 
 
-def split(items, n_chunks):
-    """Split a list into at most n_chunks contiguous, nearly equal chunks (order kept)."""
+def split(items, n_chunks, interleave=False):
+    """Split a list into at most n_chunks nearly equal chunks: contiguous (order kept), or with
+    ``interleave`` round-robin (chunk j takes items j, j + n, ...: neighbours, which tend to
+    cost alike, e.g. adjacent frequencies, go to different chunks and the chunks balance)."""
     n = len(items)
+    if n == 0:
+        return []
     n_chunks = max(1, min(n_chunks, n))
+    if interleave:
+        return [items[j::n_chunks] for j in range(n_chunks)]
     bounds = [round(k * n / n_chunks) for k in range(n_chunks + 1)]
     return [items[bounds[k]:bounds[k + 1]] for k in range(n_chunks) if bounds[k + 1] > bounds[k]]
 
