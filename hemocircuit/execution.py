@@ -45,7 +45,7 @@ def split(items, n_chunks, interleave=False):
 
 
 def run_chunks(fn, chunks, scheduler=None, workers=None, progress=None, desc="runs", sizes=None,
-               failures="raise"):
+               failures="raise", warm=None):
     """[fn(chunk) for chunk in chunks], in order, on the chosen executor.
 
     scheduler: None / 'processes' (local worker processes), 'serial' (this process), a Dask
@@ -55,6 +55,9 @@ def run_chunks(fn, chunks, scheduler=None, workers=None, progress=None, desc="ru
     :func:`hemocircuit.progress.advance`.
     failures: 'raise' (a chunk's exception propagates) or 'collect' (it becomes a
     :class:`ChunkFailed` in the list; the other chunks finish).
+    warm: a callable run in this process before local worker processes are forked, for what
+    every worker would otherwise do again at its start (e.g. a zero-length integration, which
+    loads the compiled integrator from the cache, ~0.4 s); forked workers inherit it.
     An interruption raises :class:`~hemocircuit.errors.Interrupted` with the finished chunks.
     """
     from functools import partial
@@ -73,6 +76,11 @@ def run_chunks(fn, chunks, scheduler=None, workers=None, progress=None, desc="ru
                 for i, c in enumerate(chunks):
                     done(i, _call(partial(_progress.call_in_chunk, fn, i), c, failures))
             elif scheduler in (None, "processes"):
+                if warm is not None and hasattr(os, "fork"):
+                    try:
+                        warm()
+                    except Exception:  # noqa: BLE001 - only a head start: a real fault shows in the chunks
+                        pass
                 _run_processes(fn, chunks, workers, done, failures, bar)
             else:
                 client = _dask_client(scheduler)

@@ -21,6 +21,8 @@ values (for the record; see the asserts for the accepted bands):
 """
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 
@@ -295,6 +297,34 @@ def test_failing_member_recorded_others_complete_in_one_chunk(artc):
     rows = frequency_response(artc, [1.0], [Q1, Q2], step=0.0, amplitude=0.05, rtol=1e-6,
                               grid=[("Pa.value", [80.0, BAD_PA])], scheduler="serial")
     _check_failure_rows(rows)
+
+
+_WARMED = []
+
+
+def _set_warm():
+    _WARMED.append(os.getpid())
+
+
+def _report_warm(chunk):
+    return [(v, list(_WARMED)) for v in chunk]
+
+
+def _fail_warm():
+    raise RuntimeError("warm-up failed")
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="workers inherit the warm-up only when forked")
+def test_run_chunks_warms_up_once_before_forking_the_workers():
+    """``warm`` runs once, in this process, before the workers fork: they inherit its effect
+    (here a list, for the compiled integrator its loaded code).  A failing warm-up is only a
+    lost head start: the chunks still run."""
+    _WARMED.clear()
+    out = run_chunks(_report_warm, [[1], [2], [3]], scheduler="processes", workers=2, warm=_set_warm)
+    assert [r for c in out for r in c] == [(1, [os.getpid()]), (2, [os.getpid()]), (3, [os.getpid()])]
+    _WARMED.clear()
+    assert run_chunks(_report_warm, [[1], [2]], scheduler="processes", workers=2, warm=_fail_warm) \
+        == [[(1, [])], [(2, [])]]
 
 
 def test_split_contiguous_or_interleaved():

@@ -14,6 +14,7 @@ mean and the second half of the window has at least half the peak-to-peak of the
 from __future__ import annotations
 
 import sys
+from functools import partial
 
 import numpy as np
 
@@ -41,7 +42,7 @@ def _run_chunk(job):
     the operating point}, options)."""
     bc, X0, steady, opt = job
     grid = np.arange(0.0, opt["t_end"] + 0.5 * opt["dt"], opt["dt"])
-    r = integrate(bc, X0, grid, rtol=opt["rtol"], atol=opt["rtol"])
+    r = integrate(bc, X0, **_per_member(bc.B, grid), rtol=opt["rtol"], atol=opt["rtol"])
     out = []
     for k in range(bc.B):
         try:
@@ -49,6 +50,13 @@ def _run_chunk(job):
         except HemocircuitError as exc:  # this member only
             out.append({"error": str(exc)})
     return out
+
+
+def _per_member(B, grid):
+    """integrate()'s t_out and h_max as arrays per member, (B, T) and (B,): the compiled integrator is
+    then called with the same argument types whatever the chunk's size (numba keeps one
+    specialisation per argument types, read-only flags included, each loaded at first use)."""
+    return {"t_out": np.repeat(np.asarray(grid, dtype=float)[None], B, axis=0), "h_max": np.full(B, np.inf)}
 
 
 def _summary(bc, k, r, grid, steady, opt):
@@ -135,7 +143,11 @@ def envelope(circuit, sweep, grid=None, outputs=None, t_end=1000.0, dt=0.1, wind
                 jobs.append((bc.subset(chunk), X0[chunk], steady, opt))  # pickles without caches
                 where.append([idx[j] for j in chunk])
         results = run_chunks(_run_chunk, jobs, scheduler=scheduler, workers=workers, progress=progress,
-                             desc="envelope", sizes=[len(w) for w in where], failures="collect")
+                             desc="envelope", sizes=[len(w) for w in where], failures="collect",
+                             # a zero-length integration of the first chunk as the chunks make it:
+                             # loads the compiled integrator, which the workers inherit
+                             warm=partial(integrate, jobs[0][0], jobs[0][1], **_per_member(jobs[0][0].B, [0.0]),
+                                          rtol=rtol, atol=rtol) if jobs else None)
     except KeyboardInterrupt as exc:  # SIGINT/SIGTERM: keep the finished chunks
         stopped, results = exc, getattr(exc, "chunk_results", None) or [None] * len(jobs)
     by_member = member_results(len(assignments), where, results)

@@ -18,6 +18,7 @@ All members integrate together in the vectorised batch integrator; chunks run in
 from __future__ import annotations
 
 import sys
+from functools import partial
 
 import numpy as np
 
@@ -54,6 +55,15 @@ def _run_chunk(job):
     Overflow in a member (values beyond floating-point range) is reported as its failure."""
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
         return _run_chunk_members(job)
+
+
+def _warm(job):
+    """A zero-length integration of a chunk's members as the chunk makes it (execution.
+    run_chunks' ``warm``): loads the compiled integrator into the parent, whose forked workers
+    inherit it.  Same argument kinds as in the chunk (a grid per member, h_max per member):
+    numba keeps one specialisation per argument types, read-only flags included."""
+    bc, _, X0, _, opt = job
+    return partial(integrate, bc, X0, np.zeros((bc.B, 1)), rtol=opt["rtol"], atol=opt["rtol"], h_max=np.ones(bc.B))
 
 
 def _run_chunk_members(job):
@@ -195,7 +205,8 @@ def frequency_response(circuit, freqs, outputs=None, input=None, step=0.1, ampli
                 jobs.append((bc.subset(chunk), [descr[idx[j]] for j in chunk], X0[chunk], y0[chunk], opt))
                 where.append([idx[j] for j in chunk])  # bc.subset pickles without caches
         results = run_chunks(_run_chunk, jobs, scheduler=scheduler, workers=workers, progress=progress,
-                             desc="frequency response", sizes=[len(w) for w in where], failures="collect")
+                             desc="frequency response", sizes=[len(w) for w in where], failures="collect",
+                             warm=_warm(jobs[0]) if jobs else None)
     except KeyboardInterrupt as exc:  # SIGINT/SIGTERM: keep the finished chunks
         stopped, results = exc, getattr(exc, "chunk_results", None) or [None] * len(jobs)
     by_member = member_results(len(descr), where, results)
