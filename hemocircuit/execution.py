@@ -72,7 +72,7 @@ def run_chunks(fn, chunks, scheduler=None, workers=None, progress=None, desc="ru
                 results[i] = r
                 bar.chunk_done(i)
 
-            if scheduler == "serial" or (scheduler in (None, "processes") and (workers == 1 or len(chunks) == 1)):
+            if scheduler == "serial" or (scheduler in (None, "processes") and (workers == 1 or len(chunks) <= 1)):
                 for i, c in enumerate(chunks):
                     done(i, _call(partial(_progress.call_in_chunk, fn, i), c, failures))
             elif scheduler in (None, "processes"):

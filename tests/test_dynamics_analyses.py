@@ -367,6 +367,17 @@ def test_envelope_members_keep_their_own_operating_point_in_interleaved_chunks(a
     assert len(set(np.round(res[f"steady({Q1})"], 9))) == len(pas)
 
 
+def test_no_member_with_an_operating_point_gives_failed_rows_on_worker_processes(artc):
+    """Every member fails before integrating: nothing is left to run, the rows say why."""
+    res = frequency_response(artc, [1.0], [Q1], step=0.0, amplitude=0.05, rtol=1e-6,
+                             grid=[("Pa.value", [BAD_PA, 2 * BAD_PA])], scheduler="processes", workers=2)
+    env = envelope(artc, ("Pa.value", [BAD_PA, 2 * BAD_PA]), outputs=[Q1], t_end=2.0, scheduler="processes",
+                   workers=2)
+    for r in (res, env):
+        assert r.metadata["status"] == "partial" and len(r.metadata["failed"]) == 2
+        assert all("no operating point found" in e for e in r["error"])
+
+
 def test_run_chunks_propagates_an_exception_from_a_chunk():
     """The executor layer itself does not catch: per-member failure recording lives inside the
     analyses' chunk functions (freq, envelope), which return error rows instead of raising."""
