@@ -19,7 +19,8 @@ Scenarios (``--only`` names):
               one by one (same start states, same rtol, same statistics).
   freq        hemocircuit's ``frequency_response``, 30 frequencies (0.001-1 Hz) x 2 tau_Ca
               (1 s, 10 s) on ``--workers`` cores, against roadrunner doing the same 60 runs
-              one by one with freq.py's settle rule (blocks of whole periods, DFT).
+              one by one with freq.py's settle rule (blocks of whole periods, DFT); both tools'
+              errors against an untimed roadrunner reference at ``--freq-ref-rtol``.
   rhs         one right-hand-side evaluation of the vasomotion circuit (``c.rhs(0, x)``), plus
               the compiled evaluator if the circuit offers one (see HOOK below).
 
@@ -622,7 +623,42 @@ def bench_freq(a, hc_kw):
                hemocircuit_errors=errors, hemocircuit_unsettled=unsettled_hc,
                roadrunner_unsettled=sum(1 for v in rr_res.values() if not v[0]["settled"]), rows_hc_rr=table)
     log(f"  amplitude max rel diff {worst_amp:.3g} at {worst_at}, phase max diff {worst_ph:.3g} deg")
+    if a.freq_ref_rtol:
+        res["accuracy_vs_reference"] = freq_accuracy(rr, rows, rr_res, taus, freqs, opt, a.freq_ref_rtol, outs)
     return res
+
+
+def freq_accuracy(rr, rows, rr_res, taus, freqs, opt, ref_rtol, outs):
+    """Each tool's error against a reference: roadrunner's same runs (same settle rule, so the
+    same periods) at a much tighter rtol, untimed.  Equal rtol is not equal accuracy (roadrunner's
+    absolute tolerance is a flat 1e-12, hemocircuit's rtol x each state's scale): this says how
+    close each tool's answer is to the converged one."""
+    rr_tolerances(rr, ref_rtol)
+    steps = rr.integrator.maximum_num_steps
+    rr.integrator.maximum_num_steps = 10_000_000
+    try:
+        ref = {(tau, float(f)): rr_freq_run(rr, float(f), tau, opt) for tau in taus for f in freqs}
+    finally:
+        rr.integrator.maximum_num_steps = steps
+    out = {"reference": f"roadrunner, rtol {ref_rtol:g}, same settle rule", "hemocircuit": {}, "roadrunner": {}}
+    per_tool = {"hemocircuit": [], "roadrunner": []}
+    for r in rows:
+        if r.get("error"):
+            continue
+        tau, f = float(str(r["art.tau_Ca"]).split()[0]), float(r["frequency [Hz]"])
+        key = min(ref, key=lambda k: abs(k[0] - tau) + abs(np.log(k[1] / f)))
+        i = outs.index(r["output"])
+        rf = ref[key][i]
+        per_tool["hemocircuit"].append((r["rel_amplitude"], r["phase [deg]"], rf))
+        per_tool["roadrunner"].append((rr_res[key][i]["rel_amplitude"], rr_res[key][i]["phase [deg]"], rf))
+    for tool, vals in per_tool.items():
+        out[tool] = {"max_rel_err_amplitude": max(rel(a_, rf["rel_amplitude"]) for a_, _, rf in vals),
+                     "max_abs_err_phase_deg": max(abs((p_ - rf["phase [deg]"] + 180.0) % 360.0 - 180.0)
+                                                  for _, p_, rf in vals)}
+    log(f"  against {out['reference']}: hemocircuit amplitude {out['hemocircuit']['max_rel_err_amplitude']:.2g}, "
+        f"phase {out['hemocircuit']['max_abs_err_phase_deg']:.2g} deg; roadrunner amplitude "
+        f"{out['roadrunner']['max_rel_err_amplitude']:.2g}, phase {out['roadrunner']['max_abs_err_phase_deg']:.2g} deg")
+    return out
 
 
 def _freq_rows(res, outs):
@@ -781,6 +817,10 @@ def table(results):
     if v:
         acc = (f"max rel diff amplitude {v['max_rel_diff_amplitude']:.1e}, phase {v['max_abs_diff_phase_deg']:.2g} "
                f"deg; unsettled hc {v['hemocircuit_unsettled']} rr {v['roadrunner_unsettled']}")
+        ref = v.get("accuracy_vs_reference")
+        if ref:
+            acc += "; vs ref: " + ", ".join(f"{t} {ref[t]['max_rel_err_amplitude']:.1e} / "
+                                            f"{ref[t]['max_abs_err_phase_deg']:.1e} deg" for t in ("hemocircuit", "roadrunner"))
         line(f"freq 30 f x 2 tau_Ca (hc {v['workers']} workers)", v["rtol"], v["roadrunner_wall_s"],
              v["hemocircuit_wall_s"], v["ratio_hc_over_rr"], v.get("cpu_ratio_hc_over_rr"), acc)
     v = results.get("rhs")
@@ -855,6 +895,9 @@ def main(argv=None):
     ap.add_argument("--hc-repeats", type=int, default=1, help="repeats of each hemocircuit single run (median)")
     ap.add_argument("--rhs-calls", type=int, default=200, help="calls per timing batch in the rhs scenario")
     ap.add_argument("--workers", type=int, default=2, help="worker processes of the hemocircuit batches")
+    ap.add_argument("--freq-ref-rtol", type=float, default=1e-11,
+                    help="freq: rtol of the untimed roadrunner reference both tools' errors are measured "
+                         "against (0: skip)")
     ap.add_argument("--method", help="passed as method= to hemocircuit's simulate (e.g. BDF, LSODA, Radau)")
     ap.add_argument("--engine", help="passed as engine= to every hemocircuit API call that accepts it")
     ap.add_argument("--hc-kw", action="append", metavar="KEY=VALUE",

@@ -114,3 +114,42 @@ def grid_columns(circuit, paths, assignments):
                 raise NetlistError(str(exc)) from None
         cols[p], units[p] = np.array(out, dtype=float), unit
     return cols, units
+
+
+def distinct_members(circuit):
+    """(first, inverse): ``first`` the index of one member of each distinct parameter set of a
+    batch circuit (members whose every fixed parameter value is equal), ``inverse[k]`` the
+    position in ``first`` of member k's set.  Waveforms and options are common to a batch."""
+    from .errors import NetlistError as _NetlistError
+
+    vals = circuit.parameters.values
+    cols = []
+    for path in vals:
+        try:
+            cols.append(np.asarray(vals[path], dtype=float))
+        except _NetlistError:  # follows an expression: no fixed value
+            continue
+    if circuit.B == 1 or not cols:
+        return np.zeros(min(circuit.B, 1), int), np.zeros(circuit.B, int)
+    rows = np.ascontiguousarray(np.stack(cols, axis=1))
+    _, first, inverse = np.unique(rows.view(np.dtype((np.void, rows.dtype.itemsize * rows.shape[1]))).ravel(),
+                                  return_index=True, return_inverse=True)
+    order = np.argsort(first)  # keep the members' order
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    return first[order], rank[inverse.ravel()]
+
+
+def member_operating_points(circuit):
+    """:func:`hemocircuit.analyses.op.operating_points` of a batch circuit, solved once per
+    distinct parameter set (:func:`distinct_members`; e.g. the frequencies of a frequency
+    response share the operating point of their grid point) and given to every member."""
+    from .analyses.op import operating_points
+
+    first, inverse = distinct_members(circuit)
+    # a member beyond floating-point range fails with its reason (no warnings meanwhile)
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        if len(first) == circuit.B:
+            return operating_points(circuit)
+        X, vals, errors = operating_points(circuit.subset(first))
+    return X[inverse], {k: np.asarray(v)[inverse] for k, v in vals.items()}, [errors[i] for i in inverse]

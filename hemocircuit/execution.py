@@ -30,16 +30,22 @@ def default_workers() -> int:
     return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))
 
 
-def split(items, n_chunks):
-    """Split a list into at most n_chunks contiguous, nearly equal chunks (order kept)."""
+def split(items, n_chunks, interleave=False):
+    """Split a list into at most n_chunks nearly equal chunks: contiguous (order kept), or with
+    ``interleave`` round-robin (chunk j takes items j, j + n, ...: neighbours, which tend to
+    cost alike, e.g. adjacent frequencies, go to different chunks and the chunks balance)."""
     n = len(items)
+    if n == 0:
+        return []
     n_chunks = max(1, min(n_chunks, n))
+    if interleave:
+        return [items[j::n_chunks] for j in range(n_chunks)]
     bounds = [round(k * n / n_chunks) for k in range(n_chunks + 1)]
     return [items[bounds[k]:bounds[k + 1]] for k in range(n_chunks) if bounds[k + 1] > bounds[k]]
 
 
 def run_chunks(fn, chunks, scheduler=None, workers=None, progress=None, desc="runs", sizes=None,
-               failures="raise"):
+               failures="raise", warm=None):
     """[fn(chunk) for chunk in chunks], in order, on the chosen executor.
 
     scheduler: None / 'processes' (local worker processes), 'serial' (this process), a Dask
@@ -49,6 +55,9 @@ def run_chunks(fn, chunks, scheduler=None, workers=None, progress=None, desc="ru
     :func:`hemocircuit.progress.advance`.
     failures: 'raise' (a chunk's exception propagates) or 'collect' (it becomes a
     :class:`ChunkFailed` in the list; the other chunks finish).
+    warm: a callable run in this process before local worker processes are forked, for what
+    every worker would otherwise do again at its start (e.g. a zero-length integration, which
+    loads the compiled integrator from the cache, ~0.4 s); forked workers inherit it.
     An interruption raises :class:`~hemocircuit.errors.Interrupted` with the finished chunks.
     """
     from functools import partial
@@ -63,10 +72,15 @@ def run_chunks(fn, chunks, scheduler=None, workers=None, progress=None, desc="ru
                 results[i] = r
                 bar.chunk_done(i)
 
-            if scheduler == "serial" or (scheduler in (None, "processes") and (workers == 1 or len(chunks) == 1)):
+            if scheduler == "serial" or (scheduler in (None, "processes") and (workers == 1 or len(chunks) <= 1)):
                 for i, c in enumerate(chunks):
                     done(i, _call(partial(_progress.call_in_chunk, fn, i), c, failures))
             elif scheduler in (None, "processes"):
+                if warm is not None and hasattr(os, "fork"):
+                    try:
+                        warm()
+                    except Exception:  # noqa: BLE001 - only a head start: a real fault shows in the chunks
+                        pass
                 _run_processes(fn, chunks, workers, done, failures, bar)
             else:
                 client = _dask_client(scheduler)

@@ -21,6 +21,8 @@ values (for the record; see the asserts for the accepted bands):
 """
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 
@@ -31,7 +33,7 @@ from hemocircuit.analyses.freq import _dft, frequency_response
 from hemocircuit.analyses.op import operating_point
 from hemocircuit.analyses.periodic import guess_from_run, shoot
 from hemocircuit.batch_integrator import integrate
-from hemocircuit.execution import run_chunks
+from hemocircuit.execution import run_chunks, split
 
 from paths import ROOT
 
@@ -295,6 +297,85 @@ def test_failing_member_recorded_others_complete_in_one_chunk(artc):
     rows = frequency_response(artc, [1.0], [Q1, Q2], step=0.0, amplitude=0.05, rtol=1e-6,
                               grid=[("Pa.value", [80.0, BAD_PA])], scheduler="serial")
     _check_failure_rows(rows)
+
+
+_WARMED = []
+
+
+def _set_warm():
+    _WARMED.append(os.getpid())
+
+
+def _report_warm(chunk):
+    return [(v, list(_WARMED)) for v in chunk]
+
+
+def _fail_warm():
+    raise RuntimeError("warm-up failed")
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="workers inherit the warm-up only when forked")
+def test_run_chunks_warms_up_once_before_forking_the_workers():
+    """``warm`` runs once, in this process, before the workers fork: they inherit its effect
+    (here a list, for the compiled integrator its loaded code).  A failing warm-up is only a
+    lost head start: the chunks still run."""
+    _WARMED.clear()
+    out = run_chunks(_report_warm, [[1], [2], [3]], scheduler="processes", workers=2, warm=_set_warm)
+    assert [r for c in out for r in c] == [(1, [os.getpid()]), (2, [os.getpid()]), (3, [os.getpid()])]
+    _WARMED.clear()
+    assert run_chunks(_report_warm, [[1], [2]], scheduler="processes", workers=2, warm=_fail_warm) \
+        == [[(1, [])], [(2, [])]]
+
+
+def test_split_contiguous_or_interleaved():
+    assert split(list(range(7)), 3) == [[0, 1], [2, 3, 4], [5, 6]]
+    assert split(list(range(7)), 3, interleave=True) == [[0, 3, 6], [1, 4], [2, 5]]
+    assert split([1, 2], 5, interleave=True) == [[1], [2]] and split([], 3, interleave=True) == []
+
+
+def test_distinct_members_of_a_batch(artc):
+    from hemocircuit.batch import distinct_members
+
+    bc = artc.batch(5).with_values({"art.tau_Ca": np.array([2.0, 1.0, 2.0, 3.0, 1.0])})
+    first, inverse = distinct_members(bc)
+    assert first.tolist() == [0, 1, 3] and inverse.tolist() == [0, 1, 0, 2, 1]
+    assert [k.tolist() for k in distinct_members(artc)] == [[0], [0]]
+
+
+def test_frequencies_of_a_grid_point_share_one_operating_point(artc, monkeypatch):
+    """The baseline operating point is solved once per grid point (in the calling process),
+    not once per frequency: 2 x 2 runs, one solve of 2 members."""
+    import hemocircuit.analyses.op as op_mod
+
+    sizes, real = [], op_mod.operating_points
+    monkeypatch.setattr(op_mod, "operating_points", lambda c, *a, **k: sizes.append(c.B) or real(c, *a, **k))
+    rows = frequency_response(artc, [0.5, 1.0], [Q1], step=0.0, amplitude=0.05, rtol=1e-6,
+                              grid=[("art.tau_Ca", [1.0, 2.0])], scheduler="processes", workers=2)
+    assert sizes == [2] and not any(rows["error"])
+    steady = operating_point(artc).values[Q1]
+    np.testing.assert_allclose(rows[f"steady({Q1})"], steady, rtol=1e-12)
+
+
+def test_envelope_members_keep_their_own_operating_point_in_interleaved_chunks(artc):
+    """Operating points solved for the whole batch, members spread over interleaved chunks on
+    worker processes: each row's steady value is its own member's operating point."""
+    pas = [60.0, 70.0, 80.0, 90.0, 100.0]
+    res = envelope(artc, ("Pa.value", pas), outputs=[Q1], t_end=2.0, dt=0.5, scheduler="processes", workers=2)
+    assert not any(res["error"])
+    for pa, q in zip(res["Pa.value"], res[f"steady({Q1})"]):
+        assert q == pytest.approx(operating_point(artc.with_values({"Pa.value": pa})).values[Q1], rel=1e-9)
+    assert len(set(np.round(res[f"steady({Q1})"], 9))) == len(pas)
+
+
+def test_no_member_with_an_operating_point_gives_failed_rows_on_worker_processes(artc):
+    """Every member fails before integrating: nothing is left to run, the rows say why."""
+    res = frequency_response(artc, [1.0], [Q1], step=0.0, amplitude=0.05, rtol=1e-6,
+                             grid=[("Pa.value", [BAD_PA, 2 * BAD_PA])], scheduler="processes", workers=2)
+    env = envelope(artc, ("Pa.value", [BAD_PA, 2 * BAD_PA]), outputs=[Q1], t_end=2.0, scheduler="processes",
+                   workers=2)
+    for r in (res, env):
+        assert r.metadata["status"] == "partial" and len(r.metadata["failed"]) == 2
+        assert all("no operating point found" in e for e in r["error"])
 
 
 def test_run_chunks_propagates_an_exception_from_a_chunk():

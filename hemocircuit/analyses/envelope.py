@@ -14,10 +14,11 @@ mean and the second half of the window has at least half the peak-to-peak of the
 from __future__ import annotations
 
 import sys
+from functools import partial
 
 import numpy as np
 
-from ..batch import build_batches, expand_grid, grid_columns, parse_grid_arg, resolve_values
+from ..batch import build_batches, expand_grid, grid_columns, member_operating_points, parse_grid_arg, resolve_values
 from ..batch_integrator import integrate
 from .. import plausibility
 from ..errors import HemocircuitError
@@ -37,30 +38,30 @@ def _law_states(c):
 
 
 def _run_chunk(job):
-    bc, opt = job
-    from .op import operating_points
-    X0, opv, errors = operating_points(bc)
-    good = np.array([e is None for e in errors])
-    held = _law_states(bc)
-    free = [j for j in range(bc.nx) if j not in held]
-    X0[:, free] += opt["kick"] * bc.state_scales[free]
+    """Worker: one batch.  job = (batch circuit, start states (B, nx), {output: (B,) values at
+    the operating point}, options)."""
+    bc, X0, steady, opt = job
     grid = np.arange(0.0, opt["t_end"] + 0.5 * opt["dt"], opt["dt"])
-    out = [{"error": e} for e in errors]
-    if not good.any():
-        return out
-    gidx = np.nonzero(good)[0]
-    sub = bc.subset(gidx)
-    r = integrate(sub, X0[gidx], grid, rtol=opt["rtol"], atol=opt["rtol"])
-    for j, k in enumerate(gidx):
+    r = integrate(bc, X0, **_per_member(bc.B, grid), rtol=opt["rtol"], atol=opt["rtol"])
+    out = []
+    for k in range(bc.B):
         try:
-            out[k] = _summary(sub, j, r, grid, opv, k, opt)
+            out.append(_summary(bc, k, r, grid, steady, opt))
         except HemocircuitError as exc:  # this member only
-            out[k] = {"error": str(exc)}
+            out.append({"error": str(exc)})
     return out
 
 
-def _summary(bc, k, r, grid, opv, kk, opt):
-    """Statistics of member k of the integrated batch over the settled window."""
+def _per_member(B, grid):
+    """integrate()'s t_out and h_max as arrays per member, (B, T) and (B,): the compiled integrator is
+    then called with the same argument types whatever the chunk's size (numba keeps one
+    specialisation per argument types, read-only flags included, each loaded at first use)."""
+    return {"t_out": np.repeat(np.asarray(grid, dtype=float)[None], B, axis=0), "h_max": np.full(B, np.inf)}
+
+
+def _summary(bc, k, r, grid, steady, opt):
+    """Statistics of member k of the integrated batch over the settled window (``steady``:
+    {output: (B,) values at the operating point})."""
     n_win = max(int(len(grid) * opt["window"]), 4)
     if not r.ok[k]:
         return {"error": r.message[k]}
@@ -84,7 +85,7 @@ def _summary(bc, k, r, grid, opv, kk, opt):
     for o in opt["outputs"]:
         y = cols[o]
         row.update({f"{o} min": float(y.min()), f"{o} max": float(y.max()), f"{o} mean": float(y[sel].mean()),
-                    f"{o} steady": float(opv[o][kk])})
+                    f"{o} steady": float(steady[o][k])})
     row["oscillating"] = bool(any(osc.values()))
     row["period [s]"] = _period(tw, y0) if row["oscillating"] else float("nan")
     row["warnings"] = [str(f) for f in plausibility.warnings(findings)]
@@ -119,22 +120,38 @@ def envelope(circuit, sweep, grid=None, outputs=None, t_end=1000.0, dt=0.1, wind
     outputs = list(default_outputs(circuit, "envelope") if outputs is None else outputs)
     grids = resolve_values(circuit, ([sweep] if sweep else []) + list(grid or []))
     assignments = expand_grid(grids) if members is None else list(members)
-    opt = dict(outputs=outputs, t_end=float(t_end), dt=float(dt), window=float(window), kick=kick,
-               osc_tol=osc_tol, rtol=rtol, keep_series=keep_series)
+    opt = dict(outputs=outputs, t_end=float(t_end), dt=float(dt), window=float(window), osc_tol=osc_tol,
+               rtol=rtol, keep_series=keep_series)
     jobs, where = [], []
-    for bc, idx in build_batches(circuit, assignments):
-        # a few chunks per worker: the bar (runs done / total) moves while runs last minutes
-        n = min(len(idx), 4 * (workers or default_workers())) if scheduler != "serial" else 1
-        for chunk in split(list(range(len(idx))), n):
-            jobs.append((bc.subset(chunk), opt))  # pickles without caches
-            where.append([idx[j] for j in chunk])
-    stopped = None
+    before = {}  # members without an operating point: {member: {'error': reason}}
+    stopped, results = None, []
     try:
+        for bc, idx in build_batches(circuit, assignments):
+            # the operating points of the whole batch at once (vectorised), here rather than
+            # in each chunk; the start: plus the kick on the states no law holds
+            X0, opv, errors = member_operating_points(bc)
+            held = _law_states(bc)
+            free = [j for j in range(bc.nx) if j not in held]
+            X0[:, free] += kick * bc.state_scales[free]
+            before.update({idx[j]: {"error": e} for j, e in enumerate(errors) if e is not None})
+            good = [j for j, e in enumerate(errors) if e is None]
+            # a few interleaved chunks per worker: the bar (runs done / total) moves while runs
+            # last minutes, and members of unequal cost (oscillating or not) spread evenly
+            n = 4 * (workers or default_workers()) if scheduler != "serial" else 1
+            for chunk in split(good, n, interleave=True):
+                steady = {o: np.asarray(opv[o])[chunk] for o in outputs if o in opv}
+                jobs.append((bc.subset(chunk), X0[chunk], steady, opt))  # pickles without caches
+                where.append([idx[j] for j in chunk])
         results = run_chunks(_run_chunk, jobs, scheduler=scheduler, workers=workers, progress=progress,
-                             desc="envelope", sizes=[len(w) for w in where], failures="collect")
+                             desc="envelope", sizes=[len(w) for w in where], failures="collect",
+                             # a zero-length integration of the first chunk as the chunks make it:
+                             # loads the compiled integrator, which the workers inherit
+                             warm=partial(integrate, jobs[0][0], jobs[0][1], **_per_member(jobs[0][0].B, [0.0]),
+                                          rtol=rtol, atol=rtol) if jobs else None)
     except KeyboardInterrupt as exc:  # SIGINT/SIGTERM: keep the finished chunks
         stopped, results = exc, getattr(exc, "chunk_results", None) or [None] * len(jobs)
     by_member = member_results(len(assignments), where, results)
+    by_member = [before.get(k, r) for k, r in enumerate(by_member)]
     paths = ([p for p, _ in grids] if members is None
              else list(dict.fromkeys(k for m in assignments for k in m)))
     res = EnvelopeResult(circuit, paths, assignments, by_member, outputs)

@@ -18,10 +18,11 @@ All members integrate together in the vectorised batch integrator; chunks run in
 from __future__ import annotations
 
 import sys
+from functools import partial
 
 import numpy as np
 
-from ..batch import build_batches, expand_grid, grid_columns, parse_grid_arg, resolve_values
+from ..batch import build_batches, expand_grid, grid_columns, member_operating_points, parse_grid_arg, resolve_values
 from ..batch_integrator import integrate
 from .. import plausibility
 from ..errors import HemocircuitError
@@ -49,22 +50,29 @@ def _member_outputs(bc, k, t, X, outputs, inp_col):
 
 
 def _run_chunk(job):
-    """Worker: one vectorised batch.  job = (batch circuit, list of member descriptors, options).
+    """Worker: one vectorised batch.  job = (batch circuit, list of member descriptors, the
+    members' baseline operating points (B, nx) and outputs there (B, outputs), options).
     Overflow in a member (values beyond floating-point range) is reported as its failure."""
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
         return _run_chunk_members(job)
 
 
+def _warm(job):
+    """A zero-length integration of a chunk's members as the chunk makes it (execution.
+    run_chunks' ``warm``): loads the compiled integrator into the parent, whose forked workers
+    inherit it.  Same argument kinds as in the chunk (a grid per member, h_max per member):
+    numba keeps one specialisation per argument types, read-only flags included."""
+    bc, _, X0, _, opt = job
+    return partial(integrate, bc, X0, np.zeros((bc.B, 1)), rtol=opt["rtol"], atol=opt["rtol"], h_max=np.ones(bc.B))
+
+
 def _run_chunk_members(job):
-    bc, members, opt = job
+    bc, members, X0, y0, opt = job
     B = bc.B
     outputs, inp, drive = opt["outputs"], opt["input"], opt["drive"]
     inp_node_col = opt["input_col"]
     res = [None] * B
-    # baseline operating point (input at P0), then the step + sine
-    from .op import operating_points
-    X0, opv, errors = operating_points(bc)
-    y0 = np.stack([opv.get(o, np.full(B, np.nan)) for o in outputs], axis=1) if opv else np.full((B, len(outputs)), np.nan)
+    # from the baseline operating point X0 (input at P0; outputs y0 there), the step + sine
     P0 = bc.parameters.values[f"{inp}.{drive.value}"]
     f = np.array([m["frequency"] for m in members])
     bc = bc.with_values({f"{inp}.{drive.value}": P0 * (1 + opt["step"]),
@@ -74,13 +82,9 @@ def _run_chunk_members(job):
                          f"{inp}.{drive.start}": np.zeros(B)})
     period = 1.0 / f
     t = np.zeros(B)
-    x = X0.copy()
+    x = np.array(X0, dtype=float)
     settled = np.zeros(B, bool)
-    failed = np.array([e is not None for e in errors])
-    for k, e in enumerate(errors):
-        if e is not None:
-            res[k] = {"error": e}
-            advance()
+    failed = np.zeros(B, bool)
     total_periods = np.zeros(B, int)
     block = opt["block_periods"]
     while True:
@@ -183,19 +187,30 @@ def frequency_response(circuit, freqs, outputs=None, input=None, step=0.1, ampli
                max_periods=max_periods, rtol=rtol)
     started = clock()
     jobs, where = [], []
-    for bc, idx in build_batches(circuit, assignments):
-        # chunks of one batch keep contiguous members (similar frequencies) together
-        for chunk in split(list(idx), (workers or default_workers()) if scheduler != "serial" else 1):
-            sub = bc.subset([idx.index(k) for k in chunk])  # pickles without caches
-            jobs.append((sub, [descr[k] for k in chunk], opt))
-            where.append(chunk)
-    stopped = None
+    before = {}  # members that failed before integrating: {member: {'error': reason}}
+    stopped, results = None, []
     try:
+        for bc, idx in build_batches(circuit, assignments):
+            # the baseline operating points, once per distinct grid point (every frequency of
+            # a grid point starts from the same one), here rather than in each chunk
+            X0, opv, errors = member_operating_points(bc)
+            y0 = np.stack([opv.get(o, np.full(bc.B, np.nan)) for o in outputs], axis=1) if opv \
+                else np.full((bc.B, len(outputs)), np.nan)
+            before.update({idx[j]: {"error": e} for j, e in enumerate(errors) if e is not None})
+            good = [j for j, e in enumerate(errors) if e is None]
+            # interleaved chunks, a few per worker: frequencies (and grid points) of unequal
+            # cost spread over all of them, so the workers finish together
+            n = 2 * (workers or default_workers()) if scheduler != "serial" else 1
+            for chunk in split(good, n, interleave=True):
+                jobs.append((bc.subset(chunk), [descr[idx[j]] for j in chunk], X0[chunk], y0[chunk], opt))
+                where.append([idx[j] for j in chunk])  # bc.subset pickles without caches
         results = run_chunks(_run_chunk, jobs, scheduler=scheduler, workers=workers, progress=progress,
-                             desc="frequency response", sizes=[len(w) for w in where], failures="collect")
+                             desc="frequency response", sizes=[len(w) for w in where], failures="collect",
+                             warm=_warm(jobs[0]) if jobs else None)
     except KeyboardInterrupt as exc:  # SIGINT/SIGTERM: keep the finished chunks
         stopped, results = exc, getattr(exc, "chunk_results", None) or [None] * len(jobs)
     by_member = member_results(len(descr), where, results)
+    by_member = [before.get(k, r) for k, r in enumerate(by_member)]
     inp_path = f"{input}.{drive.value}"
     paths = [p for p, _ in grid] if members is None else list(dict.fromkeys(k for m in members for k in m))
     res = FreqResult(circuit, paths, assignments, descr, by_member, outputs, inp_path)
