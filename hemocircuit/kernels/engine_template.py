@@ -55,7 +55,10 @@ def make_work(lay):
             np.zeros((n + 1, n + 1)), np.zeros((n + 1, n + 1)), np.zeros((n + 1, n + 1)),
             np.zeros((n + 1, n + 1)), np.zeros((n + 1, n + 1)), np.zeros(n + 1, dtype=np.int64),
             np.zeros(n + 1, dtype=np.int64), np.zeros(n + 1, dtype=np.int64), np.zeros(3, dtype=np.int64),
-            np.zeros(n + 1), np.zeros(n + 1))
+            np.zeros(n + 1), np.zeros(n + 1),
+            # 28-30: scratch of the waveform sums and the expression programs (no allocation in
+            # the functions compiled without numba's runtime)
+            np.zeros(WAVE_SUM_DEPTH), np.zeros(WAVE_SUM_DEPTH, dtype=np.int64), np.zeros(EXPR_STACK))
 
 
 # inline="always" (numba IR inlining) on the small helpers called inside the per-evaluation
@@ -82,7 +85,7 @@ def effective_params(t, x, P, lay, work):
     for i in range(P.shape[0]):
         Pe[i] = P[i]
     for w in range(ws.shape[0]):
-        Pe[ws[w]] += wave_value(wd, w0[w], t)
+        Pe[ws[w]] += wave_value_with(wd, w0[w], t, work[28], work[29])
     if xs.shape[0] > 0:
         for j in range(oe.shape[0]):
             e = oe[j]
@@ -91,7 +94,7 @@ def effective_params(t, x, P, lay, work):
             for i in range(eb[e], eb[e + 1]):
                 O[i] = ol[i - eb[e]]
         for k in range(xs.shape[0]):
-            Pe[xs[k]] = eval_expr(xcode, xc[k], xconst, xk[k], Pe, O)
+            Pe[xs[k]] = eval_expr_with(xcode, xc[k], xconst, xk[k], Pe, O, work[30])
     return Pe
 
 

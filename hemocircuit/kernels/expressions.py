@@ -182,7 +182,13 @@ def concat(programs) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
 def eval_expr(code, c0, consts, k0, P, O):
     """Value of the program at ``code[c0:]`` (constants at ``consts[k0:]``), parameters ``P``,
     observables ``O``."""
-    stack = np.empty(MAX_STACK)
+    return eval_expr_with(code, c0, consts, k0, P, O, np.empty(MAX_STACK))
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def eval_expr_with(code, c0, consts, k0, P, O, stack):
+    """eval_expr with a caller-owned (MAX_STACK,) scratch stack: the engine runs without numba's
+    runtime (no allocation, no reference counting) in its hot loop."""
     sp = 0
     pc = c0
     while True:

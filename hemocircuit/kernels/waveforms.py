@@ -143,12 +143,17 @@ def _leaf(data, pos, t):
 @_jit
 def wave_value(data, start, t):
     """Value at time ``t`` [s] of the record beginning at ``data[start]``."""
+    return wave_value_with(data, start, t, np.empty(MAX_SUM_DEPTH), np.empty(MAX_SUM_DEPTH, dtype=np.int64))
+
+
+@_jit
+def wave_value_with(data, start, t, acc_stack, end_stack):
+    """wave_value with caller-owned scratch (MAX_SUM_DEPTH,) float and int64 arrays: the engine
+    runs without numba's runtime (no allocation, no reference counting) in its hot loop."""
     if int(data[start]) != SUM:
         return _leaf(data, start, t)
     # nested sums without recursion: a stack of (partial sum, end) of the enclosing sums, so
     # every sum adds its parts left to right and then joins its parent, as Python's sum() does
-    acc_stack = np.empty(MAX_SUM_DEPTH)
-    end_stack = np.empty(MAX_SUM_DEPTH, dtype=np.int64)
     depth = 0
     acc = 0.0
     end = start + int(data[start + 1])
