@@ -7,7 +7,6 @@ and the compiled code.
 """
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -28,23 +27,13 @@ class Layout:
     autonomous: bool = False  # no waveform, no time-dependent element: f does not depend on t
 
 
-@functools.lru_cache(maxsize=1)
-def registered_kernels() -> tuple:
-    """The kernels of every registered component type (one option set each; the functions do
-    not depend on options), in type-name order.  The engine is generated for all of them, so
-    every netlist, whatever its types, uses one compiled engine: compiled once per install."""
-    from ..registry import component_types
+def engine_kernels(pairs) -> list:
+    """The distinct kernels of a circuit's groups in a canonical order (by the functions' qualified
+    names), so every circuit made of the same component types gets the same engine module."""
+    from .codegen import kernel_names
 
-    out, seen = [], set()
-    for _, cls in sorted(component_types().items()):
-        try:
-            k = cls().kernel()
-        except Exception:  # noqa: BLE001 - a plug-in that cannot build without options: numpy path
-            k = None
-        if k is not None and (k.stamp, k.derivs, k.observe) not in seen:
-            seen.add((k.stamp, k.derivs, k.observe))
-            out.append(k)
-    return tuple(out)
+    distinct = {(k.stamp, k.derivs, k.observe): k for _, k in pairs}
+    return sorted(distinct.values(), key=kernel_names)
 
 
 def kernels_of(circuit):
@@ -64,12 +53,8 @@ def build_layout(circuit) -> Layout | None:
     pairs = kernels_of(circuit)
     if pairs is None or circuit.n > MAX_DENSE_UNKNOWNS:
         return None
-    kernels = list(registered_kernels())
+    kernels = engine_kernels(pairs)
     codes = {(k.stamp, k.derivs, k.observe): i for i, k in enumerate(kernels)}
-    for _, k in pairs:  # a type registered after the first call (tests, notebooks)
-        if (k.stamp, k.derivs, k.observe) not in codes:
-            codes[(k.stamp, k.derivs, k.observe)] = len(kernels)
-            kernels.append(k)
     et, L, S, cm, st = [], [], [], [], []
     ep, ex, eu, eo, eb = [0], [0], [0], [0], [0]
     ui, io = [], []
