@@ -170,6 +170,7 @@ def test_component_kernel_matches_numpy(type_name, opts):
     assert isinstance(k, Kernel)
     assert k.observables == tuple(o.name for o in comp.observables() if o.state_only)
     for f in (k.stamp, k.derivs, k.observe):
+        f = getattr(f, "dispatcher", f)  # hemocircuit.kernels.jit.njit: made on first use
         assert isinstance(f, numba.core.registry.CPUDispatcher) and f.targetoptions.get("nogil")
     iopt = comp.kernel_options()
     assert iopt.dtype == np.int64 and iopt.ndim == 1
