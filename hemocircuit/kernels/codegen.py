@@ -58,11 +58,16 @@ def _header(kernels) -> str:
         for role in ("stamp", "derivs", "observe"):
             mod, name = _ref(getattr(ker, role))
             lines.append(f"from {mod} import {name} as _{role}{k}")
-    lines += ["", "", "def njit(**kw):  # numpy error model: a division by zero gives inf/nan, never raises",
+    lines += ["", "", "def njit(internal=False, **kw):",
+              "    # numpy error model: a division by zero gives inf/nan, never raises.  internal: called",
+              "    # only from compiled code, so numba builds no Python or C entry wrapper for it",
+              "    # (unboxing the layout and work tuples is a large part of each function's compile time)",
+              "    if internal:",
+              "        kw.update(no_cpython_wrapper=True, no_cfunc_wrapper=True)",
               "    return _njit(error_model='numpy', **kw)", ""]
     sigs = {"stamp": "p, x, u, t, iopt, A, b", "derivs": "p, x, u, t, iopt, dx", "observe": "p, x, iopt, out"}
     for role, args in sigs.items():
-        lines += ["", "@njit(cache=True, nogil=True)", f"def elem_{role}(k, {args}):"]
+        lines += ["", "@njit(cache=True, nogil=True, internal=True)", f"def elem_{role}(k, {args}):"]
         for k in range(len(kernels)):
             kw = "if" if k == 0 else "elif"
             lines.append(f"    {kw} k == {k}:")
