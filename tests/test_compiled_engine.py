@@ -230,12 +230,14 @@ def test_pwl_kinks_keep_the_jacobian(tmp_path):
     assert st_soft["nfev"] < 0.85 * st_hard["nfev"], (st_soft, st_hard)  # measured 1213 against 1533
 
 
-def test_one_engine_per_set_of_component_types():
+def test_one_engine_per_set_of_component_types(monkeypatch):
     """The engine covers exactly the circuit's types, in an order that does not depend on the
-    netlist (same set: same module); another set of types gets another module."""
+    netlist (same set: same module); another set of types gets another module.  With
+    HEMOCIRCUIT_ENGINE_TYPES=all every registered type is in, so every netlist shares one."""
     from hemocircuit.kernels import codegen
     from hemocircuit.kernels.layout import build_layout, engine_kernels, kernels_of
 
+    monkeypatch.setenv("HEMOCIRCUIT_ENGINE_TYPES", "used")
     vaso = hc.load(os.path.join(NETLISTS, "vasomotion.yaml"))
     passive = hc.load(os.path.join(NETLISTS, "payne06_passive.yaml"))
     pairs = kernels_of(vaso)
@@ -247,6 +249,13 @@ def test_one_engine_per_set_of_component_types():
     assert codegen._fingerprint(engine_kernels(pairs[::-1])) == key
     other = codegen._fingerprint(build_layout(passive).kernels)
     assert other[0] != key[0] and other[1] != key[1]
+    monkeypatch.setenv("HEMOCIRCUIT_ENGINE_TYPES", "all")
+    fns = lambda ks: [(k.stamp, k.derivs, k.observe) for k in ks]  # noqa: E731
+    everything = fns(build_layout(vaso).kernels)
+    assert len(everything) > len(kernels) and fns(build_layout(passive).kernels) == everything
+    monkeypatch.setenv("HEMOCIRCUIT_ENGINE_TYPES", "some")
+    with pytest.raises(hc.HemocircuitError, match="HEMOCIRCUIT_ENGINE_TYPES='some'"):
+        build_layout(vaso)
 
 
 def test_stale_engine_versions_are_pruned(tmp_path):

@@ -7,6 +7,8 @@ and the compiled code.
 """
 from __future__ import annotations
 
+import functools
+import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -27,13 +29,47 @@ class Layout:
     autonomous: bool = False  # no waveform, no time-dependent element: f does not depend on t
 
 
+#: environment variable choosing the engine's types: "used" (default) or "all"
+ENGINE_TYPES_VAR = "HEMOCIRCUIT_ENGINE_TYPES"
+
+
 def engine_kernels(pairs) -> list:
-    """The distinct kernels of a circuit's groups in a canonical order (by the functions' qualified
-    names), so every circuit made of the same component types gets the same engine module."""
+    """The kernels the circuit's engine dispatches to, in a canonical order (by the functions'
+    qualified names), so every circuit made of the same component types gets the same module.
+
+    ``$HEMOCIRCUIT_ENGINE_TYPES`` = ``used`` (default): the circuit's distinct kernels -- the
+    shortest first compilation (~26 s CPU for vasomotion's 5 types), one engine per set of
+    types.  ``all``: every registered type's kernels -- one engine for every netlist, longer
+    to compile once (~35 s), cheaper for a process that meets many sets of types (the test
+    suite, tests/conftest.py)."""
+    from ..errors import HemocircuitError
     from .codegen import kernel_names
 
+    mode = os.environ.get(ENGINE_TYPES_VAR, "used")
+    if mode not in ("used", "all"):
+        raise HemocircuitError(f"environment variable {ENGINE_TYPES_VAR}={mode!r}: expected 'used' or 'all'")
     distinct = {(k.stamp, k.derivs, k.observe): k for _, k in pairs}
+    if mode == "all":
+        for k in _registered_kernels():
+            distinct.setdefault((k.stamp, k.derivs, k.observe), k)
     return sorted(distinct.values(), key=kernel_names)
+
+
+@functools.lru_cache(maxsize=1)
+def _registered_kernels() -> tuple:
+    """The kernels of every registered component type (one option set each; the functions do
+    not depend on options)."""
+    from ..registry import component_types
+
+    out = []
+    for _, cls in sorted(component_types().items()):
+        try:
+            k = cls().kernel()
+        except Exception:  # noqa: BLE001 - a plug-in that cannot build without options: numpy path
+            k = None
+        if k is not None:
+            out.append(k)
+    return tuple(out)
 
 
 def kernels_of(circuit):
