@@ -101,7 +101,8 @@ def _fingerprint(kernels) -> tuple[str, str]:
 def _prune(folder: Path, set_key: str, keep: str) -> None:
     """Delete the other source versions of engine ``set_key`` unused for STALE_DAYS."""
     old = time.time() - STALE_DAYS * 86400
-    legacy = folder.glob("hemocircuit_engine_" + "?" * 20 + ".py")  # one engine for all types (<= 0.1)
+    # the one engine for all types of earlier versions: hemocircuit_engine_<20 hex digits>.py
+    legacy = folder.glob("hemocircuit_engine_" + "?" * 20 + ".py")
     for path in [*folder.glob(f"hemocircuit_engine_{set_key}_*.py"), *legacy]:
         if path.stem == keep:
             continue
@@ -132,7 +133,10 @@ def engine_module(kernels):
     name = "hemocircuit_engine_{}_{}".format(*key)
     folder = cache_dir()
     path = folder / f"{name}.py"
-    path.with_suffix(".used").touch()  # in use (see _prune)
+    try:
+        path.with_suffix(".used").touch()  # in use (see _prune)
+    except OSError:  # a read-only cache folder: nothing is pruned there either
+        pass
     if not path.exists():
         tmp = path.with_suffix(f".{os.getpid()}.tmp")
         tmp.write_text(_header(kernels) + _TEMPLATE.read_text())
