@@ -35,8 +35,20 @@ class LazyDispatcher:
     def __call__(self, *args):
         return self.dispatcher(*args)
 
+    def __reduce__(self):  # pickled by name, as a module-level function is
+        return _lookup, (self.__module__, self.__qualname__)
+
     def __repr__(self):
         return f"<lazy njit {self.__module__}.{self.__qualname__}>"
+
+
+def _lookup(module: str, qualname: str):
+    import importlib
+
+    obj = importlib.import_module(module)
+    for part in qualname.split("."):
+        obj = getattr(obj, part)
+    return obj
 
 
 def njit(**options):
