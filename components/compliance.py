@@ -12,12 +12,12 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 
 from hemocircuit.component import Component, Observable, Option, Param, State, Storage, pressure_branch
+from hemocircuit.kernels.jit import njit
 
-_jit = numba.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
+_jit = njit(cache=True, nogil=True, error_model="numpy", _nrt=False)  # numba imported on first use
 
 
 class _Store(Component):

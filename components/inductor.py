@@ -4,12 +4,12 @@ L [mmHg*s^2/mL]; for a bed of n vessels of radius r and length l: L = rho_b l / 
 """
 from __future__ import annotations
 
-import numba
 import numpy as np
 
 from hemocircuit.component import Component, Observable, Param, State, flow_branch
+from hemocircuit.kernels.jit import njit
 
-_jit = numba.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
+_jit = njit(cache=True, nogil=True, error_model="numpy", _nrt=False)  # numba imported on first use
 
 
 # --- compiled path (hemocircuit.kernels contract) -------------------------------------------

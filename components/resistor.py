@@ -1,11 +1,10 @@
 """Linear hydraulic resistor: q = (P_a - P_b) / R  (thesis eq. Poiseuille, R = dP/Q)."""
 from __future__ import annotations
 
-import numba
-
 from hemocircuit.component import Component, Param, two_terminal_conductance
+from hemocircuit.kernels.jit import njit
 
-_jit = numba.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
+_jit = njit(cache=True, nogil=True, error_model="numpy", _nrt=False)  # numba imported on first use
 
 
 # --- compiled path (hemocircuit.kernels contract; p = [R], no states, no options) --------------

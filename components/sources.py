@@ -8,13 +8,13 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 
 from hemocircuit.component import Component, Drive, Param, flow_branch, pressure_branch
+from hemocircuit.kernels.jit import njit
 from hemocircuit.netlist import GROUND
 
-_jit = numba.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
+_jit = njit(cache=True, nogil=True, error_model="numpy", _nrt=False)  # numba imported on first use
 
 
 def _sine_term(p, t):

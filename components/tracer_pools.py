@@ -65,10 +65,10 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 
 from hemocircuit.component import Component, Observable, Option, Param, State, pressure_branch
+from hemocircuit.kernels.jit import njit
 from hemocircuit.units import M3_PER_ML
 
 _READINGS = ("consistent", "thesis")
@@ -252,7 +252,7 @@ class TissuePool(_Pool):
 # p (the ``parameters`` order): V, k_d, h, l, C_x (both) then C_0, C_inf, k_feed, L_feed, n_feed
 # (tracer_pool).  tracer_pool local unknowns [P_a, P_b, q] (q the metered flow a -> b);
 # tissue_pool has none.  Every expression follows the numpy code above.
-_jit = numba.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
+_jit = njit(cache=True, nogil=True, error_model="numpy", _nrt=False)  # numba imported on first use
 _V, _K_D, _H, _L, _C_X, _C_0, _C_INF, _K_FEED, _L_FEED, _N_FEED = range(10)
 
 

@@ -1,10 +1,17 @@
 """Shared helpers for the core tests (the arteriole tests have their own conftest)."""
+import os
 from pathlib import Path
 import textwrap
 
 import pytest
 
 from paths import BAD, NETLISTS, PAYNE06, ROOT, TESTS  # noqa: F401
+
+# One compiled engine for every registered type (hemocircuit.kernels.layout.engine_kernels): the
+# suite meets a dozen sets of component types, each of which would otherwise compile its own
+# engine (~30 s CPU each with cold caches, as on CI).  Results are bitwise the same; the
+# per-set default is tested in test_compiled_engine.py with the variable set to "used".
+os.environ.setdefault("HEMOCIRCUIT_ENGINE_TYPES", "all")
 
 
 @pytest.fixture

@@ -280,3 +280,65 @@ def test_local_jacobian_matches_whole_rhs_differences(path):
         col = np.maximum(np.max(np.abs(J_fd), axis=0), 1e-300)  # a column's scale
         err = np.max(np.abs(J_loc - J_fd) / col)
         assert err < 2e-5, (err, J_loc, J_fd)
+
+
+def test_one_engine_per_set_of_component_types(monkeypatch):
+    """The engine covers exactly the circuit's types, in an order that does not depend on the
+    netlist (same set: same module); another set of types gets another module.  With
+    HEMOCIRCUIT_ENGINE_TYPES=all every registered type is in, so every netlist shares one."""
+    from hemocircuit.kernels import codegen
+    from hemocircuit.kernels.layout import build_layout, engine_kernels, kernels_of
+
+    monkeypatch.setenv("HEMOCIRCUIT_ENGINE_TYPES", "used")
+    vaso = hc.load(os.path.join(NETLISTS, "vasomotion.yaml"))
+    passive = hc.load(os.path.join(NETLISTS, "payne06_passive.yaml"))
+    pairs = kernels_of(vaso)
+    distinct = {(k.stamp, k.derivs, k.observe) for _, k in pairs}
+    kernels = build_layout(vaso).kernels
+    assert {(k.stamp, k.derivs, k.observe) for k in kernels} == distinct and len(kernels) == len(distinct)
+    assert engine_kernels(pairs[::-1]) == kernels
+    key = codegen._fingerprint(kernels)
+    assert codegen._fingerprint(engine_kernels(pairs[::-1])) == key
+    other = codegen._fingerprint(build_layout(passive).kernels)
+    assert other[0] != key[0] and other[1] != key[1]
+    monkeypatch.setenv("HEMOCIRCUIT_ENGINE_TYPES", "all")
+    fns = lambda ks: [(k.stamp, k.derivs, k.observe) for k in ks]  # noqa: E731
+    everything = fns(build_layout(vaso).kernels)
+    assert len(everything) > len(kernels) and fns(build_layout(passive).kernels) == everything
+    monkeypatch.setenv("HEMOCIRCUIT_ENGINE_TYPES", "some")
+    with pytest.raises(hc.HemocircuitError, match="HEMOCIRCUIT_ENGINE_TYPES='some'"):
+        build_layout(vaso)
+
+
+def test_stale_engine_versions_are_pruned(tmp_path):
+    """Other source versions of the same type set unused for STALE_DAYS go, with their numba
+    files; recently used ones, the current one and other type sets stay."""
+    from hemocircuit.kernels import codegen
+
+    (tmp_path / "__pycache__").mkdir()
+    old = os.path.getmtime(tmp_path) - (codegen.STALE_DAYS + 1) * 86400
+    names = {tag: f"hemocircuit_engine_{s}_{v * 12}" for tag, s, v in (
+        ("cur", "a" * 12, "1"), ("stale", "a" * 12, "2"), ("used", "a" * 12, "3"), ("other", "b" * 12, "4"))}
+    for tag, name in names.items():
+        for f in (tmp_path / f"{name}.py", tmp_path / "__pycache__" / f"{name}.rhs-1.py311.nbi"):
+            f.write_text("")
+            os.utime(f, (old, old))
+    (tmp_path / f"{names['used']}.used").write_text("")  # loaded just now
+    codegen._prune(tmp_path, "aaaaaaaaaaaa", names["cur"])
+    left = {p.name for p in tmp_path.rglob("*")}
+    assert f"{names['stale']}.py" not in left and f"{names['stale']}.rhs-1.py311.nbi" not in left
+    for tag in ("cur", "used", "other"):
+        assert f"{names[tag]}.py" in left and f"{names[tag]}.rhs-1.py311.nbi" in left, tag
+
+
+def test_op_does_not_import_numba():
+    """Commands that run no compiled code do not pay numba's import (~0.25 s): the component
+    kernels are lazy (hemocircuit.kernels.jit)."""
+    import subprocess
+    import sys
+
+    code = ("import sys; from hemocircuit.cli import main; main(['op', sys.argv[1]]); "
+            "print('numba' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code, os.path.join(NETLISTS, "payne06.yaml")],
+                         capture_output=True, text=True, check=True).stdout
+    assert out.strip().splitlines()[-1] == "False", out

@@ -170,6 +170,7 @@ def test_component_kernel_matches_numpy(type_name, opts):
     assert isinstance(k, Kernel)
     assert k.observables == tuple(o.name for o in comp.observables() if o.state_only)
     for f in (k.stamp, k.derivs, k.observe):
+        f = getattr(f, "dispatcher", f)  # hemocircuit.kernels.jit.njit: made on first use
         assert isinstance(f, numba.core.registry.CPUDispatcher) and f.targetoptions.get("nogil")
     iopt = comp.kernel_options()
     assert iopt.dtype == np.int64 and iopt.ndim == 1
@@ -510,3 +511,11 @@ def test_expression_slot_errors():
     kx.encode(Expression("= a.x * a.x / b.y + c0 + b.y", "mmHg", _resolve, WHERE),
               lambda ref: seen.append(ref.element + "." + ref.name) or ("param", len(seen)))
     assert seen == ["a.x", "b.y"]  # once per reference, constants never asked for
+
+
+def test_lazy_kernels_pickle_by_name():
+    """A lazy kernel (hemocircuit.kernels.jit) survives pickling as the same object, so
+    circuits and kernels can be sent to worker processes."""
+    from hemocircuit.components.resistor import kernel_stamp
+
+    assert pickle.loads(pickle.dumps(kernel_stamp)) is kernel_stamp

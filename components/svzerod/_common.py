@@ -7,10 +7,11 @@ current iterate q0 (f'(q0) = R + 2 S |q0|).
 """
 from __future__ import annotations
 
-import numba
 import numpy as np
 
-jit = numba.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
+from hemocircuit.kernels.jit import njit
+
+jit = njit(cache=True, nogil=True, error_model="numpy", _nrt=False)  # numba imported on first use
 
 #: units of the blocks' parameters (the circuit's units: mmHg, mL, s)
 R_UNIT = "mmHg*s/mL"

@@ -2,8 +2,9 @@
 stiff integration with events) as numba nopython code with an on-disk cache.
 
 The contract a component type fulfils to run compiled is :class:`Kernel` (returned by
-``Component.kernel()``): three numba ``@njit(cache=True)`` functions defined at module level,
-each working on ONE element (the circuit kernel loops over elements, so no per-call Python):
+``Component.kernel()``): three numba ``@njit(cache=True)`` functions defined at module level
+(``hemocircuit.kernels.jit.njit``, which imports numba only on first use, is what the built-in
+types use; plain ``numba.njit`` works the same), each working on ONE element (the circuit kernel loops over elements, so no per-call Python):
 
 ``stamp(p, x, u, t, iopt, A, b)``
     Fill the element's local MNA stamp in place (see ``hemocircuit.component``): ``A`` (L, L)

@@ -1,14 +1,20 @@
 """Write, cache and import the compiled engine for a set of component types.
 
-One module is generated per list of kernels -- in practice all registered component types
-(``kernels.layout.registered_kernels``), never per netlist, element count or parameter value:
-a header that dispatches by type code to each type's Kernel functions, followed by
-``engine_template.py``.  Numba compiles it on first use and caches the machine code beside
-the module, so later netlists never recompile.  The module's
-name hashes the template, the kernels' source files and the numba version, so an edit to any
-of them makes a new module instead of reusing stale machine code.
+One module is generated per *set of component types* a circuit uses (``layout.build_layout``
+passes the circuit's distinct kernels in a canonical order), never per netlist, element count
+or parameter value: a header that dispatches by type code to each type's Kernel functions,
+followed by ``engine_template.py``.  Numba compiles it on first use and caches the machine code
+beside the module (or under ``$NUMBA_CACHE_DIR``), so every netlist made of the same types
+reuses it.  Compiling only the types used keeps a first run short (the dispatchers inline every
+kernel they name into the engine).  The module's name is ``hemocircuit_engine_<set>_<source>``:
+<set> hashes the kernels' names, <source> the template, the kernels' source files and the numba
+version, so an edit to any of them makes a new module instead of reusing stale machine code.
 
 Cache folder: ``$HEMOCIRCUIT_CACHE_DIR`` or ``~/.cache/hemocircuit`` (never inside the checkout).
+Each load touches ``<module>.used`` (not the module: numba's cache checks its time stamp); when
+a new module is written, the modules of the same type set with other sources that no process
+has loaded for ``STALE_DAYS`` are deleted (with their numba files in the folder's
+``__pycache__``): stale after an upgrade, and too long unused to be loading anywhere.
 """
 from __future__ import annotations
 
@@ -17,6 +23,7 @@ import importlib.util
 import inspect
 import os
 import sys
+import time
 from pathlib import Path
 
 _TEMPLATE = Path(__file__).with_name("engine_template.py")
@@ -26,6 +33,8 @@ _SUPPORT = (_HERE / "waveforms.py", _HERE / "expressions.py", _HERE.parent / "un
             _HERE.parent / "batch_integrator.py",  # the Rosenbrock tableau
             Path(__file__))  # and this file: it writes the header
 _loaded: dict[str, object] = {}
+#: days without a load after which another source version of an engine is deleted
+STALE_DAYS = 7
 
 
 def cache_dir() -> Path:
@@ -49,11 +58,16 @@ def _header(kernels) -> str:
         for role in ("stamp", "derivs", "observe"):
             mod, name = _ref(getattr(ker, role))
             lines.append(f"from {mod} import {name} as _{role}{k}")
-    lines += ["", "", "def njit(**kw):  # numpy error model: a division by zero gives inf/nan, never raises",
+    lines += ["", "", "def njit(internal=False, **kw):",
+              "    # numpy error model: a division by zero gives inf/nan, never raises.  internal: called",
+              "    # only from compiled code, so numba builds no Python or C entry wrapper for it",
+              "    # (unboxing the layout and work tuples is a large part of each function's compile time)",
+              "    if internal:",
+              "        kw.update(no_cpython_wrapper=True, no_cfunc_wrapper=True)",
               "    return _njit(error_model='numpy', **kw)", ""]
     sigs = {"stamp": "p, x, u, t, iopt, A, b", "derivs": "p, x, u, t, iopt, dx", "observe": "p, x, iopt, out"}
     for role, args in sigs.items():
-        lines += ["", "@njit(cache=True, nogil=True)", f"def elem_{role}(k, {args}):"]
+        lines += ["", "@njit(cache=True, nogil=True, internal=True)", f"def elem_{role}(k, {args}):"]
         for k in range(len(kernels)):
             kw = "if" if k == 0 else "elif"
             lines.append(f"    {kw} k == {k}:")
@@ -63,23 +77,45 @@ def _header(kernels) -> str:
     return "\n".join(lines) + "\n\n\n"
 
 
-def _fingerprint(kernels) -> str:
+def kernel_names(kernel) -> list[str]:
+    """'module:qualname' of a Kernel's three functions."""
+    return [":".join(_ref(getattr(kernel, role))) for role in ("stamp", "derivs", "observe")]
+
+
+def _fingerprint(kernels) -> tuple[str, str]:
+    """(type-set key, source key) of the engine for these kernels."""
     import numba
 
+    names = [name for ker in kernels for name in kernel_names(ker)]
     h = hashlib.sha256()
     h.update(numba.__version__.encode())
     h.update(_TEMPLATE.read_bytes())
     for path in _SUPPORT:
         h.update(path.read_bytes())
-    files = set()
-    for ker in kernels:
-        for role in ("stamp", "derivs", "observe"):
-            mod, name = _ref(getattr(ker, role))
-            h.update(f"{mod}:{name};".encode())
-            files.add(inspect.getsourcefile(sys.modules[mod]))
+    files = {inspect.getsourcefile(sys.modules[name.split(":")[0]]) for name in names}
     for f in sorted(files):  # the kernels' own source: an edit there recompiles
         h.update(Path(f).read_bytes())
-    return h.hexdigest()[:20]
+    return hashlib.sha256(";".join(names).encode()).hexdigest()[:12], h.hexdigest()[:12]
+
+
+def _prune(folder: Path, set_key: str, keep: str) -> None:
+    """Delete the other source versions of engine ``set_key`` unused for STALE_DAYS."""
+    old = time.time() - STALE_DAYS * 86400
+    # the one engine for all types of earlier versions: hemocircuit_engine_<20 hex digits>.py
+    legacy = folder.glob("hemocircuit_engine_" + "?" * 20 + ".py")
+    for path in [*folder.glob(f"hemocircuit_engine_{set_key}_*.py"), *legacy]:
+        if path.stem == keep:
+            continue
+        used = path.with_suffix(".used")
+        try:
+            if (used if used.exists() else path).stat().st_mtime > old:
+                continue  # loaded recently: another install may still use it
+            path.unlink()
+            used.unlink(missing_ok=True)
+            for f in (folder / "__pycache__").glob(f"{path.stem}.*"):
+                f.unlink()
+        except OSError:  # deleted meanwhile by another process, or not ours to delete
+            pass
 
 
 _keys: dict = {}
@@ -94,12 +130,18 @@ def engine_module(kernels):
     mod = _loaded.get(key)
     if mod is not None:
         return mod
-    name = f"hemocircuit_engine_{key}"
-    path = cache_dir() / f"{name}.py"
+    name = "hemocircuit_engine_{}_{}".format(*key)
+    folder = cache_dir()
+    path = folder / f"{name}.py"
+    try:
+        path.with_suffix(".used").touch()  # in use (see _prune)
+    except OSError:  # a read-only cache folder: nothing is pruned there either
+        pass
     if not path.exists():
         tmp = path.with_suffix(f".{os.getpid()}.tmp")
         tmp.write_text(_header(kernels) + _TEMPLATE.read_text())
         os.replace(tmp, path)  # atomic: concurrent workers never see a half-written module
+        _prune(folder, key[0], name)
     spec = importlib.util.spec_from_file_location(name, path)
     mod = importlib.util.module_from_spec(spec)
     sys.modules[name] = mod

@@ -22,6 +22,10 @@
 #   cm (E,)          1 if the element's matrix stamp is constant (summed once into A0)
 #   st (E,)          1 if its whole stamp is constant ("static": stamped once, into A0 and b0)
 # Units: as the numpy path -- pressures mmHg, flows mL/s, time s, states in declared units.
+#
+# Entry points called from Python: rhs, rhs_batch, integrate_batch.  Every other compiled
+# function is ``internal=True`` (the header's njit): numba then builds no Python/C wrapper for it,
+# whose unboxing of the layout and work tuples cost ~15 % of the first compilation.
 
 # _nrt=False on the functions that never allocate (and return no array): no reference counting
 # of the arrays they touch.  With it on, NRT's atomic increments/decrements of the layout's and
@@ -32,7 +36,7 @@ NEWTON_TOL = 1e-12
 NEWTON_MAXIT = 50
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, internal=True)
 def make_work(lay):
     """Scratch arrays for one evaluation.  Elements get whole scratch buffers (pl, xl, ul, Al,
     bl, il, dl, ol) rather than slices: a slice is a new array view whose reference counting
@@ -113,7 +117,7 @@ def stamp_element(e, t, x, Pe, et, L, ep, ex, eu, ui, eo, io, u, Al, bl, ul, pl,
     elem_stamp(et[e], pl, xl, ul, t, il, Al, bl)
 
 
-@njit(cache=True, nogil=True, _nrt=False)
+@njit(cache=True, nogil=True, internal=True, _nrt=False)
 def prepare_static(t, x, P, lay, work):
     """A0 = the constant matrix stamps, b0 = the static elements' right-hand sides, for the
     parameters P (call again whenever P changes)."""
@@ -135,7 +139,7 @@ def prepare_static(t, x, P, lay, work):
     condense(lay, work)
 
 
-@njit(cache=True, nogil=True, _nrt=False)
+@njit(cache=True, nogil=True, internal=True, _nrt=False)
 def condense(lay, work):
     """Static condensation of the nodal system: the unknowns V that state-dependent matrix
     stamps touch are kept, the constant rest C is eliminated once per parameter set.  With
@@ -289,7 +293,7 @@ def solve_nodes(t, x, Pe, lay, work):
     return False
 
 
-@njit(cache=True, nogil=True, _nrt=False)
+@njit(cache=True, nogil=True, internal=True, _nrt=False)
 def rhs_into(t, x, P, lay, work, dx):
     """dx/dt for states x at time t into dx.  Returns False on a singular nodal system
     (dx is then NaN)."""
@@ -534,7 +538,7 @@ def jacobian(t, x, P, lay, scales, local):
     return J
 
 
-@njit(cache=True, nogil=True, _nrt=False)
+@njit(cache=True, nogil=True, internal=True, _nrt=False)
 def lu_factor(W, piv, m):
     """In-place LU with partial pivoting of the leading m x m block of W; False if singular.
     (The nodal system uses it with m = n, leaving out the ground slot; the integrator's W
@@ -542,7 +546,7 @@ def lu_factor(W, piv, m):
     return lu_factor_at(W, piv, m) < 0
 
 
-@njit(cache=True, nogil=True, _nrt=False)
+@njit(cache=True, nogil=True, internal=True, _nrt=False)
 def lu_factor_at(W, piv, m):
     """lu_factor, returning -1 on success or the column where no nonzero pivot was left."""
     for c in range(m):
@@ -570,7 +574,7 @@ def lu_factor_at(W, piv, m):
     return -1
 
 
-@njit(cache=True, nogil=True, _nrt=False)
+@njit(cache=True, nogil=True, internal=True, _nrt=False)
 def lu_apply(W, piv, v, m):
     """Solve with the factors of lu_factor (size m), in place on v[:m]."""
     for c in range(m):
@@ -591,7 +595,7 @@ def lu_apply(W, piv, v, m):
         v[i] = s / W[i, i]
 
 
-@njit(cache=True, nogil=True, _nrt=False)
+@njit(cache=True, nogil=True, internal=True, _nrt=False)
 def hermite(x0, f0, x1, f1, h, s, out):
     a = (1 + 2 * s) * (1 - s) ** 2
     b = s * (1 - s) ** 2 * h
@@ -601,7 +605,7 @@ def hermite(x0, f0, x1, f1, h, s, out):
         out[i] = a * x0[i] + b * f0[i] + c * x1[i] + d * f1[i]
 
 
-@njit(cache=True, nogil=True, _nrt=False)
+@njit(cache=True, nogil=True, internal=True, _nrt=False)
 def hermite_root(y0, d0, y1, d1):
     """First fraction s in [0, 1] where the cubic (values y0 > 0 >= y1, scaled slopes d0, d1)
     crosses zero (bisection, 50 halvings)."""

@@ -8,6 +8,7 @@ and the compiled code.
 from __future__ import annotations
 
 import functools
+import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -28,21 +29,45 @@ class Layout:
     autonomous: bool = False  # no waveform, no time-dependent element: f does not depend on t
 
 
+#: environment variable choosing the engine's types: "used" (default) or "all"
+ENGINE_TYPES_VAR = "HEMOCIRCUIT_ENGINE_TYPES"
+
+
+def engine_kernels(pairs) -> list:
+    """The kernels the circuit's engine dispatches to, in a canonical order (by the functions'
+    qualified names), so every circuit made of the same component types gets the same module.
+
+    ``$HEMOCIRCUIT_ENGINE_TYPES`` = ``used`` (default): the circuit's distinct kernels -- the
+    shortest first compilation (~26 s CPU for vasomotion's 5 types), one engine per set of
+    types.  ``all``: every registered type's kernels -- one engine for every netlist, longer
+    to compile once (~35 s), cheaper for a process that meets many sets of types (the test
+    suite, tests/conftest.py)."""
+    from ..errors import HemocircuitError
+    from .codegen import kernel_names
+
+    mode = os.environ.get(ENGINE_TYPES_VAR, "used")
+    if mode not in ("used", "all"):
+        raise HemocircuitError(f"environment variable {ENGINE_TYPES_VAR}={mode!r}: expected 'used' or 'all'")
+    distinct = {(k.stamp, k.derivs, k.observe): k for _, k in pairs}
+    if mode == "all":
+        for k in _registered_kernels():
+            distinct.setdefault((k.stamp, k.derivs, k.observe), k)
+    return sorted(distinct.values(), key=kernel_names)
+
+
 @functools.lru_cache(maxsize=1)
-def registered_kernels() -> tuple:
+def _registered_kernels() -> tuple:
     """The kernels of every registered component type (one option set each; the functions do
-    not depend on options), in type-name order.  The engine is generated for all of them, so
-    every netlist, whatever its types, uses one compiled engine: compiled once per install."""
+    not depend on options)."""
     from ..registry import component_types
 
-    out, seen = [], set()
+    out = []
     for _, cls in sorted(component_types().items()):
         try:
             k = cls().kernel()
         except Exception:  # noqa: BLE001 - a plug-in that cannot build without options: numpy path
             k = None
-        if k is not None and (k.stamp, k.derivs, k.observe) not in seen:
-            seen.add((k.stamp, k.derivs, k.observe))
+        if k is not None:
             out.append(k)
     return tuple(out)
 
@@ -64,12 +89,8 @@ def build_layout(circuit) -> Layout | None:
     pairs = kernels_of(circuit)
     if pairs is None or circuit.n > MAX_DENSE_UNKNOWNS:
         return None
-    kernels = list(registered_kernels())
+    kernels = engine_kernels(pairs)
     codes = {(k.stamp, k.derivs, k.observe): i for i, k in enumerate(kernels)}
-    for _, k in pairs:  # a type registered after the first call (tests, notebooks)
-        if (k.stamp, k.derivs, k.observe) not in codes:
-            codes[(k.stamp, k.derivs, k.observe)] = len(kernels)
-            kernels.append(k)
     et, L, S, cm, st = [], [], [], [], []
     ep, ex, eu, eo, eb = [0], [0], [0], [0], [0]
     ui, io = [], []

@@ -1,13 +1,13 @@
 """Kernel functions shared by element types without states or observables (resistors,
 sources): nothing to integrate, nothing to observe."""
-import numba
+from .jit import njit
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True)
 def no_derivs(p, x, u, t, iopt, dx):
     pass
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True)
 def no_observables(p, x, iopt, out):
     pass

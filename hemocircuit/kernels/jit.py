@@ -1,0 +1,56 @@
+"""``njit`` for component kernels that imports numba only when a kernel is first used.
+
+Loading the component registry imports every component module; with ``numba.njit`` at module
+level that alone imports numba (~0.25 s), which commands that never run compiled code (``op``,
+``--help``) do not need.  ``njit(**options)(fn)`` returns a :class:`LazyDispatcher`: the numba
+dispatcher is made on the first call, or when numba compiles a caller that reads it as a global
+(numba types a global through its ``_numba_type_``), so kernels calling kernels work unchanged.
+"""
+from __future__ import annotations
+
+import functools
+
+
+class LazyDispatcher:
+    """A numba ``njit`` dispatcher created on first use (see the module docstring)."""
+
+    def __init__(self, fn, options):
+        self.py_func = fn
+        self._options = options
+        self._dispatcher = None
+        functools.update_wrapper(self, fn)
+
+    @property
+    def dispatcher(self):
+        if self._dispatcher is None:
+            import numba
+
+            self._dispatcher = numba.njit(**self._options)(self.py_func)
+        return self._dispatcher
+
+    @property
+    def _numba_type_(self):  # what numba.typeof reports: the real dispatcher's type
+        return self.dispatcher._numba_type_
+
+    def __call__(self, *args):
+        return self.dispatcher(*args)
+
+    def __reduce__(self):  # pickled by name, as a module-level function is
+        return _lookup, (self.__module__, self.__qualname__)
+
+    def __repr__(self):
+        return f"<lazy njit {self.__module__}.{self.__qualname__}>"
+
+
+def _lookup(module: str, qualname: str):
+    import importlib
+
+    obj = importlib.import_module(module)
+    for part in qualname.split("."):
+        obj = getattr(obj, part)
+    return obj
+
+
+def njit(**options):
+    """Decorator: like ``numba.njit(**options)``, applied on first use."""
+    return lambda fn: LazyDispatcher(fn, options)
