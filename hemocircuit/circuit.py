@@ -1127,7 +1127,7 @@ class Circuit:
         pts = set()
         for g in self.groups:
             for _, _, wf in g.waves:
-                pts.update(b for b in wf.breakpoints() if t0 < b < t1)
+                pts.update(b for b in wf.breakpoints(t0, t1) if t0 < b < t1)
             pts.update(float(b) for b in g.comp.breakpoints(g.p, t0, t1) if t0 < b < t1)
         return sorted(pts)
 

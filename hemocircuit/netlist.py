@@ -190,6 +190,11 @@ def read_yaml_file(path, what="netlist"):
 
 def _read_yaml(path):
     data = read_yaml_file(path)
+    if str(path).lower().endswith(".json"):
+        from .svzerod.importer import is_svzerod_model, netlist_of
+
+        if is_svzerod_model(data):  # an svZeroDSolver model: read through the importer
+            return netlist_of(data, path)
     if not isinstance(data, dict):
         raise NetlistError("a netlist is a YAML mapping with at least 'elements' (or 'extends')", file=path)
     unknown = sorted(set(map(str, data)) - TOP_KEYS)

@@ -7,8 +7,12 @@ Netlist forms (every number with a unit; the source's own unit gives the value d
   value: {pwl: {file: table.csv}}                  CSV (two columns, header 'time [s],value [mmHg]')
   value: {sine: {offset: 80 mmHg, amplitude: 8 mmHg, frequency: 0.1 Hz, phase: 0 deg, start: 0 s}}
   value: {sum: [<waveform>, <waveform>, ...]}
-Tables are parsed at load time; evaluation is plain numpy.  ``breakpoints()`` lists the times
-where the value or its slope jumps, so the transient solver restarts there.
+  value: {periodic: {period: 1 s, pwl: [[0 s, 5 mL/s], ..., [1 s, 5 mL/s]]}}
+                                                   one cycle of a table (pwl or steps), repeated:
+                                                   evaluated at t0 + (t - t0) mod period, t0 its
+                                                   first time (svZeroDSolver's time series)
+Tables are parsed at load time; evaluation is plain numpy.  ``breakpoints(t0, t1)`` lists the
+times in (t0, t1) where the value or its slope jumps, so the transient solver restarts there.
 """
 from __future__ import annotations
 
@@ -28,7 +32,9 @@ class Waveform:
     def __call__(self, t: float) -> float:
         raise NotImplementedError
 
-    def breakpoints(self) -> list[float]:
+    def breakpoints(self, t0=-np.inf, t1=np.inf) -> list[float]:
+        """Times where the value or its slope jumps (those in (t0, t1) at least; a periodic
+        waveform needs a finite range)."""
         return []
 
 
@@ -52,7 +58,7 @@ class Table(Waveform):
         i = np.searchsorted(self.times, t, side="right") - 1
         return float(self.values[max(i, 0)])
 
-    def breakpoints(self):
+    def breakpoints(self, t0=-np.inf, t1=np.inf):
         return [float(x) for x in self.times]
 
 
@@ -69,7 +75,7 @@ class Sine(Waveform):
             return self.offset
         return self.offset + self.amplitude * np.sin(2 * np.pi * self.frequency * (t - self.start) + self.phase)
 
-    def breakpoints(self):
+    def breakpoints(self, t0=-np.inf, t1=np.inf):
         return [self.start]
 
 
@@ -80,8 +86,35 @@ class Sum(Waveform):
     def __call__(self, t):
         return sum(p(t) for p in self.parts)
 
-    def breakpoints(self):
-        return sorted({b for p in self.parts for b in p.breakpoints()})
+    def breakpoints(self, t0=-np.inf, t1=np.inf):
+        return sorted({b for p in self.parts for b in p.breakpoints(t0, t1)})
+
+
+@dataclass
+class Periodic(Waveform):
+    """One cycle of a table repeated with ``period`` [s]: the value at t is the table's at
+    t0 + (t - t0) mod period (t0 = the table's first time; the table spans at most a period)."""
+
+    period: float
+    table: Table
+
+    def phase(self, t):
+        t0 = float(self.table.times[0])
+        return t0 + (t - t0) % self.period
+
+    def __call__(self, t):
+        return self.table(self.phase(t))
+
+    def breakpoints(self, t0=-np.inf, t1=np.inf):
+        if not (np.isfinite(t0) and np.isfinite(t1)):
+            raise ValueError("a periodic waveform's breakpoints need a finite time range")
+        first = float(self.table.times[0])
+        k0 = int(np.floor((t0 - first) / self.period))
+        k1 = int(np.ceil((t1 - first) / self.period))
+        # the table's times in every cycle, and the cycle boundaries (the value may jump there)
+        offs = np.unique(np.append(self.table.times - first, 0.0))
+        pts = (first + self.period * np.arange(k0, k1 + 1)[:, None] + offs[None, :]).ravel()
+        return [float(b) for b in np.unique(pts) if t0 <= b <= t1]
 
 
 def _table_rows(spec, base_dir, unit, where):
@@ -140,7 +173,7 @@ def _table_rows(spec, base_dir, unit, where):
 
 
 _SINE_FIELDS = ("offset", "amplitude", "frequency", "phase", "start")
-_KINDS = ("steps", "pwc", "pwl", "sine", "sum")
+_KINDS = ("steps", "pwc", "pwl", "sine", "sum", "periodic")
 
 
 def parse_waveform(spec, unit: str, base_dir=None, where=None) -> Waveform:
@@ -150,9 +183,11 @@ def parse_waveform(spec, unit: str, base_dir=None, where=None) -> Waveform:
         if not isinstance(spec, dict):
             return Constant(parse_quantity(spec, unit, "value"))
         if len(spec) != 1:
-            raise NetlistError("a waveform has exactly one kind (steps, pwl, pwc, sine, sum); got "
+            raise NetlistError("a waveform has exactly one kind (steps, pwl, pwc, sine, sum, periodic); got "
                                f"{excerpt(sorted(map(str, spec)))}", **where)
         (kind, body), = spec.items()
+        if kind == "periodic":
+            return _periodic(body, unit, base_dir, where)
         if kind in ("steps", "pwc", "pwl"):
             # stable sort on time only: rows with equal times keep their order (a jump)
             rows = sorted(_table_rows(body, base_dir, unit, where), key=lambda r: r[0])
@@ -185,8 +220,26 @@ def parse_waveform(spec, unit: str, base_dir=None, where=None) -> Waveform:
                 raise NetlistError("sum needs a non-empty list of waveforms", **where)
             return Sum([parse_waveform(b, unit, base_dir, where) for b in body])
         raise NetlistError(f"unknown waveform kind {excerpt(kind, 40)}{did_you_mean(kind, _KINDS)} "
-                           "(use steps, pwl, pwc, sine or sum)", **where)
+                           "(use steps, pwl, pwc, sine, sum or periodic)", **where)
     except UnitError as exc:
         raise NetlistError(str(exc), **where) from None
     except (TypeError, ValueError) as exc:  # unhashable or odd YAML values in a waveform mapping
         raise NetlistError(f"malformed waveform {excerpt(spec)}: {type(exc).__name__}", **where) from None
+
+
+def _periodic(body, unit, base_dir, where):
+    """{periodic: {period: T, pwl|steps|pwc: table}}: the table spans at most one period."""
+    if not isinstance(body, dict) or "period" not in body or len(body) != 2:
+        raise NetlistError("periodic needs a mapping {period: <time>, pwl|steps|pwc: <table>}; got "
+                           f"{excerpt(body)}", **where)
+    period = parse_quantity(body["period"], "s", "periodic period")
+    if not (np.isfinite(period) and period > 0):
+        raise NetlistError(f"periodic period = {period:g} s: must be > 0 and finite", **where)
+    (kind, table), = ((k, v) for k, v in body.items() if k != "period")
+    if kind not in ("pwl", "steps", "pwc"):
+        raise NetlistError(f"periodic repeats a table (pwl, steps or pwc), got {excerpt(kind, 40)}", **where)
+    tab = parse_waveform({kind: table}, unit, base_dir, where)
+    span = float(tab.times[-1] - tab.times[0])
+    if span > period * (1 + 1e-12):
+        raise NetlistError(f"periodic table spans {span:g} s, more than its period {period:g} s", **where)
+    return Periodic(period, tab)

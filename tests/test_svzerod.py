@@ -180,3 +180,125 @@ def test_closed_loop_conserves_volume():
     res = simulate(c, 2 * m.period, dt=m.period / 50, x0=x0, rtol=1e-7, progress=False)
     tot = c.law_volumes(np.asarray(res.x))[0]
     assert np.ptp(tot) < 1e-6 * abs(tot[0]) and tot[0] == pytest.approx(float(m.netlist["constraints"][0]["volume"].split()[0]) * 1e6, rel=1e-9)
+
+
+def test_periodic_waveform_repeats_one_cycle():
+    """{periodic: {period, pwl}} is the table at t0 + (t - t0) mod period, compiled and in
+    Python alike; its breakpoints are the table's times in every cycle of the range."""
+    from hemocircuit.kernels.waveforms import encode, wave_value
+    from hemocircuit.waveforms import parse_waveform
+
+    rows = [["0.5 s", "1 mL/s"], ["0.8 s", "4 mL/s"], ["1.5 s", "1 mL/s"]]
+    wf = parse_waveform({"periodic": {"period": "1 s", "pwl": rows}}, "mL/s")
+    rec = encode(wf)
+    for t in (-0.7, 0.0, 0.5, 0.65, 1.2, 3.8, 10.15):
+        ph = 0.5 + (t - 0.5) % 1.0
+        want = np.interp(ph, [0.5, 0.8, 1.5], [1.0, 4.0, 1.0])
+        assert wf(t) == pytest.approx(want, abs=1e-12) and wave_value(rec, 0, t) == wf(t)
+    assert wf.breakpoints(1.0, 3.0) == pytest.approx([1.5, 1.8, 2.5, 2.8])
+    for bad, msg in (({"period": "0 s", "pwl": rows}, "must be > 0"), ({"period": "0.5 s", "pwl": rows}, "spans"),
+                     ({"period": "1 s", "sine": {}}, "repeats a table"), ({"pwl": rows}, "period")):
+        with pytest.raises(NetlistError, match=msg):
+            parse_waveform({"periodic": bad}, "mL/s")
+
+
+def test_their_time_series_are_one_periodic_cycle():
+    """The importer writes one cycle (their fmod interpolation), not one per simulated cycle."""
+    cfg = _model({"R_poiseuille": 1.0}, {"bc_name": "OUT", "bc_type": "RESISTANCE", "bc_values": {"R": 1.0, "Pd": 0.0}},
+                 {"bc_name": "IN", "bc_type": "FLOW", "bc_values": {"Q": [1.0, 3.0, 1.0], "t": [0.0, 0.4, 1.0]}})
+    src = next(e for e in import_svzerod(cfg).netlist["elements"] if e["id"] == "IN")
+    assert list(src["value"]) == ["periodic"] and len(src["value"]["periodic"]["pwl"]) == 3
+
+
+def test_a_stenosis_needs_the_stenotic_option(tmp_path):
+    """Without 'stenotic' a vessel is linear (constant matrix): a coefficient is an error."""
+    from hemocircuit.circuit import load
+    from hemocircuit.svzerod import write_netlist
+
+    cfg = _model({"R_poiseuille": 1.0, "stenosis_coefficient": 2.0},
+                 {"bc_name": "OUT", "bc_type": "RESISTANCE", "bc_values": {"R": 1.0, "Pd": 0.0}})
+    nl = import_svzerod(cfg).netlist
+    v = next(e for e in nl["elements"] if e["id"] == "v")
+    assert v["stenotic"] is True
+    v["stenotic"] = False
+    write_netlist(nl, str(tmp_path / "m.yaml"))
+    with pytest.raises(NetlistError, match="stenotic"):
+        load(str(tmp_path / "m.yaml"))
+
+
+def _sine_series(f, n=41, T=1.0):
+    t = np.linspace(0.0, T, n)
+    return t, f(t)
+
+
+def test_capacitor_across_a_pressure_source_is_reduced():
+    """PRESSURE P(t) -> BloodVesselCRL (C at the inlet) -> FLOW Q(t): the capacitor's volume
+    is C P(t), so its flow is C dP/dt of their linear interpolation, and their flow_in is
+    Q(t) + C dP/dt; P_out = P(t) - R Q(t)."""
+    from hemocircuit.derived import evaluate_derived
+
+    t, P = _sine_series(lambda t: 10.0 + 5.0 * np.sin(2 * np.pi * t))
+    _, Q = _sine_series(lambda t: 2.0 + np.cos(2 * np.pi * t))
+    R, C = 3.0, 0.2
+    cfg = {"simulation_parameters": {**SIM, "number_of_time_pts_per_cardiac_cycle": 11},
+           "vessels": [{"vessel_name": "v", "vessel_id": 0, "zero_d_element_type": "BloodVesselCRL",
+                        "zero_d_element_values": {"R_poiseuille": R, "C": C},
+                        "boundary_conditions": {"inlet": "IN", "outlet": "OUT"}}],
+           "boundary_conditions": [{"bc_name": "IN", "bc_type": "PRESSURE", "bc_values": {"P": P.tolist(), "t": t.tolist()}},
+                                   {"bc_name": "OUT", "bc_type": "FLOW", "bc_values": {"Q": Q.tolist(), "t": t.tolist()}}]}
+    m = import_svzerod(cfg, units="mmHg")
+    c = load_svzerod(cfg, units="mmHg")
+    assert c.nx == 0  # no state left: everything follows the sources
+    tt = np.array([0.13, 0.52, 1.77])  # inside table intervals (the slope is defined)
+    res = c.outputs(tt, np.zeros((tt.size, 0)))
+    cols = {**res, **evaluate_derived(m.netlist["derived"], res)}
+    slope = np.diff(P) / np.diff(t)
+    k = np.searchsorted(t, tt % 1.0, side="right") - 1
+    q = np.interp(tt % 1.0, t, Q)
+    assert cols[m.columns["v:flow_in"]] == pytest.approx(q + C * slope[k], rel=1e-12)
+    assert cols[m.columns["v:pressure_out"]] == pytest.approx(np.interp(tt % 1.0, t, P) - R * q, rel=1e-12)
+
+
+def test_inductor_in_series_with_a_flow_source_is_reduced():
+    """FLOW Q(t) -> RL vessel -> RESISTANCE: the inductor's flow is Q(t), so P_in = Pd +
+    (R_bc + R) Q + L dQ/dt with their interpolation's slope (BloodVessel.cpp)."""
+    t, Q = _sine_series(lambda t: 5.0 + 2.0 * np.sin(2 * np.pi * t))
+    R, L, Rbc, Pd = 4.0, 0.5, 10.0, 7.0
+    cfg = _model({"R_poiseuille": R, "L": L}, {"bc_name": "OUT", "bc_type": "RESISTANCE", "bc_values": {"R": Rbc, "Pd": Pd}},
+                 {"bc_name": "IN", "bc_type": "FLOW", "bc_values": {"Q": Q.tolist(), "t": t.tolist()}})
+    m = import_svzerod(cfg, units="mmHg")
+    c = load_svzerod(cfg, units="mmHg")
+    assert c.nx == 0
+    tt = np.array([0.07, 0.61, 2.33])
+    res = c.outputs(tt, np.zeros((tt.size, 0)))
+    q = np.interp(tt % 1.0, t, Q)
+    dq = (np.diff(Q) / np.diff(t))[np.searchsorted(t, tt % 1.0, side="right") - 1]
+    assert res[m.columns["v:pressure_in"]] == pytest.approx(Pd + (Rbc + R) * q + L * dq, rel=1e-12)
+    assert res[m.columns["v:flow_out"]] == pytest.approx(q, rel=1e-12)
+
+
+@have_cases
+@pytest.mark.parametrize("case", ["pulsatileFlow_CRL", "pulsatileFlow_CStenosis_steadyPressure", "steadyFlow_RL_R"])
+def test_conformance_reduced_cases(case):
+    """The three cases with a capacitor across a PRESSURE or an inductor after a FLOW."""
+    from hemocircuit.svzerod.conformance import run_case
+
+    r = run_case(os.path.join(SHARED, "cases", case + ".json"), "converged")
+    assert r.ok, (r.err_p, r.err_q, r.worst, r.note)
+
+
+@have_cases
+def test_commands_read_their_json(tmp_path, capsys):
+    """A .json svZeroDSolver model loads like a netlist (the same circuit as the importer's
+    YAML) and a command runs on it directly."""
+    from hemocircuit.circuit import load
+    from hemocircuit.cli import main
+    from hemocircuit.svzerod import write_netlist
+
+    path = os.path.join(SHARED, "cases", "steadyFlow_R_coronary.json")
+    write_netlist(import_svzerod(path).netlist, str(tmp_path / "m.yaml"))
+    a = dict(load(str(tmp_path / "m.yaml")).operating_point().items())
+    b = dict(load(path).operating_point().items())
+    assert a.keys() == b.keys() and all(np.array_equal(a[k], b[k]) for k in a)
+    assert main(["op", path, "--quiet"]) == 0
+    assert "P(INFLOW__branch0_seg0)" in capsys.readouterr().out

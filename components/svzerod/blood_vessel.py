@@ -9,7 +9,9 @@ Units: R_poiseuille [mmHg*s/mL], C [mL/mmHg], L [mmHg*s^2/mL], stenosis_coeffici
 [mmHg*s^2/mL^2]; the importer converts their cgs values.
 
 C = 0 or L = 0 removes the state, so the structure is chosen by two options (set by the
-importer from the values): ``capacitive`` (C > 0) and ``inductive`` (L > 0).
+importer from the values): ``capacitive`` (C > 0) and ``inductive`` (L > 0); a third,
+``stenotic`` (S > 0), marks the quadratic drop: without it the vessel is linear in the
+pressures with a constant matrix (stamped once per parameter set, no Newton iteration).
 States: V = C * P_c [mL] (stored volume above zero pressure) when capacitive, and Q_out [mL/s]
 (the inductor's flow) when inductive.  Local unknowns (terminals in, out, ref):
   R   : branch (in, out) carrying q = Q_in = Q_out
@@ -40,9 +42,17 @@ class _Vessel(Component):
     terminals = ("in", "out", "ref")
     parameters = _PARAMS
     options = {"capacitive": Option(False, kind=bool, doc="has the capacitor (C > 0)"),
-               "inductive": Option(False, kind=bool, doc="has the inductor (L > 0)")}
-    linear_in_pressure = False
-    constant_matrix = False
+               "inductive": Option(False, kind=bool, doc="has the inductor (L > 0)"),
+               "stenotic": Option(False, kind=bool, doc="has the stenosis term (stenosis_coefficient > 0)")}
+
+    @property
+    def linear_in_pressure(self):
+        """Only the stenosis term S|Q|Q is nonlinear (a Newton iteration in the nodal solve)."""
+        return not self.opts["stenotic"]
+
+    @property
+    def constant_matrix(self):
+        return not self.opts["stenotic"]
 
     @property
     def cap(self):
@@ -59,6 +69,8 @@ class _Vessel(Component):
                 out.append((i, "capacitive vessel needs C > 0 (set capacitive: false for C = 0)"))
             if self.ind and np.any(p["L"][..., i] <= 0):
                 out.append((i, "inductive vessel needs L > 0 (set inductive: false for L = 0)"))
+            if not self.opts["stenotic"] and np.any(p["stenosis_coefficient"][..., i] != 0):
+                out.append((i, "stenosis_coefficient != 0 needs the option stenotic: true"))
         return out
 
     def states(self):

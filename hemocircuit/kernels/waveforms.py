@@ -8,6 +8,8 @@ header included, so a reader can skip it); integers are stored as exact float64 
 ``[2, 3 + 2n, n, t_0 .. t_{n-1}, v_0 .. v_{n-1}]``  Table, steps (searchsorted right)
 ``[3, 7, offset, amplitude, frequency, phase, start]``  Sine (frequency Hz, phase rad, start s)
 ``[4, 3 + sum of the parts' lengths, m, part_1 .. part_m]``  Sum of m nested records
+``[5, 4 + table length, period, t_0, table record]``  Periodic: the table (kind 1 or 2) at
+                                                    t_0 + (t - t_0) mod period
 
 ``encode(wf)`` builds the record of one waveform; ``concat(records)`` joins several into one
 array and returns their start offsets; ``wave_value(data, start, t)`` evaluates the record that
@@ -21,9 +23,9 @@ import math
 import numba
 import numpy as np
 
-from ..waveforms import Constant, Sine, Sum, Table, Waveform
+from ..waveforms import Constant, Periodic, Sine, Sum, Table, Waveform
 
-CONSTANT, LINEAR, STEPS, SINE, SUM = 0, 1, 2, 3, 4
+CONSTANT, LINEAR, STEPS, SINE, SUM, PERIODIC = 0, 1, 2, 3, 4, 5
 #: deepest nesting of Sum records ``wave_value`` evaluates (checked by ``encode``)
 MAX_SUM_DEPTH = 16
 
@@ -58,6 +60,11 @@ def _encode(wf, out, depth):
         out += [SUM, 0, len(wf.parts)]
         for part in wf.parts:
             _encode(part, out, depth + 1)
+        out[head + 1] = len(out) - head
+    elif isinstance(wf, Periodic):
+        head = len(out)
+        out += [PERIODIC, 0, float(wf.period), float(wf.table.times[0])]
+        _encode(wf.table, out, depth)
         out[head + 1] = len(out) - head
     else:
         raise TypeError(f"no compiled form for waveform {type(wf).__name__}")
@@ -126,6 +133,11 @@ def _steps(data, ts, n, t):
 @_jit
 def _leaf(data, pos, t):
     kind = int(data[pos])
+    if kind == PERIODIC:  # Periodic.phase, then its table
+        t0 = data[pos + 3]
+        t = t0 + (t - t0) % data[pos + 2]
+        pos += 4
+        kind = int(data[pos])
     if kind == CONSTANT:
         return data[pos + 2]
     if kind == LINEAR:

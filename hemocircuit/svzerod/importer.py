@@ -12,7 +12,7 @@ Mapping (one element per block, named after it; blocks in components/svzerod/):
            mass conservation); BloodVesselJunction -> one blood_vessel per outlet,
            ``J_outletname`` (their equations are exactly parallel R + stenosis + L branches)
   BCs      FLOW -> flow_source, PRESSURE -> pressure_source (their periodic time series as a
-           pwl table repeated over the simulated cycles + 1), RESISTANCE -> resistance_bc,
+           ``periodic`` pwl waveform: one cycle), RESISTANCE -> resistance_bc,
            RCR -> rcr_bc, CORONARY -> coronary_bc
 Connection nodes are named ``A__B`` (upstream block, downstream block), a normal junction's
 node after the junction.  ``SvzModel.columns`` maps their output names (``pressure:A:B``,
@@ -91,7 +91,7 @@ def _fmt(x, unit):
 
 
 class _Importer:
-    def __init__(self, cfg, path, units, extra_cycles=1):
+    def __init__(self, cfg, path, units):
         self.cfg, self.path = cfg, path
         if units not in UNIT_SYSTEMS:
             raise _err(f"unknown unit system {units!r}; choose one of {sorted(UNIT_SYSTEMS)}", path=path)
@@ -101,10 +101,11 @@ class _Importer:
         self.uR, self.uC, self.uL = f"({P})/({Q})", f"({V})/({P})", f"({P})/({Q})*s"
         self.uS = f"({P})/({Q})**2"
         self.uE = f"({P})/({V})"
-        self.extra_cycles = extra_cycles
         self.elements, self.columns, self.types = [], {}, set()
         self.chamber_elements = []
         self.ids = {}
+        self.raw = {}  # (block, key) -> (times from 0, values, period) of a time series
+        self.pinned_p, self.pinned_q = {}, {}  # node -> (BC name, its value key) of PRESSURE / FLOW
 
     # --- helpers ------------------------------------------------------------------------
     def id_of(self, name):
@@ -125,7 +126,7 @@ class _Importer:
         return v
 
     def series(self, block, values, key, unit, steady=False):
-        """A constant, or a periodic time series repeated over the simulated cycles."""
+        """A constant, or their periodic time series (one cycle, a ``periodic`` pwl waveform)."""
         v = self.value(block, values, key)
         if not isinstance(v, list):
             return _fmt(v, unit), float(v)
@@ -145,11 +146,10 @@ class _Importer:
         mean = float(np.mean(vals))  # their Parameter::to_steady: mean of the samples
         if steady or np.all(vals == vals[0]):  # a constant series stays a constant
             return _fmt(mean, unit), mean
-        rows = []
-        for k in range(self.n_cycles + self.extra_cycles):
-            for tt, vv in zip(t - t[0] + k * period, vals):
-                rows.append([_fmt(tt, "s"), _fmt(vv, unit)])
-        return {"pwl": rows}, mean
+        self.raw[(block, key)] = (t - t[0], vals, period)
+        # their Parameter::get: linear interpolation at fmod(t, period), i.e. one cycle repeated
+        rows = [[_fmt(tt, "s"), _fmt(vv, unit)] for tt, vv in zip(t - t[0], vals)]
+        return {"periodic": {"period": _fmt(period, "s"), "pwl": rows}}, mean
 
     def note_period(self, period, block):
         if self.period is None:
@@ -158,6 +158,16 @@ class _Importer:
             raise _err(f"block '{block}': its time series has period {period!r} s, but block "
                        f"'{self.period_block}' has {self.period!r} s (svZeroDSolver needs one cardiac period)",
                        block, self.path)
+
+    def slope(self, block, key, factor, unit):
+        """factor * d/dt of a block's series: their linear interpolation's slopes as a periodic
+        ``steps`` waveform (0 for a constant or the steady variant)."""
+        if (block, key) not in self.raw:
+            return _fmt(0.0, unit)
+        t, v, period = self.raw[(block, key)]
+        d = factor * np.diff(v) / np.diff(t)
+        rows = [[_fmt(tt, "s"), _fmt(dd, unit)] for tt, dd in zip(t[:-1], d)]
+        return {"periodic": {"period": _fmt(period, "s"), "steps": rows}}
 
     def add(self, eid, typ, nodes, **vals):
         self.elements.append({"id": eid, "type": typ, "nodes": nodes, **vals})
@@ -311,7 +321,8 @@ class _Importer:
             eid = self.id_of(name)
             self.add(eid, "blood_vessel" if typ == "BloodVessel" else "blood_vessel_crl", [n_in, n_out, "ground"],
                      R_poiseuille=_fmt(R, self.uR), C=_fmt(C, self.uC), L=_fmt(L, self.uL),
-                     stenosis_coefficient=_fmt(S, self.uS), capacitive=C != 0.0, inductive=L != 0.0)
+                     stenosis_coefficient=_fmt(S, self.uS), capacitive=C != 0.0, inductive=L != 0.0,
+                     stenotic=S != 0.0)
             q_in[name], q_out[name] = f"{eid}.Q_in", f"{eid}.Q_out"
             p0, qi, qo = ic(f"pressure:{up}:{name}"), ic(f"flow:{up}:{name}"), ic(f"flow:{name}:{down}")
             if C != 0.0:  # their capacitor pressure: P_in (CRL), P_in - (R + S|Q_in|) Q_in (BloodVessel)
@@ -337,7 +348,7 @@ class _Importer:
                 eid = self.id_of(f"{name}_{o}")
                 self.add(eid, "blood_vessel", [node(ins[0], name), node(name, o), "ground"],
                          R_poiseuille=_fmt(R, self.uR), L=_fmt(L, self.uL), stenosis_coefficient=_fmt(S, self.uS),
-                         inductive=float(L) != 0.0)
+                         inductive=float(L) != 0.0, stenotic=float(S) != 0.0)
                 q_in[name + "->" + o] = f"{eid}.Q_out"
                 if float(L) != 0.0:
                     start(eid, "Q_out", ic(f"flow:{name}:{o}"), Q)
@@ -421,9 +432,11 @@ class _Importer:
                 q, _ = self.series(name, vals, "Q", Q, steady)
                 self.add(eid, "flow_source", ["ground", nd] if outs else [nd, "ground"], value=q)
                 flow_col[name] = f"Q({eid})"
+                self.pinned_q[nd] = (name, "Q")
             elif typ == "PRESSURE":
                 p_, _ = self.series(name, vals, "P", P, steady)
                 self.add(eid, "pressure_source", [nd, "ground"], value=p_)
+                self.pinned_p[nd] = (name, "P")
             elif typ == "RESISTANCE":
                 pd, _ = self.series(name, vals, "Pd", P, steady)
                 self.add(eid, "resistance_bc", [nd, "ground"], R=_fmt(self.value(name, vals, "R"), self.uR), Pd=pd)
@@ -453,6 +466,9 @@ class _Importer:
             for e in self.elements:
                 if e["id"] == eid:
                     e["period"] = _fmt(period, "s")
+
+        self.derived = {}
+        self.reduce_ideal_sources(q_in, q_out)
 
         # their output names -> our columns
         cols = {}
@@ -489,6 +505,80 @@ class _Importer:
         self.law_node = node(HEART_IN, HEART) if heart is not None else (
             self.elements[0]["nodes"][0] if self.elements else None)
         return [v["vessel_name"] for v in vessels]
+
+    def reduce_ideal_sources(self, q_in, q_out):
+        """Vessel capacitors across an ideal pressure source, vessel inductors in series with an
+        ideal flow source.
+
+        Their solver integrates the DAE with a mass matrix, so such a capacitor (pulsatileFlow_CRL:
+        a PRESSURE inlet on a BloodVesselCRL) or inductor (steadyFlow_RL_R: a FLOW inlet on an RL
+        vessel), whose state the source fixes (a higher-index DAE), is no special case for it.
+        Our states must be free (the topology
+        pass rejects a loop of pressure-defining elements and a node reached only through
+        flow-defining ones), so the importer does the index reduction where it can do it
+        exactly: the constrained state is a known function of time.
+          - capacitor C from node n to ground, P(n) = P(t) imposed: V = C P(t) is not a state;
+            the vessel loses its capacitor and a flow source C dP/dt from n to ground (the slopes
+            of their linear interpolation, a periodic steps waveform) carries its flow;
+          - inductor L whose end node is joined only to it and flow sources Q(t): its flow is
+            not a state; the vessel loses its inductor and a pressure source L dQ/dt in series
+            (between a new node ``ID_L`` and the end node) keeps its pressure drop.
+        Detection is generic, from the components' own edges (the capacitor's store edge on a
+        pinned node; a node whose every edge is flow-defining); only the reduction knows the
+        vessel's structure.  Their outputs that include the removed flow become derived
+        quantities (``derived:`` in the netlist)."""
+        from hemocircuit.registry import get_type
+
+        comps = [get_type(e["type"])({k: e[k] for k in get_type(e["type"]).options if k in e})
+                 for e in self.elements]
+        roles = {}  # node -> [(element index, role)]
+        for i, (e, c) in enumerate(zip(self.elements, comps)):
+            m = dict(zip(c.terminals, e["nodes"]))
+            for a, b, role in c.edges():
+                for t in (a, b):
+                    if t in m:
+                        roles.setdefault(m[t], []).append((i, role))
+        Q, P = self.u["Q"], self.u["P"]
+        for i, (e, c) in enumerate(list(zip(self.elements, comps))):
+            if e["type"] not in ("blood_vessel", "blood_vessel_crl"):
+                continue
+            m = dict(zip(c.terminals, e["nodes"]))
+            eid, block = e["id"], self.block_of(e["id"])
+            stores = c.storages()
+            if stores and m.get(stores[0].plus) in self.pinned_p and m.get(stores[0].minus) == "ground":
+                node = m[stores[0].plus]
+                bc, key = self.pinned_p[node]
+                Cv = float(e["C"].split()[0])
+                e["capacitive"] = False
+                cid = self.id_of(f"{block}_C")
+                self.add(cid, "flow_source", [node, "ground"], value=self.slope(bc, key, Cv, Q))
+                if stores[0].plus == "in":  # their flow_in includes the capacitor's flow
+                    self.derived[f"{eid}_Q_in"] = {"expr": f"{eid}.Q_in + Q({cid})", "unit": "mL/s"}
+                    q_in[block] = f"{eid}_Q_in"
+                else:
+                    self.derived[f"{eid}_Q_out"] = {"expr": f"{eid}.Q_out - Q({cid})", "unit": "mL/s"}
+                    q_out[block] = f"{eid}_Q_out"
+                continue
+            if not e.get("inductive"):
+                continue
+            for end in ("out", "in"):
+                node = m[end]
+                others = [j for j, _ in roles.get(node, []) if j != i]
+                if node in self.pinned_q and all(r == "flow" for _, r in roles[node]) and all(
+                        self.elements[j]["type"] == "flow_source" for j in others):
+                    bc, key = self.pinned_q[node]
+                    Lv = float(e["L"].split()[0])
+                    e["inductive"] = False
+                    mid = f"{eid}_L"
+                    e["nodes"] = [mid, e["nodes"][1], e["nodes"][2]] if end == "in" else [e["nodes"][0], mid, e["nodes"][2]]
+                    pid = self.id_of(f"{block}_L")
+                    # P(mid) - P(node) = L dQ/dt at the outlet; P(node) - P(mid) at the inlet
+                    sign = 1.0 if end == "out" else -1.0
+                    self.add(pid, "pressure_source", [mid, node], value=self.slope(bc, key, sign * Lv, P))
+                    break
+
+    def block_of(self, eid):
+        return next(name for name, ident in self.ids.items() if ident == eid)
 
     def activation(self, name, af):
         """Their activation_function mapping -> the chamber's option and parameters."""
@@ -544,12 +634,14 @@ def _read(path_or_cfg):
         raise NetlistError(f"not valid JSON: {exc}", file=path) from None
 
 
-def import_svzerod(path_or_cfg, units: str = "cgs", extra_cycles: int = 1) -> SvzModel:
-    """Read an svZeroDSolver JSON model (a path or the parsed dict) into an :class:`SvzModel`."""
+def import_svzerod(path_or_cfg, units: str = "cgs", name=None, source=None) -> SvzModel:
+    """Read an svZeroDSolver JSON model (a path or the parsed dict) into an :class:`SvzModel`.
+    ``name``/``source``: the model's name and file when a parsed dict is given."""
     cfg, path = _read(path_or_cfg)
-    imp = _Importer(cfg, path, units, extra_cycles)
+    path = path or source
+    imp = _Importer(cfg, path, units)
     vessels = imp.run()
-    name = os.path.splitext(os.path.basename(path))[0] if path else "svzerod_model"
+    name = name or (os.path.splitext(os.path.basename(path))[0] if path else "svzerod_model")
     sim = {k: v for k, v in imp.sim.items()}
     header = {
         "name": _ident(name, path),
@@ -561,15 +653,44 @@ def import_svzerod(path_or_cfg, units: str = "cgs", extra_cycles: int = 1) -> Sv
                        "number_of_time_pts_per_cardiac_cycle": int(sim["number_of_time_pts_per_cardiac_cycle"])},
     }
     netlist = {**header, "elements": imp.elements}
+    if imp.derived:
+        netlist["derived"] = imp.derived
     if imp.closed:  # the conserved blood volume is that of their initial condition
         netlist["constraints"] = [{"node": imp.law_node, "volume": _fmt(imp.store_volume, imp.u["V"])}]
-    steady = _Importer(cfg, path, units, extra_cycles)
+    steady = _Importer(cfg, path, units)
     steady.run(steady=True)
     mean_netlist = {**header, "name": header["name"] + "_mean", "elements": steady.elements}
+    if steady.derived:
+        mean_netlist["derived"] = steady.derived
     if imp.closed:
         mean_netlist["constraints"] = netlist["constraints"]
     return SvzModel(name, netlist, imp.period_value, sim, imp.columns, sorted(imp.types), vessels,
                     imp.u, mean_netlist, imp.initial, imp.closed, imp.initial_given)
+
+
+def is_svzerod_model(data) -> bool:
+    """True for a parsed svZeroDSolver JSON model (simulation_parameters and blocks, no
+    hemocircuit 'elements')."""
+    return (isinstance(data, dict) and isinstance(data.get("simulation_parameters"), dict)
+            and "elements" not in data and any(k in data for k in ("vessels", "boundary_conditions",
+                                                                  "closed_loop_blocks", "chambers")))
+
+
+def guess_units(cfg) -> str:
+    """Unit system of a model: 'SI' when its top-level comments say m^3 (their Regazzoni
+    models), else 'cgs' (their convention).  Models in mmHg need no special case: every
+    pressure-carrying parameter scales together, so 'cgs' gives the same numbers."""
+    text = " ".join(str(v) for k, v in cfg.items() if str(k).startswith("_"))
+    return "SI" if re.search(r"m\^3|m\*\*3", text) else "cgs"
+
+
+def netlist_of(cfg: dict, path=None) -> dict:
+    """The hemocircuit netlist (dict) of a parsed svZeroDSolver model, in the units
+    :func:`guess_units` finds: what netlist loading uses for a ``.json`` model, so every
+    command accepts their JSON directly."""
+    name = os.path.splitext(os.path.basename(path))[0] if path else None
+    model = import_svzerod(cfg, units=guess_units(cfg), name=name, source=path)
+    return model.netlist
 
 
 def write_netlist(netlist: dict, out_path: str):

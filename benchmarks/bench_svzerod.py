@@ -1,0 +1,64 @@
+"""Our in-process solve time against svZeroDSolver's on their five timed test cases.
+
+    python benchmarks/bench_svzerod.py [--folder ../shared/svzerod] [--repeat 7] [--case NAME]
+
+Reads the cases and their times (the README's speed table: Release build, in-process
+``pysvzerod.simulate``, median of 5) from a folder laid out like ``../shared/svzerod/``; skips
+when it is absent.  Ours: the conformance runner's solve (hemocircuit.svzerod.conformance:
+operating point or their initial condition, then the transient at the case's integrator
+tolerance), after one untimed run that loads the compiled engine; loading the model and
+compiling are excluded, as in theirs.  Prints the median and minimum wall time, the median CPU
+time and the ratio of our median wall time to the middle of their range.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import sys
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+TIMED = ("steadyFlow_R_RCR", "pulsatileFlow_R_RCR", "pulsatileFlow_R_coronary", "closedLoopHeart_singleVessel",
+         "chamber_elastance_inductor")
+
+
+def their_ms(text):
+    """'7.0-7.8 ms' -> 7.4 (the middle of the range), '18.5 ms' -> 18.5."""
+    nums = [float(x) for x in re.findall(r"[\d.]+", text)]
+    return float(np.mean(nums)) if nums else float("nan")
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--folder", default=os.path.join(HERE, "..", "..", "shared", "svzerod"))
+    ap.add_argument("--repeat", type=int, default=7)
+    ap.add_argument("--case", action="append")
+    args = ap.parse_args(argv)
+    folder = os.path.abspath(args.folder)
+    if not os.path.isdir(os.path.join(folder, "cases")):
+        print(f"no svZeroDSolver cases in {folder}: skipped")
+        return 0
+    from hemocircuit.svzerod.conformance import case_rtol, simulate_case, their_times
+    from hemocircuit.svzerod.importer import guess_units, import_svzerod
+
+    theirs = their_times(os.path.join(folder, "README.md"))
+    print(f"{'case':30s} {'rtol':>6s} {'ours median':>12s} {'min':>9s} {'CPU':>9s} {'theirs':>12s} {'ratio':>6s}")
+    for name in args.case or TIMED:
+        path = os.path.join(folder, "cases", f"{name}.json")
+        with open(path) as fh:
+            model = import_svzerod(path, units=guess_units(json.load(fh)))
+        rtol = case_rtol(model)
+        simulate_case(model, rtol=rtol)  # loads (or compiles) the engine
+        _, _, _, times = simulate_case(model, rtol=rtol, timed_runs=args.repeat)
+        wall, cpu = np.median(times, axis=0) * 1e3
+        ref = theirs.get(name, "")
+        print(f"{name:30s} {rtol:6.0e} {wall:9.2f} ms {times[:, 0].min() * 1e3:6.2f} ms {cpu:6.2f} ms "
+              f"{ref:>12s} {wall / their_ms(ref):6.2f}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
