@@ -247,10 +247,10 @@ def _load_any(path):
 
         from hemocircuit.ic import apply_ic
         from hemocircuit.svzerod import import_svzerod, load_svzerod
-        from hemocircuit.svzerod.conformance import case_units
+        from hemocircuit.svzerod.importer import guess_units
 
         with open(path) as fh:
-            units = case_units(json.load(fh))
+            units = guess_units(json.load(fh))
         m = import_svzerod(path, units=units)
         c = load_svzerod(path, units=units)
         return c, apply_ic(c, np.zeros(c.nx), m.initial)
