@@ -120,14 +120,12 @@ def distinct_members(circuit):
     """(first, inverse): ``first`` the index of one member of each distinct parameter set of a
     batch circuit (members whose every fixed parameter value is equal), ``inverse[k]`` the
     position in ``first`` of member k's set.  Waveforms and options are common to a batch."""
-    from .errors import NetlistError as _NetlistError
-
     vals = circuit.parameters.values
     cols = []
     for path in vals:
         try:
             cols.append(np.asarray(vals[path], dtype=float))
-        except _NetlistError:  # follows an expression: no fixed value
+        except NetlistError:  # follows an expression: no fixed value
             continue
     if circuit.B == 1 or not cols:
         return np.zeros(min(circuit.B, 1), int), np.zeros(circuit.B, int)

@@ -297,8 +297,8 @@ def _simulate_compiled(system, c, x, t0, t_end, dt, events, rtol, atol, max_step
         except KeyboardInterrupt as exc:
             raise Interrupted.of(exc, partial=_collect(c, ts, xs, segs) if ts else None) from None
     res = _collect(c, ts, xs, segs)
-    from ..kernels.tableaus import default_method
-    res.stats = {**stats, "method": f"{default_method(rtol).upper()} (compiled)"}
+    from ..kernels.tableaus import DEFAULT
+    res.stats = {**stats, "method": f"{DEFAULT.upper()} (compiled)"}
     return res
 
 

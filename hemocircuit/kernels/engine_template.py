@@ -351,15 +351,25 @@ def make_jac_work(lay):
     (its LU), 2 its pivots, 3 base unknowns u, 4 base local residuals (at the eu offsets),
     5 dD/du (nx, n+1), 6 one column dR/dx_j, 7 base derivatives, 8 stored local matrices
     (at the eu offsets, Lm columns), 9 stored local right-hand sides, 10 1 if the element has
-    an expression parameter."""
+    an expression parameter, 11 1 if expressions read the element's observables (both depend
+    on the layout only)."""
     (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st) = lay
     Lm = 1
     for e in range(et.shape[0]):
         Lm = max(Lm, L[e])
     nu = max(ui.shape[0], 1)
+    hasx = np.zeros(et.shape[0], dtype=np.int64)
+    for k in range(xs.shape[0]):
+        for e in range(et.shape[0]):
+            if ep[e] <= xs[k] < ep[e + 1]:
+                hasx[e] = 1
+    observed = np.zeros(et.shape[0], dtype=np.int64)
+    if xs.shape[0] > 0:
+        for k in range(oe.shape[0]):
+            observed[oe[k]] = 1
     return (np.zeros(max(ep[-1], 1)), np.zeros((n + 1, n + 1)), np.zeros(n + 1, dtype=np.int64), np.zeros(n + 1),
             np.zeros(nu), np.zeros((max(nx, 1), n + 1)), np.zeros(n + 1), np.zeros(max(nx, 1)),
-            np.zeros((nu, Lm)), np.zeros(nu), np.zeros(et.shape[0], dtype=np.int64))
+            np.zeros((nu, Lm)), np.zeros(nu), hasx, observed)
 
 
 @njit(cache=True, nogil=True, _nrt=False)
@@ -377,18 +387,13 @@ def local_jacobian_into(t, x, P, lay, work, jw, scales, J, xt):
     (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st) = lay
     if nonlin != 0:
         return -1
-    Pb, A, piv, ub, rb, M, col, Db, Ab, bb, hasx = jw
+    Pb, A, piv, ub, rb, M, col, Db, Ab, bb, hasx, obs = jw
     u, Al, bl, ul, pl, xl, il, dl, A0, b0 = (work[4], work[5], work[6], work[7], work[9], work[10], work[11],
                                              work[12], work[14], work[15])
     E = et.shape[0]
     Pe = effective_params(t, x, P, lay, work)
     for i in range(Pb.shape[0]):
         Pb[i] = Pe[i]
-    for e in range(E):
-        hasx[e] = 0
-        for k in range(xs.shape[0]):
-            if ep[e] <= xs[k] < ep[e + 1]:
-                hasx[e] = 1
     # the full nodal system at x (as solve_nodes, without condensation); local stamps kept
     for i in range(n + 1):
         ub[i] = b0[i]
@@ -444,11 +449,7 @@ def local_jacobian_into(t, x, P, lay, work, jw, scales, J, xt):
     for i in range(nx):
         xt[i] = x[i]
     for e0 in range(E):
-        observed = False
-        if xs.shape[0] > 0:
-            for k in range(oe.shape[0]):
-                if oe[k] == e0:
-                    observed = True
+        observed = obs[e0] == 1
         for j in range(ex[e0], ex[e0 + 1]):
             hj = FD_REL * max(abs(x[j]), scales[j])
             xt[j] = x[j] + hj

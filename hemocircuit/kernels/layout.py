@@ -38,10 +38,10 @@ def engine_kernels(pairs) -> list:
     qualified names), so every circuit made of the same component types gets the same module.
 
     ``$HEMOCIRCUIT_ENGINE_TYPES`` = ``used`` (default): the circuit's distinct kernels -- the
-    shortest first compilation (~26 s CPU for vasomotion's 5 types), one engine per set of
-    types.  ``all``: every registered type's kernels -- one engine for every netlist, longer
-    to compile once (~35 s), cheaper for a process that meets many sets of types (the test
-    suite, tests/conftest.py)."""
+    shortest first compilation, one engine per set of types.  ``all``: every registered
+    type's kernels -- one engine for every netlist, longer to compile once, cheaper for a
+    process that meets many sets of types (the test suite, tests/conftest.py).  Compile times:
+    docs/performance.md."""
     from ..errors import HemocircuitError
     from .codegen import kernel_names
 

@@ -59,9 +59,8 @@ class CompiledSystem:
     def integrate(self, t_out, x0, P, rtol=1e-6, atol=None, breaks=(), h0=1e-3, hmax=np.inf,
                   max_steps=10_000_000, method=None, **tab_options):
         """States on the grid t_out (T,) from x0 at t_out[0] for one parameter row P (slots,).
-        ``method``: a Rosenbrock tableau of hemocircuit.kernels.tableaus (None: chosen by rtol,
-        tableaus.default_method;
-        ``tab_options`` go to its ``packed``).
+        ``method``: a Rosenbrock tableau of hemocircuit.kernels.tableaus (None: tableaus.DEFAULT);
+        ``tab_options`` go to its ``packed``.
 
         Returns (X (T, nx), stats dict).  Rows after a failure are NaN; stats['status'] < 0
         says why (see STATUS)."""
@@ -87,7 +86,7 @@ class CompiledSystem:
         return self.mod.integrate_batch(t_out, X0, P, self.lay, self.scales, self.lim_i, self.lim_b, self.lim_r,
                                         np.asarray(sorted(breaks), dtype=float), float(rtol), atol_v, float(h0),
                                         hmax, int(max_steps),
-                                        self.tableau(method or tableaus.default_method(rtol), **tab_options))
+                                        self.tableau(method or tableaus.DEFAULT, **tab_options))
 
     def tableau(self, method, **tab_options):
         """The packed method for integrate_batch (hemocircuit.kernels.tableaus)."""

@@ -129,11 +129,6 @@ JAC_REUSE = {"ros34pw2": 6, "ros34pw3": 6, "rodas4": 1, "rodas5p": 1}
 DEFAULT = "rodas5p"
 
 
-def default_method(rtol):
-    """The method used when none is named (see DEFAULT; the same at every tolerance)."""
-    return DEFAULT
-
-
 def classical(name):
     """(gamma, A, G, b, e, q) of method ``name`` in the classical form."""
     if name not in METHODS:
