@@ -256,7 +256,7 @@ def compute_tran(args, sets):
     t_end = float(_unit_to(args.t_end, "s")) if args.t_end else None
     dt = float(_unit_to(args.dt, "s")) if args.dt else None
     ic = _assignments(args.ic, "--ic", "ID.STATE=VALUE", "Cv.V=20mL")
-    return c.simulate(t_end, dt=dt, protocol=events_only(proto), method=args.method, ic=ic)
+    return c.simulate(t_end, dt=dt, protocol=events_only(proto), method=args.method, ic=ic, compile=args.compile)
 
 
 def cmd_tran(args):
@@ -404,6 +404,11 @@ def build_parser(command=None):
     sp.add_argument("--ic", action="append", metavar="ID.STATE=VALUE",
                     help="start with this state overridden (units allowed, e.g. Cv.V=20mL, art.Ca=1e-7M); "
                          "the others at the operating point; repeatable")
+    sp.add_argument("--compile", choices=("background", "wait"),
+                    default=os.environ.get("HEMOCIRCUIT_COMPILE", "background"),
+                    help="first run of a set of component types: build the compiled engine in the background "
+                         "and integrate on the scipy path meanwhile (default; $HEMOCIRCUIT_COMPILE), or wait "
+                         "for the build")
     sp.set_defaults(func=cmd_tran)
     common(sub.add_parser("graph", help="draw the circuit graph to PNG"), grid=False).set_defaults(func=cmd_graph)
     sp = sub.add_parser("show", help="reload a result file: provenance, summary, re-plot, re-run")

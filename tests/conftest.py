@@ -12,6 +12,9 @@ from paths import BAD, NETLISTS, PAYNE06, ROOT, TESTS  # noqa: F401
 # engine (~30 s CPU each with cold caches, as on CI).  Results are bitwise the same; the
 # per-set default is tested in test_compiled_engine.py with the variable set to "used".
 os.environ.setdefault("HEMOCIRCUIT_ENGINE_TYPES", "all")
+# runs compile their engine before integrating (the command line default builds it in the
+# background and starts on the scipy path: tests would depend on timing)
+os.environ.setdefault("HEMOCIRCUIT_COMPILE", "wait")
 
 
 @pytest.fixture

@@ -9,6 +9,8 @@ SolverError carrying the time, the state and the part computed so far.
 """
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 from scipy.integrate import solve_ivp
 
@@ -69,7 +71,7 @@ def _limit_events(circuit, limits):
 
 
 def simulate(circuit, t_end, dt=None, t0=0.0, x0=None, protocol=None, method="BDF", rtol=1e-6, atol=None,
-             max_step=np.inf, first_step=None, engine="auto", ic=None, progress=None):
+             max_step=np.inf, first_step=None, engine="auto", ic=None, progress=None, compile="wait"):
     """Integrate from t0 to t_end [s].
 
     x0: initial states (default: the operating point after the protocol's initial settings).
@@ -83,6 +85,12 @@ def simulate(circuit, t_end, dt=None, t0=0.0, x0=None, protocol=None, method="BD
         kernel and ``method`` is left at its default, scipy otherwise.
     progress: a bar of the simulated time on stderr (default: :mod:`hemocircuit.progress`'s
         setting, on for the command line unless --quiet).
+    compile: with engine 'auto', what a run does when the compiled engine of the circuit's
+        component types is not built yet (its first run; building takes about a minute):
+        'wait' compiles it first; 'background' starts the build in another process
+        (:mod:`hemocircuit.kernels.background`), integrates on the scipy path meanwhile and
+        continues on the compiled engine from the first piece after the build is ready
+        (``stats['method']`` says where it switched).  The command line uses 'background'.
 
     Returns a :class:`TransientResult`; implausible values (:mod:`hemocircuit.plausibility`)
     are listed in ``metadata['warnings']``.  A solver failure (or a non-finite value) raises
@@ -93,10 +101,13 @@ def simulate(circuit, t_end, dt=None, t0=0.0, x0=None, protocol=None, method="BD
     settings = {"t_end": t_end, "dt": dt, "t0": t0, "method": method, "engine": engine, "rtol": rtol,
                 "atol": atol, "max_step": None if max_step == np.inf else max_step, "first_step": first_step,
                 "ic": dict(ic) if ic else None, "x0": None if x0 is None else "given",
-                "protocol": protocol if isinstance(protocol, str) else getattr(protocol, "file", None)}
+                "protocol": protocol if isinstance(protocol, str) else getattr(protocol, "file", None),
+                "compile": compile}
+    if compile not in ("wait", "background"):
+        raise SolverError(f"compile {compile!r} (tran --compile, $HEMOCIRCUIT_COMPILE): choose 'wait' or 'background'")
     try:
         res = _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step, first_step, engine, ic,
-                        progress)
+                        progress, compile)
     except SolverError as exc:
         if exc.partial is not None:
             stamp(exc.partial, "tran", circuit, settings, started, status="partial")
@@ -119,11 +130,12 @@ def simulate(circuit, t_end, dt=None, t0=0.0, x0=None, protocol=None, method="BD
 
 
 def _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step, first_step, engine, ic,
-              progress=None):
-    from ..progress import bar
+              progress=None, compile="wait"):
+    from ..progress import bar, wanted
     from .op import operating_point
 
     c = circuit
+    handover = None
     if isinstance(protocol, str):
         protocol = Protocol.load(protocol, c)
     if protocol is not None:
@@ -152,9 +164,20 @@ def _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step
             raise SolverError("this circuit cannot run compiled (a component type without a kernel, or "
                               "too many nodal unknowns); use engine='scipy'")
         if system is not None:
-            with bar(t_end - t0, "tran (simulated time)", unit="s", progress=progress) as pbar:
-                return _simulate_compiled(system, c, x, t0, t_end, dt, events, rtol, atol, max_step, first_step,
-                                          pbar)
+            from ..kernels import background
+            if compile == "background" and engine == "auto" and not background.ready(system) \
+                    and background.start(system, c, x, t0, rtol):
+                handover = _Handover(system, t0, t_end)  # the scipy path below, until the build is ready
+                if wanted(progress):
+                    print("hemocircuit: the compiled engine for these component types is being built in the "
+                          "background (first run, about a minute); integrating on the scipy path meanwhile",
+                          file=sys.stderr)
+            else:
+                with bar(t_end - t0, "tran (simulated time)", unit="s", progress=progress) as pbar:
+                    res = _simulate_compiled(system, c, x, t0, t_end, dt, events, rtol, atol, max_step, first_step,
+                                             pbar)
+                background.mark_ready(system)
+                return res
     ts, xs, segs = [], [], []
     nfev = njev = nsteps = 0
     t_grid = None if dt is None else np.arange(t0, t_end + 0.5 * dt, dt)
@@ -198,19 +221,66 @@ def _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step
         return _collect(c, ts, xs, segs)
 
     bounds = [t0] + [e[0] for e in events] + [t_end]
+    compiled = None
     try:
-        _scipy_segments(c, x, bounds, events, limits, one_segment, ts, xs, segs)
+        switch = _scipy_segments(c, x, bounds, events, limits, one_segment, ts, xs, segs, handover, t_grid)
+        if switch is not None:  # the background build is ready: the rest on the compiled engine
+            k, t_s, x_s, c_k = switch
+            from ..kernels.system import CompiledSystem
+            compiled = _simulate_compiled(CompiledSystem.of(c_k), c_k, x_s, t_s, t_end, dt, events[k:], rtol, atol,
+                                          max_step, first_step, pbar, t_grid=_output_grid(t0, t_end, dt),
+                                          parts=(ts, xs, segs), bar_t0=t0)
     except KeyboardInterrupt as exc:
         raise Interrupted.of(exc, partial=_partial()) from None
     finally:
         pbar.close()
+    scipy_stats = {"nfev": nfev, "njev": njev, "nsteps": nsteps, "method": method}
+    if compiled is not None:
+        compiled.stats = {**compiled.stats, "method": f"{method} (scipy) to t = {switch[1]:.6g} s while the compiled "
+                                                      f"engine was built, then {compiled.stats['method']}",
+                          "switched_at": switch[1], "scipy": scipy_stats}
+        return compiled
     res = _collect(segs[-1] if segs else c, ts, xs, segs)
-    res.stats = {"nfev": nfev, "njev": njev, "nsteps": nsteps, "method": method}
+    res.stats = scipy_stats if handover is None else {**scipy_stats, "compiled_engine": "building in the background"}
     return res
 
 
-def _scipy_segments(c, x, bounds, events, limits, one_segment, ts, xs, segs):
-    """Integrate the protocol segments (solve_ivp), appending to ts, xs, segs."""
+class _Handover:
+    """The scipy path in pieces while the compiled engine builds in the background
+    (simulate's ``compile='background'``): each piece takes about PIECE_WALL seconds of wall
+    time, after each :meth:`ready` says whether the rest can run compiled."""
+
+    PIECE_WALL = 0.25  # [s] of wall time between checks
+
+    def __init__(self, system, t0, t_end):
+        self.system = system
+        self.piece = (t_end - t0) / 1000.0  # [s] simulated: a first guess, adapted after each piece
+
+    def end_of(self, cur, b, t_grid):
+        """End of the piece starting at ``cur`` in a stretch ending at ``b`` (an output time
+        when there is an output grid, so that pieces add no rows)."""
+        end = min(b, cur + self.piece)
+        if t_grid is not None and end < b:
+            later = t_grid[t_grid >= end]
+            end = min(b, float(later[0])) if later.size else b
+        return end
+
+    def after(self, simulated, wall):
+        """Adapt the piece length to the speed of the last piece (at most 4x per piece)."""
+        target = simulated * self.PIECE_WALL / max(wall, 1e-4)
+        self.piece = min(max(target, self.piece / 4), self.piece * 4)
+
+    def ready(self):
+        from ..kernels import background
+        return background.ready(self.system)
+
+
+def _scipy_segments(c, x, bounds, events, limits, one_segment, ts, xs, segs, handover=None, t_grid=None):
+    """Integrate the protocol segments (solve_ivp), appending to ts, xs, segs.  With a
+    ``handover`` (:class:`_Handover`), in pieces: returns (segment index, time, state,
+    circuit) where the compiled engine is to go on, or None when the scipy path finished."""
+    import time
+
     for k in range(len(bounds) - 1):
         t_a, t_b = bounds[k], bounds[k + 1]
         if k > 0:
@@ -220,7 +290,9 @@ def _scipy_segments(c, x, bounds, events, limits, one_segment, ts, xs, segs):
         for a, b in zip(cuts, cuts[1:]):
             cur = a
             while cur < b:
-                sol = one_segment(c, cur, b, x)
+                end = b if handover is None else handover.end_of(cur, b, t_grid)
+                started = time.perf_counter()
+                sol = one_segment(c, cur, end, x)
                 ts.append(sol.t)
                 xs.append(sol.y.T)
                 segs.append(c)
@@ -236,8 +308,13 @@ def _scipy_segments(c, x, bounds, events, limits, one_segment, ts, xs, segs):
                     ts.append(np.array([cur]))
                     xs.append(x[None, :])
                     segs.append(c)
-                else:
-                    cur = b
+                    continue
+                if handover is not None:
+                    handover.after(end - cur, time.perf_counter() - started)
+                    if end < bounds[-1] and handover.ready():
+                        return k, end, x, c
+                cur = end
+    return None
 
 
 def _collect(c_last, ts, xs, segs):
@@ -261,21 +338,28 @@ def _collect(c_last, ts, xs, segs):
     return TransientResult(t, x, columns, c_last.column_units(), c_last.state_names)
 
 
-def _simulate_compiled(system, c, x, t0, t_end, dt, events, rtol, atol, max_step, first_step, bar=None):
+def _output_grid(t0, t_end, dt):
+    """The compiled engine's output times: every dt from t0, and t_end (1001 points without dt)."""
+    if dt is None:
+        return np.linspace(t0, t_end, 1001)
+    t_grid = np.arange(t0, t_end + 0.5 * dt, dt)
+    t_grid = t_grid[t_grid <= t_end + 1e-9 * max(1.0, abs(t_end))]
+    return np.append(t_grid, t_end) if t_grid[-1] < t_end else t_grid
+
+
+def _simulate_compiled(system, c, x, t0, t_end, dt, events, rtol, atol, max_step, first_step, bar=None,
+                       t_grid=None, parts=None, bar_t0=None):
     """simulate() on the compiled engine: kernel calls per protocol segment (hard limits and
     source breakpoints are handled inside the kernel), in pieces (:func:`_compiled_segment`):
-    at most PIECE_STEPS steps each and, with a progress ``bar`` shown, about 50 per segment."""
+    at most PIECE_STEPS steps each and, with a progress ``bar`` shown, about 50 per segment.
+    A run handed over from the scipy path at t0 passes its output grid ``t_grid``, its series
+    so far ``parts`` (ts, xs, segs; appended to) and its start ``bar_t0``."""
     from ..kernels.system import CompiledSystem
 
-    if dt is None:
-        t_grid = np.linspace(t0, t_end, 1001)
-    else:
-        t_grid = np.arange(t0, t_end + 0.5 * dt, dt)
-        t_grid = t_grid[t_grid <= t_end + 1e-9 * max(1.0, abs(t_end))]
-        if t_grid[-1] < t_end:
-            t_grid = np.append(t_grid, t_end)
+    if t_grid is None:
+        t_grid = _output_grid(t0, t_end, dt)
     bounds = [t0] + [e[0] for e in events] + [t_end]
-    ts, xs, segs = [], [], []
+    ts, xs, segs = parts if parts is not None else ([], [], [])
     stats = {"steps": 0, "rejected": 0, "nfev": 0, "limit_events": 0}
     h0 = 1e-3 if first_step is None else first_step
     for k in range(len(bounds) - 1):
@@ -293,7 +377,8 @@ def _simulate_compiled(system, c, x, t0, t_end, dt, events, rtol, atol, max_step
         tpts = t_grid[(t_grid > t_a) & (t_grid < t_b)]
         tpts = np.concatenate([[t_a], tpts, [t_b]])
         try:
-            x = _compiled_segment(system, c, tpts, x, rtol, atol, h0, max_step, stats, ts, xs, segs, bar, t0)
+            x = _compiled_segment(system, c, tpts, x, rtol, atol, h0, max_step, stats, ts, xs, segs, bar,
+                                  t0 if bar_t0 is None else bar_t0)
         except KeyboardInterrupt as exc:
             raise Interrupted.of(exc, partial=_collect(c, ts, xs, segs) if ts else None) from None
     res = _collect(c, ts, xs, segs)

@@ -1,0 +1,141 @@
+"""First run of a set of component types: the compiled engine builds in a background process
+while the run integrates on the scipy path, and the run hands over to the compiled engine when
+the build is ready (hemocircuit.kernels.background, transient.simulate(compile='background'))."""
+import os
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+import hemocircuit as hc
+from hemocircuit.analyses.op import operating_point
+from hemocircuit.kernels import background
+from hemocircuit.kernels.system import CompiledSystem
+
+from paths import ROOT, TESTS
+
+TEST_NETLISTS = os.path.join(TESTS, "netlists")
+NETLISTS = os.path.join(ROOT, "netlists")
+
+
+class FakeBuild:
+    """background.start/ready stand-ins: no process; 'ready' after ``after`` checks."""
+
+    def __init__(self, monkeypatch, after):
+        self.checks, self.starts, self.after = 0, 0, after
+        monkeypatch.setattr(background, "ready", self.ready)
+        monkeypatch.setattr(background, "start", self.start)
+
+    def ready(self, system):
+        self.checks += 1
+        return self.after is not None and self.checks > self.after
+
+    def start(self, system, circuit, x0, t0, rtol):
+        self.starts += 1
+        return True
+
+
+def _forced(tmp_path):
+    """Arterial compliance driven by a 0.1 Hz sine, with a protocol step of Pa at 30 s."""
+    c = hc.load(os.path.join(NETLISTS, "arterial_compliance.yaml"))
+    c = c.with_values({"Pa.amplitude": "8 mmHg", "Pa.frequency": "0.1 Hz"})
+    proto = tmp_path / "step.yaml"
+    proto.write_text("t_end: 60 s\nevents:\n  - {at: 30 s, set: {Pa.value: 90 mmHg}}\n")
+    return c, str(proto)
+
+
+def test_handover_to_the_compiled_engine(tmp_path, monkeypatch):
+    """The run starts on scipy, switches at the end of a piece once the build is ready, and
+    continues compiled through a later protocol event: the output grid is exactly the
+    requested one (pieces add no rows) and the course is the compiled engine's own."""
+    c, proto = _forced(tmp_path)
+    ref = c.simulate(None, dt=0.1, protocol=proto, engine="compiled", rtol=1e-8)
+    fake = FakeBuild(monkeypatch, after=3)
+    res = c.simulate(None, dt=0.1, protocol=proto, rtol=1e-8, compile="background")
+    assert fake.starts == 1
+    t_s = res.stats["switched_at"]
+    assert 0 < t_s < 30.0  # handed over before the event, which the compiled part applies
+    assert "scipy" in res.stats["method"] and "compiled" in res.stats["method"]
+    assert res.stats["scipy"]["nsteps"] > 0 and res.stats["steps"] > 0
+    assert np.allclose(res.t, ref.t, rtol=0, atol=1e-9) and len(res.t) == len(ref.t)
+    for col in ("art.r", "Q(Rla)", "V(Ca)"):
+        scale = np.max(np.abs(ref[col]))
+        assert np.max(np.abs(res[col] - ref[col])) / scale < 2e-6, col
+    # the step of Pa to 90 mmHg at 30 s is applied after the switch: the input's mean rises
+    assert abs(np.mean(res["P(in)"][res.t > 30.05]) - 90.0) < 1.0
+    assert abs(np.mean(res["P(in)"][(res.t > 0) & (res.t < 30)]) - float(np.ravel(c.parameters.values["Pa.value"])[0])) < 1.0
+
+
+def test_build_never_ready_scipy_to_the_end(tmp_path, monkeypatch):
+    """A build that does not finish during the run: the whole run on scipy, in pieces that
+    keep the requested grid, marked as such; same course as one scipy run."""
+    c, proto = _forced(tmp_path)
+    ref = c.simulate(None, dt=0.1, protocol=proto, engine="scipy", rtol=1e-8)
+    fake = FakeBuild(monkeypatch, after=None)
+    res = c.simulate(None, dt=0.1, protocol=proto, rtol=1e-8, compile="background")
+    assert fake.checks >= 3  # it was asked between pieces
+    assert res.stats["compiled_engine"] == "building in the background" and res.stats["method"] == "BDF"
+    assert np.array_equal(res.t, ref.t)
+    for col in ("art.r", "Q(Rla)"):
+        scale = np.max(np.abs(ref[col]))
+        assert np.max(np.abs(res[col] - ref[col])) / scale < 2e-6, col
+
+
+def test_engine_ready_means_no_background(tmp_path, monkeypatch):
+    """With the engine built (ready marker present), compile='background' runs compiled from
+    the start and starts no build."""
+    c, proto = _forced(tmp_path)
+    c.simulate(1.0, engine="compiled")  # builds (or loads) and marks ready
+    system = CompiledSystem.of(c)
+    assert background.ready(system)
+    started = []
+    monkeypatch.setattr(background, "start", lambda *a: started.append(a) or True)
+    res = c.simulate(5.0, dt=0.1, compile="background")
+    assert not started and "switched_at" not in res.stats and "compiled" in res.stats["method"]
+
+
+def test_failed_build_compiles_in_the_foreground(monkeypatch):
+    """After a failed background build no new one starts (start() is False): the run
+    compiles in the foreground, where an error would show."""
+    c = hc.load(os.path.join(TEST_NETLISTS, "base_rc.yaml"))
+    system = CompiledSystem.of(c)
+    monkeypatch.setattr(background, "ready", lambda s: False)
+    monkeypatch.setattr(background, "failed", lambda s: True)
+    res = c.simulate(2.0, dt=0.1, x0=np.zeros(c.nx), compile="background")
+    assert "compiled" in res.stats["method"] and "switched_at" not in res.stats
+    assert background.start(system, c, np.zeros(c.nx), 0.0, 1e-6) is False
+
+
+def test_builder_process_marks_ready():
+    """The real builder: a detached process that compiles (or loads) the engine, runs the
+    transient entry points and leaves the ready marker, no running marker and its log."""
+    c = hc.load(os.path.join(TEST_NETLISTS, "base_rc.yaml"))
+    system = CompiledSystem.of(c)
+    ready = background._marker(system, "ready")
+    ready.unlink(missing_ok=True)
+    assert background.start(system, c, np.zeros(c.nx), 0.0, 1e-6)
+    assert background.start(system, c, np.zeros(c.nx), 0.0, 1e-6)  # one build at a time: no second
+    deadline = time.monotonic() + 600  # a cold compile on a busy 2-core machine
+    while not background.ready(system) and time.monotonic() < deadline:
+        time.sleep(0.5)
+    assert background.ready(system)
+    for _ in range(40):  # the builder removes its running marker just before marking ready
+        if not background.building(system):
+            break
+        time.sleep(0.25)
+    assert not background.building(system)
+    log = ready.with_name(ready.name.split(".")[0] + ".build.log").read_text()
+    assert "ready after" in log
+
+
+def test_compile_option_checked():
+    """A bad --compile / $HEMOCIRCUIT_COMPILE value is a clear error, not a traceback."""
+    env = dict(os.environ, HEMOCIRCUIT_COMPILE="soon")
+    p = subprocess.run([sys.executable, "-m", "hemocircuit.cli", "tran", os.path.join(TEST_NETLISTS, "base_rc.yaml"),
+                        "--t-end", "1", "--quiet"], capture_output=True, text=True, env=env, cwd=ROOT)
+    assert p.returncode != 0
+    assert "HEMOCIRCUIT_COMPILE" in p.stderr and "Traceback" not in p.stderr
+    with pytest.raises(hc.errors.SolverError, match="choose 'wait' or 'background'"):
+        hc.load(os.path.join(TEST_NETLISTS, "base_rc.yaml")).simulate(1.0, compile="later")
