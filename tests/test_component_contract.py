@@ -229,6 +229,41 @@ def test_hooks_return_the_documented_shapes(name, netlist_samples):
         assert isinstance(comp.varies_in_time(p), (bool, np.bool_))
 
 
+@pytest.mark.parametrize("name", NAMES)
+def test_one_batched_parameter_broadcasts(name, netlist_samples):
+    """A batch that varies one parameter only (a sweep, a fit's perturbation, a sensitivity
+    sample): that parameter is (B, E), every other one (1, E).  The circuit stamps the
+    elements with a constant matrix once with states (1, E) (Circuit._prepare) and evaluates
+    everything else with the batch's states (B, E).  The hooks broadcast to the batch, and the
+    last member's result is the one of its values alone."""
+    cls = TYPES[name]
+    for comp, p1, x1, u1 in samples_of(cls, netlist_samples):
+        one = {k: np.repeat(v[:, :1], E, axis=1) for k, v in p1.items()}
+        x = np.repeat(x1[:, :1], E, axis=1)
+        u = np.repeat(u1[:, :1], E, axis=1)
+        xb, ub = np.repeat(x, B, axis=0), np.repeat(u, B, axis=0)
+        S, L = len(comp.states()), len(comp.local_nodes) + len(comp.branches())
+        if not (comp.constant_matrix and comp.linear_in_pressure):
+            x, u = xb, ub  # stamped with the batch's states, like every evaluation
+        uu = None if comp.linear_in_pressure else u
+        for k in comp.parameters:
+            p = dict(one)
+            p[k] = one[k] * (1.0 + 0.01 * np.arange(B))[:, None]
+            where = f"{name} {comp.opts}, {k} batched"
+            A, b = comp.stamp(p, x, uu, 0.0, None)
+            A, b = np.broadcast_to(A, (B, E, L, L)), np.broadcast_to(b, (B, E, L))
+            dx = np.broadcast_to(comp.derivatives(p, xb, ub, 0.0, None), (B, E, S))
+            obs = comp.observe(p, xb, ub, 0.0, None)
+            for o in comp.observables():
+                np.broadcast_to(obs[o.name], (B, E))
+            last = {n: v[-1:] if n == k else v for n, v in p.items()}
+            A1, b1 = comp.stamp(last, x[-1:], None if uu is None else uu[-1:], 0.0, None)
+            np.testing.assert_array_equal(np.broadcast_to(A1, (1, E, L, L))[0], A[-1], err_msg=where)
+            np.testing.assert_array_equal(np.broadcast_to(b1, (1, E, L))[0], b[-1], err_msg=where)
+            np.testing.assert_array_equal(np.broadcast_to(comp.derivatives(last, xb[-1:], ub[-1:], 0.0, None),
+                                                          (1, E, S))[0], dx[-1], err_msg=where)
+
+
 @pytest.mark.parametrize("name", [n for n in NAMES if TYPES[n].drive is not None and TYPES[n].drive.has_sine])
 def test_sine_drive_breakpoints_follow_the_declared_parameters(name, netlist_samples):
     """A source's sine term switching on at its declared start is a breakpoint, and only

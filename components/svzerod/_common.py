@@ -21,6 +21,12 @@ S_UNIT = "mmHg*s**2/mL**2"
 E_UNIT = "mmHg/mL"
 
 
+def batch_shape(p, *shapes):
+    """(B, E) of an evaluation: the broadcast of every parameter's shape and ``shapes`` (a
+    batch may vary one parameter only, e.g. a sweep or a fit's perturbation)."""
+    return np.broadcast_shapes(*(np.shape(v) for v in p.values()), *shapes)
+
+
 def stenosis_linearised(R, S, q0):
     """(slope, offset) of f(q) = (R + S|q|) q linearised at q0: f ~ slope q + offset."""
     a = np.abs(q0)

@@ -25,7 +25,7 @@ import numpy as np
 
 from hemocircuit.component import Component, Observable, Option, Param, State, Storage
 
-from ._common import C_UNIT, L_UNIT, R_UNIT, S_UNIT, jit, k_stenosis_linearised, stenosis_linearised
+from ._common import batch_shape, C_UNIT, L_UNIT, R_UNIT, S_UNIT, jit, k_stenosis_linearised, stenosis_linearised
 
 _PARAMS = {
     "R_poiseuille": Param(R_UNIT, lower=0.0, doc="Poiseuille resistance"),
@@ -133,8 +133,8 @@ class BloodVessel(_Vessel):
     def stamp(self, p, x, u, t, src=None):
         R, S = p["R_poiseuille"], p["stenosis_coefficient"]
         L = len(self.local_nodes) + len(self.branches())
-        A = np.zeros(np.broadcast_shapes(R.shape, x.shape[:2]) + (L, L))
-        b = np.zeros(np.broadcast_shapes(R.shape, x.shape[:2]) + (L,))
+        A = np.zeros(batch_shape(p, x.shape[:2]) + (L, L))
+        b = np.zeros(batch_shape(p, x.shape[:2]) + (L,))
         if self.cap:
             Pc = x[..., 0] / p["C"]
             slope, off = stenosis_linearised(R, S, 0.0 if u is None else u[..., 3])

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._common import jit, k_stenosis_linearised, stenosis_linearised
+from ._common import batch_shape, jit, k_stenosis_linearised, stenosis_linearised
 from .blood_vessel import BloodVessel, _Vessel, vessel_derivs, vessel_observe, vessel_stamp
 
 
@@ -42,8 +42,8 @@ class BloodVesselCRL(_Vessel):
             return BloodVessel.stamp(self, p, x, u, t, src)
         R, S = p["R_poiseuille"], p["stenosis_coefficient"]
         L = len(self.local_nodes) + len(self.branches())
-        A = np.zeros(np.broadcast_shapes(R.shape, x.shape[:2]) + (L, L))
-        b = np.zeros(np.broadcast_shapes(R.shape, x.shape[:2]) + (L,))
+        A = np.zeros(batch_shape(p, x.shape[:2]) + (L, L))
+        b = np.zeros(batch_shape(p, x.shape[:2]) + (L,))
         A[..., 0, 3], A[..., 2, 3] = 1.0, -1.0
         A[..., 3, 0], A[..., 3, 2] = 1.0, -1.0
         b[..., 3] = x[..., 0] / p["C"]

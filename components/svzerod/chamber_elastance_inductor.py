@@ -19,7 +19,7 @@ import numpy as np
 
 from hemocircuit.component import Component, Observable, Option, Param, State, Storage
 
-from ._common import E_UNIT, L_UNIT, jit
+from ._common import batch_shape, E_UNIT, L_UNIT, jit
 from .activation import KINDS, act_parameters, activation, activation_np, check_activation
 
 _OWN = {"Emax": Param(E_UNIT, lower=0.0, doc="maximum elastance"),
@@ -63,7 +63,7 @@ class ChamberElastanceInductor(Component):
 
     def stamp(self, p, x, u, t, src=None):
         E, Vrest = self._elastance(p, t)
-        shape = np.broadcast_shapes(E.shape, x.shape[:2])
+        shape = batch_shape(p, E.shape, x.shape[:2])
         A = np.zeros(shape + (4, 4))
         b = np.zeros(shape + (4,))
         A[..., 0, 3], A[..., 2, 3] = 1.0, -1.0
@@ -73,7 +73,7 @@ class ChamberElastanceInductor(Component):
         return A, b
 
     def derivatives(self, p, x, u, t, src=None):
-        dx = np.zeros(np.broadcast_shapes(x.shape, u.shape[:2] + (2,)))
+        dx = np.zeros(batch_shape(p, x.shape[:2], u.shape[:2]) + (2,))
         dx[..., 0] = u[..., 3]
         dx[..., 1] = (u[..., 0] - u[..., 1]) / p["Impedance"]
         return dx
@@ -102,7 +102,7 @@ class ChamberElastanceInductor(Component):
 
     def initial_states(self, p, u, flows=None, x=None):
         E, Vrest = self._elastance(p, 0.0)
-        out = np.zeros(np.broadcast_shapes(E.shape, u.shape[:2]) + (2,))
+        out = np.zeros(batch_shape(p, E.shape, u.shape[:2]) + (2,))
         out[..., 0] = (u[..., 0] - u[..., 2]) / E + Vrest
         if flows is not None:
             out[..., 1] = -flows[..., 1]

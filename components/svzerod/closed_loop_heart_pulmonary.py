@@ -36,7 +36,7 @@ import numpy as np
 
 from hemocircuit.component import Component, Observable, Param, State, Storage
 
-from ._common import C_UNIT, E_UNIT, L_UNIT, R_UNIT, jit
+from ._common import batch_shape, C_UNIT, E_UNIT, L_UNIT, R_UNIT, jit
 
 _P = {"period": ("s", "cardiac period (their cardiac_cycle_period)"),
       "Tsa": ("dimensionless", "atrial systole fraction of the period"),
@@ -196,7 +196,7 @@ class ClosedLoopHeartAndPulmonary(Component):
     def _each(self, p, x, t, *more):
         """Broadcast parameters, states, time (and ``more`` arrays) to one (B, E) shape:
         (shape, P (..., 28), X (..., 10), T (...), more...)."""
-        shape = np.broadcast_shapes(np.shape(p["period"]), x.shape[:-1], np.shape(t), *(m.shape[:-1] for m in more))
+        shape = batch_shape(p, x.shape[:-1], np.shape(t), *(m.shape[:-1] for m in more))
         P = np.stack([np.broadcast_to(np.asarray(p[k], float), shape) for k in _P], axis=-1)
         X = np.broadcast_to(x, shape + x.shape[-1:])
         T = np.broadcast_to(np.asarray(t, float), shape)
@@ -236,7 +236,7 @@ class ClosedLoopHeartAndPulmonary(Component):
         return A_loc, b_loc
 
     def initial_states(self, p, u, flows=None, x=None):
-        shape = np.broadcast_shapes(np.shape(p["Cpa"]), u.shape[:-1])
+        shape = batch_shape(p, u.shape[:-1])
         out = np.zeros(shape + (10,))
         for name, k in (("Vaso_ra", 0), ("Vrv_u", 2), ("Vaso_la", 5), ("Vlv_u", 7)):
             out[..., k] = p[name]

@@ -15,7 +15,7 @@ import numpy as np
 
 from hemocircuit.component import Component, Observable, Param, State, Storage
 
-from ._common import C_UNIT, R_UNIT, jit
+from ._common import batch_shape, C_UNIT, R_UNIT, jit
 
 
 class ClosedLoopRCR(Component):
@@ -48,7 +48,7 @@ class ClosedLoopRCR(Component):
                 Observable("Q_out", "mL/s", "flow out of the outlet"))
 
     def stamp(self, p, x, u, t, src=None):
-        shape = np.broadcast_shapes(p["C"].shape, x.shape[:2])
+        shape = batch_shape(p, x.shape[:2])
         A = np.zeros(shape + (6, 6))
         b = np.zeros(shape + (6,))
         g = 1.0 / p["Rd"]

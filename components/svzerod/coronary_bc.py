@@ -17,7 +17,7 @@ import numpy as np
 
 from hemocircuit.component import Component, Observable, Param, State
 
-from ._common import C_UNIT, R_UNIT, jit
+from ._common import batch_shape, C_UNIT, R_UNIT, jit
 
 
 class CoronaryBC(Component):
@@ -44,8 +44,8 @@ class CoronaryBC(Component):
         return (Observable("Q_in", "mL/s", "flow into the block"),)
 
     def stamp(self, p, x, u, t, src=None):
-        A = np.zeros(np.broadcast_shapes(p["Ca"].shape, x.shape[:2]) + (3, 3))
-        b = np.zeros(np.broadcast_shapes(p["Ca"].shape, x.shape[:2]) + (3,))
+        A = np.zeros(batch_shape(p, x.shape[:2]) + (3, 3))
+        b = np.zeros(batch_shape(p, x.shape[:2]) + (3,))
         A[..., 0, 2], A[..., 1, 2] = 1.0, -1.0
         A[..., 2, 0], A[..., 2, 1], A[..., 2, 2] = 1.0, -1.0, -p["Ra1"]
         b[..., 2] = x[..., 0] / p["Ca"]

@@ -15,7 +15,7 @@ import numpy as np
 
 from hemocircuit.component import Component, Observable, Option, Param, State, Storage
 
-from ._common import E_UNIT, jit
+from ._common import batch_shape, E_UNIT, jit
 from .activation import KINDS, act_parameters, activation, activation_np, check_activation
 
 
@@ -55,7 +55,7 @@ class LinearElastanceChamber(Component):
 
     def stamp(self, p, x, u, t, src=None):
         E = self._elastance(p, t)
-        shape = np.broadcast_shapes(E.shape, x.shape[:2])
+        shape = batch_shape(p, E.shape, x.shape[:2])
         A = np.zeros(shape + (5, 5))
         b = np.zeros(shape + (5,))
         A[..., 0, 3], A[..., 2, 3] = 1.0, -1.0
