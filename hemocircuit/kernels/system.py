@@ -59,8 +59,9 @@ class CompiledSystem:
     def integrate(self, t_out, x0, P, rtol=1e-6, atol=None, breaks=(), h0=1e-3, hmax=np.inf,
                   max_steps=10_000_000, method=None, **tab_options):
         """States on the grid t_out (T,) from x0 at t_out[0] for one parameter row P (slots,).
-        ``method``: a Rosenbrock tableau of hemocircuit.kernels.tableaus (None: tableaus.DEFAULT);
-        ``tab_options`` go to its ``packed``.
+        ``method``: 'bdf' (engine_template.integrate_bdf, variable-order BDF) or a Rosenbrock
+        tableau of hemocircuit.kernels.tableaus (None: tableaus.DEFAULT); ``tab_options`` go to
+        the tableau's ``packed`` (the BDF method takes ``local_jacobian`` only).
 
         Returns (X (T, nx), stats dict).  Rows after a failure are NaN; stats['status'] < 0
         says why (see STATUS)."""
@@ -83,10 +84,19 @@ class CompiledSystem:
         P = np.ascontiguousarray(np.broadcast_to(P, (B, P.shape[-1])), dtype=float)
         atol_v = (rtol * 1e-3 if atol is None else atol) * self.scales
         hmax = np.ascontiguousarray(np.broadcast_to(np.asarray(hmax, dtype=float), (B,)))
+        method = method or tableaus.DEFAULT
+        if method == tableaus.BDF:
+            unknown = set(tab_options) - {"local_jacobian"}
+            if unknown:
+                raise ValueError(f"options {sorted(unknown)} apply to the Rosenbrock methods, not to {method!r}")
+            return self.mod.integrate_batch_bdf(t_out, X0, P, self.lay, self.scales, self.lim_i, self.lim_b,
+                                                self.lim_r, np.asarray(sorted(breaks), dtype=float), float(rtol),
+                                                atol_v, float(h0), hmax, int(max_steps),
+                                                bool(tab_options.get("local_jacobian", 1)))
         return self.mod.integrate_batch(t_out, X0, P, self.lay, self.scales, self.lim_i, self.lim_b, self.lim_r,
                                         np.asarray(sorted(breaks), dtype=float), float(rtol), atol_v, float(h0),
                                         hmax, int(max_steps),
-                                        self.tableau(method or tableaus.DEFAULT, **tab_options))
+                                        self.tableau(method, **tab_options))
 
     def tableau(self, method, **tab_options):
         """The packed method for integrate_batch (hemocircuit.kernels.tableaus)."""

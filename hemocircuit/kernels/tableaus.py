@@ -127,6 +127,11 @@ JAC_REUSE = {"ros34pw2": 6, "ros34pw3": 6, "rodas4": 1, "rodas5p": 1}
 #: over 6 steps) at rtol 1e-5 and is 55x closer to the reference cycle (1.3e-5 against 7.1e-4);
 #: it is the cheapest at rtol <= 1e-6 (vasomotion run, docs/performance.md)
 DEFAULT = "rodas5p"
+#: the variable-order BDF method (engine_template.integrate_bdf): no tableau, the engine's
+#: other integrator
+BDF = "bdf"
+#: every method name the engine takes
+ALL = (BDF,) + tuple(METHODS)
 
 
 def classical(name):
