@@ -49,22 +49,25 @@ class BatchResult:
         self.t, self.x, self.ok, self.message, self.stats = t, x, ok, message, stats
 
 
-def integrate(circuit, x0, t_out, rtol=1e-5, atol=None, h0=1e-3, max_steps=500000, h_max=np.inf, engine="auto"):
+def integrate(circuit, x0, t_out, rtol=1e-5, atol=None, h0=1e-3, max_steps=500000, h_max=np.inf, engine="auto",
+              method=None):
     """Integrate every member of a batch circuit (B parameter sets) from x0 (B, nx) at the
     first output time and return the states on the output grid: t_out (T,) common to all, or
     (B, T), one grid per member (e.g. whole periods of each member's forcing frequency).
     Members that fail are marked (ok False) with a reason; the others are unaffected, and every
     member's trajectory is independent of which other members share the batch.
 
-    engine: 'auto' runs the compiled kernel (hemocircuit.kernels: the same method, one
-    member after another inside numba) when the circuit has one, 'numpy' this vectorised code."""
+    engine: 'auto' runs the compiled kernel (hemocircuit.kernels, one member after another
+    inside numba) when the circuit has one, 'numpy' this vectorised code (ROS34PW2).
+    method: the compiled engine's method ('bdf' or a Rosenbrock tableau name; None:
+    hemocircuit.kernels.tableaus.DEFAULT)."""
     if engine not in ("auto", "numpy"):
         raise ValueError(f"engine {engine!r}: choose 'auto' or 'numpy'")
     if engine == "auto":
         from .kernels.system import CompiledSystem
         system = CompiledSystem.of(circuit)
         if system is not None:
-            return _integrate_compiled(system, circuit, x0, t_out, rtol, atol, h0, max_steps, h_max)
+            return _integrate_compiled(system, circuit, x0, t_out, rtol, atol, h0, max_steps, h_max, method)
     B, nx = np.shape(x0)
     assert circuit.B == B or circuit.B == 1
     t_out = np.asarray(t_out, dtype=float)
@@ -160,7 +163,7 @@ def integrate(circuit, x0, t_out, rtol=1e-5, atol=None, h0=1e-3, max_steps=50000
     return BatchResult(t_out, out, ok, message, {"steps": nsteps, "rejected": nrej})
 
 
-def _integrate_compiled(system, circuit, x0, t_out, rtol, atol, h0, max_steps, h_max):
+def _integrate_compiled(system, circuit, x0, t_out, rtol, atol, h0, max_steps, h_max, method=None):
     from .kernels.system import STATUS
 
     B = np.shape(x0)[0]
@@ -169,7 +172,7 @@ def _integrate_compiled(system, circuit, x0, t_out, rtol, atol, h0, max_steps, h
     P = np.broadcast_to(system.params(circuit), (B, system.layout.n_params))
     breaks = circuit.breakpoints(float(grid[:, 0].min()), float(grid[:, -1].max()))
     out, st = system.integrate_batch(grid, x0, P, rtol=rtol, atol=atol, breaks=breaks, h0=h0, hmax=h_max,
-                                     max_steps=max_steps)
+                                     max_steps=max_steps, method=method)
     ok = st[:, 0] == 0
     message = ["" if k else f"{STATUS[int(s)]} at t = {t:.6g} s" for k, s, t in zip(ok, st[:, 0], st[:, 1])]
     return BatchResult(t_out, out, ok, message, {"steps": int(st[:, 2].sum()), "rejected": int(st[:, 3].sum())})
