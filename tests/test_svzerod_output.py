@@ -252,3 +252,35 @@ def test_bad_input_is_named(tmp_path, capsys):
     model.sim["output_interval"] = 0
     with pytest.raises(HemocircuitError, match="output_interval"):
         written_steps(model)
+
+
+def test_written_rows_follow_their_counter(tmp_path):
+    """Their run_integration: N = 5 points per cycle, 3 cycles (steps 0 .. 12), output_interval
+    2: the last cycle from step 8 on (8, 10, 12 -> times 0, T/2, T), or every other step of the
+    whole run from 0 with output_all_cycles."""
+    from hemocircuit.svzerod.output import written_steps
+
+    path = _rc_model(tmp_path, {"bc_name": "OUT", "bc_type": "RESISTANCE", "bc_values": {"R": 1000.0, "Pd": 0.0}},
+                     {"R_poiseuille": 100.0}, sim={"number_of_cardiac_cycles": 3,
+                                                   "number_of_time_pts_per_cardiac_cycle": 5, "output_interval": 2})
+    model = import_svzerod(path)
+    steps, t = written_steps(model)
+    assert list(steps) == [8, 10, 12]
+    np.testing.assert_allclose(t, [0.0, 0.5, 1.0])
+    model.sim["output_all_cycles"] = True
+    steps, t = written_steps(model)
+    assert list(steps) == [0, 2, 4, 6, 8, 10, 12]
+    np.testing.assert_allclose(t, np.arange(0, 13, 2) * 0.25)
+
+
+def test_their_rcr_rule_sets_the_cycles(tmp_path):
+    """use_cycle_to_cycle_error with an RCR (Rd C = 2 s, T = 1 s, 1 %): their solver runs
+    ceil(-2 ln 0.01) = 10 cycles instead of the 2 given; without it the 2 stay."""
+    from hemocircuit.svzerod.output import apply_their_cycle_rule
+
+    bc = {"bc_name": "OUT", "bc_type": "RCR", "bc_values": {"Rp": 100.0, "C": 2e-3, "Rd": 1000.0, "Pd": 0.0}}
+    path = _rc_model(tmp_path, bc, {"R_poiseuille": 100.0}, sim={"use_cycle_to_cycle_error": True})
+    cfg = json.load(open(path))
+    assert apply_their_cycle_rule(import_svzerod(path), cfg) == math.ceil(-2.0 * math.log(0.01)) == 10
+    cfg["simulation_parameters"]["use_cycle_to_cycle_error"] = False
+    assert apply_their_cycle_rule(import_svzerod(cfg), cfg) == 2
