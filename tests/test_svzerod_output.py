@@ -284,3 +284,21 @@ def test_their_rcr_rule_sets_the_cycles(tmp_path):
     assert apply_their_cycle_rule(import_svzerod(path), cfg) == math.ceil(-2.0 * math.log(0.01)) == 10
     cfg["simulation_parameters"]["use_cycle_to_cycle_error"] = False
     assert apply_their_cycle_rule(import_svzerod(cfg), cfg) == 2
+
+
+def test_stateless_model_rows_and_zero_derivatives(tmp_path):
+    """FLOW 5 -> R 100 -> RESISTANCE 1000 (no states): every written row has P_in = 5 (100 +
+    1000) dyn/cm^2, P_out = 5000, flows 5, and d_* = 0 (output_derivative)."""
+    import pandas as pd
+
+    path = _rc_model(tmp_path, {"bc_name": "OUT", "bc_type": "RESISTANCE", "bc_values": {"R": 1000.0, "Pd": 0.0}},
+                     {"R_poiseuille": 100.0}, sim={"output_derivative": True})
+    out = str(tmp_path / "r.json")
+    svzerod_output(path, out)
+    df = pd.read_json(out)
+    assert len(df) == 11 and list(df["name"]) == ["v"] * 11
+    np.testing.assert_allclose(df["time"], np.linspace(0, 1, 11), atol=1e-12)
+    np.testing.assert_allclose(df["pressure_in"], 5500.0, rtol=1e-10)
+    np.testing.assert_allclose(df["pressure_out"], 5000.0, rtol=1e-10)
+    np.testing.assert_allclose(df[["flow_in", "flow_out"]], 5.0, rtol=1e-12)
+    np.testing.assert_allclose(df[["d_flow_in", "d_flow_out", "d_pressure_in", "d_pressure_out"]], 0.0, atol=1e-6)

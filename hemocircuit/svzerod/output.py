@@ -180,7 +180,8 @@ def _rates(model, circuit, t, x, t_start):
     the tangent f(t-, x) (right-sided where the left side would leave the run)."""
     h = 1e-7 * max(model.period, 1e-300)
     side = np.where(t - 2 * h >= t_start, -1.0, 1.0)  # -1: left (the default)
-    f = np.array([circuit.rhs(float(tt + 0.5 * s * h), xx) for tt, xx, s in zip(t, x, side)]).reshape(x.shape)
+    f = (np.array([circuit.rhs(float(tt + 0.5 * s * h), xx) for tt, xx, s in zip(t, x, side)]).reshape(x.shape)
+         if circuit.nx else np.zeros_like(x))
     g = [_columns(model, circuit, t + k * s * h, x + (k * h * side)[:, None] * f)
          for k, s in ((0, 0), (1, side), (2, side))]
     return {k: side * (-3 * g[0][k] + 4 * g[1][k] - g[2][k]) / (2 * h) for k in g[0]}
