@@ -262,6 +262,13 @@ def _circuits(model, sets=None):
     return c, cm
 
 
+def their_initial(model, circuit):
+    """Their initial_condition as {ID.STATE: value} for the states ``circuit`` has (the
+    importer's index reduction removes a capacitor under a PRESSURE or an inductor in series
+    with a FLOW: the source fixes those)."""
+    return {k: v for k, v in model.initial.items() if k in circuit.state_names}
+
+
 def start_state(model, circuit, start="operating-point", sets=None, mean_circuit=None):
     """The state their run starts from, for ``circuit`` (the model's, maybe with ``sets``):
     'operating-point' (the default: the true steady state of the circuit with the time series
@@ -275,7 +282,7 @@ def start_state(model, circuit, start="operating-point", sets=None, mean_circuit
     if start not in ("operating-point", "their-steady"):
         raise HemocircuitError(f"start {start!r}: choose 'operating-point' or 'their-steady'")
     if model.closed or not model.sim.get("steady_initial", True):
-        return apply_ic(circuit, np.zeros(circuit.nx), model.initial)
+        return apply_ic(circuit, np.zeros(circuit.nx), their_initial(model, circuit))
     cm = mean_circuit if mean_circuit is not None else _circuits(model, sets)[1]
     if start == "their-steady":
         from .steady_initial import their_steady_initial

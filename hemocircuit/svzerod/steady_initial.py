@@ -71,9 +71,11 @@ def _functions(c):
 def gen_alpha_steps(c, x0, h, n_steps, rho=0.5, t0=0.0, max_iter=30, tol=1e-11):
     """``n_steps`` generalized-alpha steps of size h [s] of x' = f(t, x) (circuit ``c``) from x0
     with x'(0) = 0, as their Integrator::step.  Returns the final state."""
+    x = np.array(x0, float)
+    if x.size == 0:  # no states: nothing relaxes
+        return x
     am, af, gamma = gen_alpha_coefficients(rho)
     rhs, jac = _functions(c)
-    x = np.array(x0, float)
     xd = np.zeros_like(x)
     S = c.state_scales
     eye = np.eye(x.size)
@@ -122,6 +124,7 @@ def their_steady_initial(model, mean_circuit):
     ``model.mean_netlist``).  Their cardiac period T, ``rho_infty`` from their
     simulation_parameters."""
     from ..ic import apply_ic
+    from .output import their_initial
 
     cm = mean_circuit
     if model.closed:
@@ -136,7 +139,7 @@ def their_steady_initial(model, mean_circuit):
                 path = f"{e['id']}.{p}"
                 changes[path] = float(cm.parameters.values[path][0]) * EPS
             scaled += [cm.state_names.index(f"{e['id']}.{s}") for s in states]
-    x0 = apply_ic(cm, np.zeros(cm.nx), model.initial)
+    x0 = apply_ic(cm, np.zeros(cm.nx), their_initial(model, cm))
     x0[scaled] *= EPS
     c0 = cm.with_values(changes) if changes else cm
     x = gen_alpha_steps(c0, x0, model.period / 10.0, STEPS, rho)
