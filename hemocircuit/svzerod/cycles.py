@@ -16,8 +16,7 @@ Their criterion (SimVascular/svZeroDSolver src/solve/Solver.cpp, ``use_cycle_to_
 For a linear(ised) model the deviation from the periodic state shrinks by the dominant Floquet
 multiplier mu per cycle (mu = exp(-T/tau) for one RCR), so cycle k's error is about
 E_1 |mu|^(k-2) (E_1: cycles 1 vs 2) and the criterion needs n ~ 2 + log(tol/E_1)/log|mu|
-cycles; their eq. 21 is
-log(tol)/log|mu| with mu = exp(-T/tau).
+cycles; their eq. 21 is log(tol)/log|mu| with mu = exp(-T/tau).
 """
 from __future__ import annotations
 
