@@ -180,9 +180,7 @@ def test_cycle_means_and_errors_by_hand():
     np.testing.assert_allclose(cycles.cycle_errors(m), [[1.5]])
     assert cycles.predicted_cycles(math.exp(-1.0), 0.01) == 5  # ceil(ln 0.01 / -1)
     assert cycles.predicted_cycles(0.5, 0.01, first_error=0.08) == 2 + 3  # 0.08 / 2^3 = 0.01
-    assert cycles.pfaller_cycles({"boundary_conditions": [{"bc_type": "RCR", "bc_values": {"Rd": 1000.0,
-                                                                                            "C": 1e-3}}]},
-                                 1.0, 0.01) == 5
+    assert cycles.pfaller_cycles([0.5, 1.0], 1.0, 0.01) == 5  # ceil(-1 ln 0.01)
 
 
 @have_cases
@@ -275,15 +273,20 @@ def test_written_rows_follow_their_counter(tmp_path):
 
 def test_their_rcr_rule_sets_the_cycles(tmp_path):
     """use_cycle_to_cycle_error with an RCR (Rd C = 2 s, T = 1 s, 1 %): their solver runs
-    ceil(-2 ln 0.01) = 10 cycles instead of the 2 given; without it the 2 stay."""
-    from hemocircuit.svzerod.output import apply_their_cycle_rule
+    ceil(-2 ln 0.01) = 10 cycles instead of the 2 given (from the circuit's values: --set C
+    to 4e-3 gives 19); without it the 2 stay."""
+    from hemocircuit.svzerod.output import _circuits, apply_their_cycle_rule
 
     bc = {"bc_name": "OUT", "bc_type": "RCR", "bc_values": {"Rp": 100.0, "C": 2e-3, "Rd": 1000.0, "Pd": 0.0}}
     path = _rc_model(tmp_path, bc, {"R_poiseuille": 100.0}, sim={"use_cycle_to_cycle_error": True})
+    model = import_svzerod(path)
+    assert apply_their_cycle_rule(model, _circuits(model)[0]) == math.ceil(-2.0 * math.log(0.01)) == 10
+    c = _circuits(model, {"OUT.C": "4e-3 mL/(dyn/cm**2)"})[0]
+    assert apply_their_cycle_rule(model, c) == math.ceil(-4.0 * math.log(0.01)) == 19
     cfg = json.load(open(path))
-    assert apply_their_cycle_rule(import_svzerod(path), cfg) == math.ceil(-2.0 * math.log(0.01)) == 10
     cfg["simulation_parameters"]["use_cycle_to_cycle_error"] = False
-    assert apply_their_cycle_rule(import_svzerod(cfg), cfg) == 2
+    model = import_svzerod(cfg)
+    assert apply_their_cycle_rule(model, _circuits(model)[0]) == 2
 
 
 def test_stateless_model_rows_and_zero_derivatives(tmp_path):

@@ -252,7 +252,8 @@ def _forced_by_period(args, c, output):
         tol = args.cycle_tol
     orb = cycles.forced_periodic_report(c, x0, T, quantities, N=N, tol=tol)
     if svz is not None:  # their up-front count with RCR boundary conditions (their eq. 21)
-        orb.metadata["measures"]["cycles_their_rcr_rule"] = cycles.pfaller_cycles(cfg, T, tol)
+        taus = cycles.rcr_time_constants(c)
+        orb.metadata["measures"]["cycles_their_rcr_rule"] = cycles.pfaller_cycles(taus, T, tol)
     return orb
 
 

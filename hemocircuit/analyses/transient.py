@@ -374,7 +374,7 @@ def cmd_tran_svzerod(args):
     from ..cli import _sets, save_outputs
     from ..errors import HemocircuitError
     from ..svzerod.importer import guess_units, import_svzerod, is_svzerod_model
-    from ..svzerod.output import apply_their_cycle_rule, simulate_svzerod, write_svzerod_output
+    from ..svzerod.output import simulate_svzerod, write_svzerod_output
 
     given = [f"--{k.replace('_', '-')}" for k in ("t_end", "dt", "ic", "protocol", "grid") if getattr(args, k, None)]
     if given:
@@ -391,7 +391,6 @@ def cmd_tran_svzerod(args):
         raise HemocircuitError(f"--svzerod-output: {args.netlist} is not an svZeroDSolver JSON model "
                                "(simulation_parameters and blocks)")
     model = import_svzerod(args.netlist, units=guess_units(cfg))
-    apply_their_cycle_rule(model, cfg)
     c, res = simulate_svzerod(model, sets=_sets(args.set), start=args.svzerod_start)
     path = write_svzerod_output(args.svzerod_output, model, c, res, cfg)
     layout = "per variable" if model.sim.get("output_variable_based") else "per block"

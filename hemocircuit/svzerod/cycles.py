@@ -46,11 +46,17 @@ def vessel_caps(cfg, model):
     return out
 
 
-def pfaller_cycles(cfg, period, tol):
-    """Their up-front cycle count with RCR boundary conditions, ceil(-tau_max/T ln tol)
-    (tau = Rd C), or None without one (Solver.cpp constructor)."""
-    taus = [float(b["bc_values"]["Rd"]) * float(b["bc_values"]["C"]) for b in cfg.get("boundary_conditions") or []
-            if b.get("bc_type") == "RCR"]
+def rcr_time_constants(circuit):
+    """Rd C [s] of every RCR boundary condition (rcr_bc element) of a circuit, as it is
+    (``--set`` included)."""
+    vals = circuit.parameters.values
+    return [float(vals[f"{e}.Rd"][0]) * float(vals[f"{e}.C"][0])
+            for g in circuit.groups if g.comp.type_name == "rcr_bc" for e in g.ids]
+
+
+def pfaller_cycles(taus, period, tol):
+    """Their up-front cycle count with RCR boundary conditions (time constants ``taus`` [s]),
+    ceil(-tau_max/T ln tol), or None without one (Solver.cpp constructor)."""
     if not taus:
         return None
     return int(math.ceil(-max(taus) / period * math.log(tol)))

@@ -300,6 +300,7 @@ def simulate_svzerod(model, sets=None, rtol=None, start="operating-point"):
     from .conformance import case_rtol
 
     c, cm = _circuits(model, sets)
+    apply_their_cycle_rule(model, c)
     x0 = start_state(model, c, start, mean_circuit=cm)
     dt = model.period / (model.points - 1)
     if c.nx == 0:  # no states: the outputs are algebraic functions of time
@@ -309,17 +310,17 @@ def simulate_svzerod(model, sets=None, rtol=None, start="operating-point"):
     return c, simulate(c, model.n_cycles * model.period, dt=dt, x0=x0, rtol=rtol or case_rtol(model), progress=False)
 
 
-def apply_their_cycle_rule(model, cfg):
+def apply_their_cycle_rule(model, circuit):
     """With ``use_cycle_to_cycle_error`` and an RCR boundary condition their solver replaces
     the number of cycles by ceil(-tau_max/T ln tol) (Solver.cpp constructor, their eq. 21):
     the same here (model.sim changed), so the written rows are theirs.  Without an RCR they
     run extra cycles until their criterion holds but write no rows of them (their extra-cycle
     loop restarts its step counter), so the output keeps the given cycles.  Returns the
     number of cycles."""
-    from .cycles import pfaller_cycles, their_tolerance
+    from .cycles import pfaller_cycles, rcr_time_constants, their_tolerance
 
     if model.sim.get("use_cycle_to_cycle_error"):
-        n = pfaller_cycles(cfg, model.period, their_tolerance(model.sim))
+        n = pfaller_cycles(rcr_time_constants(circuit), model.period, their_tolerance(model.sim))
         if n is not None:
             model.sim["number_of_cardiac_cycles"] = n
     return model.n_cycles
@@ -342,7 +343,6 @@ def svzerod_output(model_path, out_path, rtol=None, start="operating-point", uni
 
     cfg = _read_config(model_path)
     model = import_svzerod(model_path, units=units or guess_units(cfg))
-    apply_their_cycle_rule(model, cfg)
     c, res = simulate_svzerod(model, sets=sets, rtol=rtol, start=start)
     write_svzerod_output(out_path, model, c, res, cfg)
     return model, c, res
