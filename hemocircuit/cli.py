@@ -262,6 +262,9 @@ def compute_tran(args, sets):
 def cmd_tran(args):
     from .errors import SolverError
 
+    if getattr(args, "svzerod_output", None):
+        from .analyses.transient import cmd_tran_svzerod
+        return cmd_tran_svzerod(args)
     if args.grid:
         return report_grid(args, computed(args, compute_tran))
     try:
@@ -409,6 +412,12 @@ def build_parser(command=None):
                     help="first run of a set of component types: build the compiled engine in the background "
                          "and integrate on the scipy path meanwhile (default; $HEMOCIRCUIT_COMPILE), or wait "
                          "for the build")
+    sp.add_argument("--svzerod-output", metavar="RESULT.json",
+                    help="an svZeroDSolver model: run it with their simulation settings (cycles, points per "
+                         "cycle, output options) and write their result layout (pandas to_json) here")
+    sp.add_argument("--svzerod-start", choices=("operating-point", "their-steady"), default="operating-point",
+                    help="with --svzerod-output: start from the true operating point (default) or their "
+                         "steady_initial procedure (31 pseudo-time steps)")
     sp.set_defaults(func=cmd_tran)
     common(sub.add_parser("graph", help="draw the circuit graph to PNG"), grid=False).set_defaults(func=cmd_graph)
     sp = sub.add_parser("show", help="reload a result file: provenance, summary, re-plot, re-run")
@@ -484,7 +493,7 @@ def _extra_commands(only=None):
     return out
 
 
-OUTPUT_OPTIONS = ("out", "plot", "phase_plot")
+OUTPUT_OPTIONS = ("out", "plot", "phase_plot", "svzerod_output")
 
 
 def _check_outputs(args):

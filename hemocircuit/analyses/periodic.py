@@ -188,8 +188,14 @@ def register_cli(sub, common):
     sp.add_argument("--output", help="output used to find the period (default: the first of the netlist's "
                                      "'outputs:' for periodic)")
     sp.add_argument("--t-settle", type=float, default=400.0, help="settling run for the initial guess, s")
-    sp.add_argument("--forced", help="source element with a built-in sine term: periodic steady state at "
-                                     "its frequency")
+    sp.add_argument("--forced", nargs="?", const="", metavar="SOURCE",
+                    help="periodic steady state of a forced circuit: alone, at the period of the circuit's own "
+                         "time dependence (periodic waveforms, chambers: an svZeroDSolver model's cardiac period), "
+                         "with the cycles their cycle-to-cycle criterion needs; with SOURCE (a source with a "
+                         "built-in sine term) at its frequency")
+    sp.add_argument("--cycle-tol", type=float,
+                    help="tolerance of the cycle-to-cycle criterion for --forced (default: an svZeroDSolver "
+                         "model's sim_cycle_to_cycle_percent_error/100, else 0.01)")
     sp.add_argument("--out", help="CSV of one period of the orbit (or .json)")
     sp.add_argument("--plot", help="PNG of the orbit")
     sp.set_defaults(func=cmd_periodic)
@@ -201,6 +207,8 @@ def _periodic(args, c):
 
     interest = default_outputs(c, "periodic", required=args.output is None)
     output = args.output or interest[0]
+    if args.forced == "":
+        return _forced_by_period(args, c, output), output, interest
     if args.forced:
         src = input_element(c, args.forced)
         comp, drive = drive_of(c, src)
@@ -222,6 +230,47 @@ def _periodic(args, c):
     return orb, output, interest
 
 
+def _forced_by_period(args, c, output):
+    """--forced without a source: the circuit's own period (svzerod.cycles.time_period); an
+    svZeroDSolver model watches their vessel caps with their N points per cycle and starts as
+    their run does (hemocircuit.svzerod.output.start_state)."""
+    from ..svzerod import cycles
+
+    T = cycles.time_period(c)
+    svz = _svzerod_model(args.netlist)
+    if svz is not None:
+        model, cfg = svz
+        from ..cli import _sets
+        from ..svzerod.output import start_state
+        x0 = start_state(model, c, sets=_sets(getattr(args, "set", None)))
+        quantities = [col for _, q, p in cycles.vessel_caps(cfg, model) for col in (q, p)]
+        N, tol = model.points, cycles.their_tolerance(model.sim)
+    else:
+        from .op import operating_point
+        x0, quantities, N, tol = operating_point(c).x, None, 101, cycles.DEFAULT_TOL
+    if args.cycle_tol is not None:
+        tol = args.cycle_tol
+    orb = cycles.forced_periodic_report(c, x0, T, quantities, N=N, tol=tol)
+    if svz is not None:  # their up-front count with RCR boundary conditions (their eq. 21)
+        taus = cycles.rcr_time_constants(c)
+        orb.metadata["measures"]["cycles_their_rcr_rule"] = cycles.pfaller_cycles(taus, T, tol)
+    return orb
+
+
+def _svzerod_model(path):
+    """(SvzModel, their config) when ``path`` is an svZeroDSolver JSON model, else None."""
+    import json
+
+    if not str(path).endswith(".json"):
+        return None
+    from ..svzerod.importer import guess_units, import_svzerod, is_svzerod_model
+    with open(path) as fh:
+        cfg = json.load(fh)
+    if not is_svzerod_model(cfg):
+        return None
+    return import_svzerod(path, units=guess_units(cfg)), cfg
+
+
 def compute_periodic(args, sets):
     """One --grid member (:func:`hemocircuit.cli.computed`)."""
     from ..cli import load_circuit
@@ -241,5 +290,14 @@ def cmd_periodic(args):
     mu = orb.nontrivial_multipliers
     print("Floquet multipliers (non-trivial): " + ", ".join(f"{m:.4g}" for m in mu))
     print("orbitally stable" if orb.stable else "orbitally UNSTABLE")
+    m = orb.metadata["measures"]
+    if "cycles_measured" in m:
+        print(f"x(T) - x(0): {orb.residual:.2e} (scaled); cycle-by-cycle integration from the same start meets the "
+              f"cycle-to-cycle criterion (relative change of cycle means <= {m['cycle_tolerance']:g}) after "
+              f"{m['cycles_measured']} cycles; predicted from |mu| = {m['dominant_multiplier']:.4g}: "
+              f"{m['cycles_predicted']} (log(tol)/log|mu|: {m['cycles_log_tol_over_log_mu']})")
+        if m.get("cycles_their_rcr_rule") is not None:
+            print(f"svZeroDSolver with use_cycle_to_cycle_error runs {m['cycles_their_rcr_rule']} cycles here "
+                  "(ceil(-tau_max/T ln tol), tau = Rd C of its RCR boundary conditions)")
     select = [output] + [k for k in interest if k in orb.columns and k != output]
     save_outputs(args, orb, plot=lambda path: orb.plot(path, select=select, title="periodic orbit"))

@@ -1,0 +1,147 @@
+"""svZeroDSolver's ``steady_initial`` procedure, as an option (hemocircuit's default start is the
+true operating point, found by Newton).
+
+Theirs (SimVascular/svZeroDSolver src/solve/Solver.cpp ``setup_initial``): from their initial
+condition (``initial_condition``, 0 where not given, derivatives 0) the model with every time
+series at its mean (``Model::to_steady``: Parameter::to_steady, and the capacitance of every
+RCR and ClosedLoopRCR set to 0, OpenLoopCoronaryBC switched to its steady equations
+P_in = (Ra + Ram + Rv) Q_in + P_v, V_im = 0) takes 31 generalized-alpha steps of T/10
+(src/algebra/Integrator.cpp), step i from t = i T/10, evaluated at t + alpha_f h, with their
+``rho_infty`` (0.5 by default).  So it is 3.1 cardiac periods of pseudo-time, not a steady
+state: vessel capacitors, inductors and chambers (whose activation keeps running on that
+pseudo-time) are still relaxing at its end.
+
+Here the same scheme is applied to hemocircuit's ODE form x' = f(t, x) of the time-averaged
+circuit: per step the predictor x_{n+1} = x_n, x'_{n+1} = (1 - 1/gamma) x'_n, then Newton on
+x'_{n+alpha_m} = f(t_n + alpha_f h, x_{n+alpha_f}) with x_{n+1} = x_n + h (x'_n + gamma (x'_{n+1} - x'_n)),
+alpha_m = (3 - rho)/(2 (1 + rho)), alpha_f = 1/(1 + rho), gamma = 1/2 + alpha_m - alpha_f
+(their Integrator constructor).  Their zero capacitances make those variables algebraic; here
+the capacitances of rcr_bc, closed_loop_rcr (C) and coronary_bc (Ca, Cc) are scaled by
+EPS = 1e-9 for the procedure (a mode of time constant ~EPS tau, which the scheme damps like an
+algebraic variable: by -rho per step) and their volume states scaled back at the end, so the
+pressures they carry are kept.  Their algebraic variables are not states here, so only the
+states are taken from the procedure.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import HemocircuitError, SolverError
+
+EPS = 1e-9
+STEPS = 31  # Solver.cpp setup_initial
+#: capacitances their to_steady removes (per hemocircuit type) and the volume states they carry
+ZEROED = {"rcr_bc": (("C",), ("V",)), "closed_loop_rcr": (("C",), ("V",)),
+          "coronary_bc": (("Ca", "Cc"), ("V_a", "V_im"))}
+
+
+def gen_alpha_coefficients(rho):
+    """(alpha_m, alpha_f, gamma) of their first-order generalized-alpha scheme."""
+    am = 0.5 * (3.0 - rho) / (1.0 + rho)
+    af = 1.0 / (1.0 + rho)
+    return am, af, 0.5 + am - af
+
+
+def _functions(c):
+    """(rhs(t, x), dense jacobian(t, x)) of circuit ``c``: the compiled engine's when it has one
+    (its nodal solve also converges where the Python Newton on tanh valves does not), else the
+    circuit's."""
+    from ..kernels.system import CompiledSystem
+
+    system = CompiledSystem.of(c)
+
+    def jac_py(t, x):
+        J = c.jacobian(t, x)
+        return J.toarray() if hasattr(J, "toarray") else np.asarray(J)
+
+    if system is None:
+        return c.rhs, jac_py
+    P = system.params(c)[0]
+
+    def rhs(t, x):  # the compiled nodal solve, the Python Newton where it does not converge
+        f = system.rhs(t, x, P)
+        return f if np.all(np.isfinite(f)) else c.rhs(t, x)
+
+    def jac(t, x):
+        J = np.asarray(system.jacobian(t, x, P))
+        return J if np.all(np.isfinite(J)) else jac_py(t, x)
+    return rhs, jac
+
+
+def gen_alpha_steps(c, x0, h, n_steps, rho=0.5, t0=0.0, max_iter=30, tol=1e-11):
+    """``n_steps`` generalized-alpha steps of size h [s] of x' = f(t, x) (circuit ``c``) from x0
+    with x'(0) = 0, as their Integrator::step.  Returns the final state."""
+    x = np.array(x0, float)
+    if x.size == 0:  # no states: nothing relaxes
+        return x
+    am, af, gamma = gen_alpha_coefficients(rho)
+    rhs, jac = _functions(c)
+    xd = np.zeros_like(x)
+    S = c.state_scales
+    eye = np.eye(x.size)
+
+    def residual(t, xd_new):
+        x_new = x + h * (xd + gamma * (xd_new - xd))
+        return xd + am * (xd_new - xd) - rhs(t, x + af * (x_new - x)), x + af * (x_new - x)
+
+    for i in range(n_steps):
+        t = t0 + i * h + af * h
+        xd_new = xd * (1.0 - 1.0 / gamma)  # their predictor (x_new = x)
+        r, x_af = residual(t, xd_new)
+        for _ in range(max_iter):
+            J = jac(t, x_af)
+            d = np.linalg.solve(am * eye - af * gamma * h * J, -r)
+            # backtracking: their valves (tanh of steepness ~100 per dyn/cm^2) make the full
+            # Newton step leave the region where our nodal equations converge
+            lam, norm0 = 1.0, np.max(np.abs(r) * h / S)
+            for _ in range(40):
+                try:
+                    r_new, x_af_new = residual(t, xd_new + lam * d)
+                    if np.all(np.isfinite(r_new)) and (np.max(np.abs(r_new) * h / S) < max(norm0, tol)
+                                                       or lam < 1e-3):
+                        break
+                except SolverError:
+                    pass
+                lam *= 0.5
+            else:
+                raise SolverError(f"their steady_initial: no Newton step reduces the residual in pseudo-time "
+                                  f"step {i} (t = {t:g} s)", time=t)
+            xd_new, r, x_af = xd_new + lam * d, r_new, x_af_new
+            if np.max(np.abs(r) * h / S) < tol or np.max(np.abs(gamma * h * lam * d) / S) < tol:
+                break
+        else:
+            raise SolverError(f"their steady_initial: Newton did not converge in {max_iter} iterations in "
+                              f"pseudo-time step {i} (t = {t:g} s)", time=t)
+        x, xd = x + h * (xd + gamma * (xd_new - xd)), xd_new
+        if not np.all(np.isfinite(x)):
+            raise SolverError(f"their steady_initial: non-finite state after pseudo-time step {i}", time=t)
+    return x
+
+
+def their_steady_initial(model, mean_circuit):
+    """The state their steady_initial procedure gives for an imported ``model``
+    (:class:`~hemocircuit.svzerod.importer.SvzModel`), on ``mean_circuit`` (the circuit of
+    ``model.mean_netlist``).  Their cardiac period T, ``rho_infty`` from their
+    simulation_parameters."""
+    from ..ic import apply_ic
+    from .output import their_initial
+
+    cm = mean_circuit
+    if model.closed:
+        raise HemocircuitError("their steady_initial does not apply to a closed loop (their Solver.cpp rejects it "
+                               "with ClosedLoopHeartAndPulmonary); it starts from its initial_condition")
+    rho = float(model.sim.get("rho_infty", 0.5))
+    changes, scaled = {}, []
+    for e in model.netlist["elements"]:
+        if e["type"] in ZEROED:
+            params, states = ZEROED[e["type"]]
+            for p in params:
+                path = f"{e['id']}.{p}"
+                changes[path] = float(cm.parameters.values[path][0]) * EPS
+            scaled += [cm.state_names.index(f"{e['id']}.{s}") for s in states]
+    x0 = apply_ic(cm, np.zeros(cm.nx), their_initial(model, cm))
+    x0[scaled] *= EPS
+    c0 = cm.with_values(changes) if changes else cm
+    x = gen_alpha_steps(c0, x0, model.period / 10.0, STEPS, rho)
+    x[scaled] /= EPS
+    return x
