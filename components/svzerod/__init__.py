@@ -6,6 +6,7 @@ blocks to these types; docs/svzerod.md lists the mapping.
 """
 from .blood_vessel import BloodVessel
 from .blood_vessel_crl import BloodVesselCRL
+from .blood_vessel_rc import BloodVesselRC
 from .coronary_bc import CoronaryBC
 from .coronary_var_res_bc import CoronaryVarResBC
 from .closed_loop_coronary import ClosedLoopCoronary
@@ -20,6 +21,6 @@ from .linear_elastance_chamber import LinearElastanceChamber
 from .closed_loop_rcr import ClosedLoopRCR
 from .closed_loop_heart_pulmonary import ClosedLoopHeartAndPulmonary
 
-__all__ = ["BloodVessel", "BloodVesselCRL", "ChamberElastanceInductor", "ChamberElastanceInductorExponential", "ChamberSphere",
+__all__ = ["BloodVessel", "BloodVesselCRL", "BloodVesselRC", "ChamberElastanceInductor", "ChamberElastanceInductorExponential", "ChamberSphere",
            "ClosedLoopCoronary",
            "ClosedLoopHeartAndPulmonary", "ClosedLoopRCR", "CoronaryBC", "CoronaryVarResBC", "LinearElastanceChamber", "PiecewiseValve", "RCRBC", "ResistanceBC", "ValveTanh"]

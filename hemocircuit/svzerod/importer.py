@@ -7,8 +7,8 @@ at load time.
 
 Mapping (one element per block, named after it; blocks in components/svzerod/):
   vessels  BloodVessel -> blood_vessel, BloodVesselCRL -> blood_vessel_crl, BloodVesselRC
-           (Rpd, Cp) -> blood_vessel_crl without L (their BloodVesselRC.cpp: Cp dP_in/dt =
-           Q_in - (P_in - P_out)/Rpd, Q_in = Q_out, i.e. the CRL equations with L = S = 0)
+           (Rpd, Cp) -> blood_vessel_rc (a flow-through RC: Q_in = Q_out), ChamberSphere ->
+           chamber_sphere
            (nodes [inlet, outlet, ground]; options capacitive/inductive from C, L != 0)
   junctions NORMAL_JUNCTION -> one node named after the junction (ideal: equal pressures,
            mass conservation); BloodVesselJunction -> one blood_vessel per outlet,
@@ -342,15 +342,18 @@ class _Importer:
                 self.chamber_sphere(name, vals, two_port("vessel", name), ic, start)
                 q_in[name], q_out[name] = f"{self.ids[name]}.Q_in", f"{self.ids[name]}.Q_out"
                 continue
-            if typ == "BloodVesselRC":  # their Rpd, Cp: exactly a CRL vessel without L and stenosis
+            if typ == "BloodVesselRC":  # a flow-through RC (Q_in = Q_out), not a CRL without L
                 self.only_keys(name, vals, ("Rpd", "Cp"))
-                R, C, L, S = self.value(name, vals, "Rpd"), float(self.value(name, vals, "Cp")), 0.0, 0.0
-                if C <= 0.0:
-                    raise _err(f"vessel '{name}': BloodVesselRC needs Cp > 0, got {C!r}", name, path)
-            else:
-                R = self.value(name, vals, "R_poiseuille")
-                C, L = float(vals.get("C", 0.0)), float(vals.get("L", 0.0))
-                S = float(vals.get("stenosis_coefficient", 0.0))
+                eid = self.id_of(name)
+                Cp = float(self.value(name, vals, "Cp"))
+                self.add(eid, "blood_vessel_rc", list(two_port("vessel", name)) + ["ground"],
+                         Rpd=_fmt(self.value(name, vals, "Rpd"), self.uR), Cp=_fmt(Cp, self.uC))
+                q_in[name], q_out[name] = f"{eid}.Q_in", f"{eid}.Q_out"
+                start(eid, "X", Cp * ic(f"pressure:{inlet[name][0]}:{name}"), V)
+                continue
+            R = self.value(name, vals, "R_poiseuille")
+            C, L = float(vals.get("C", 0.0)), float(vals.get("L", 0.0))
+            S = float(vals.get("stenosis_coefficient", 0.0))
             n_in, n_out = two_port("vessel", name)
             up, down = inlet[name][0], outlet[name][0]
             eid = self.id_of(name)
@@ -361,7 +364,7 @@ class _Importer:
             q_in[name], q_out[name] = f"{eid}.Q_in", f"{eid}.Q_out"
             p0, qi, qo = ic(f"pressure:{up}:{name}"), ic(f"flow:{up}:{name}"), ic(f"flow:{name}:{down}")
             if C != 0.0:  # their capacitor pressure: P_in (CRL), P_in - (R + S|Q_in|) Q_in (BloodVessel)
-                pc = p0 if typ != "BloodVessel" else p0 - (float(R) + S * abs(qi)) * qi
+                pc = p0 if typ == "BloodVesselCRL" else p0 - (float(R) + S * abs(qi)) * qi
                 start(eid, "V", C * pc, V, store=True)
             if L != 0.0:
                 start(eid, "Q_out", qo, Q)
@@ -503,6 +506,7 @@ class _Importer:
                          **{k: _fmt(self.value(name, vals, k), self.uR) for k in ("Ra1", "Ra2", "Rv1")},
                          **{k: _fmt(self.value(name, vals, k), self.uC) for k in ("Ca", "Cc")},
                          Pim=pim, P_v=_fmt(self.value(name, vals, "P_v"), P))
+                self.coronary_start(name, eid, vals, float(self.value(name, vals, "Ra2")), ins, outs, ic, start)
             elif typ == "CORONARY_VAR_RES":
                 pim, _ = self.series(name, vals, "Pim", P, steady)
                 self.add(eid, "coronary_var_res_bc", [nd, "ground"],
@@ -511,6 +515,7 @@ class _Importer:
                          **{k: _fmt(self.value(name, vals, k), "s") for k in ("T_vc", "T_vr")},
                          Pim=pim, P_v=_fmt(self.value(name, vals, "P_v"), P))
                 self.timed_elements.append(eid)  # Ram(t) uses the model's cardiac period
+                self.coronary_start(name, eid, vals, float(self.value(name, vals, "Ra2_min")), ins, outs, ic, start)
             else:
                 raise _err(f"boundary condition '{name}': unknown or unsupported bc_type {typ!r} "
                            f"(supported: {', '.join(SUPPORTED_BC)})", name, path)
@@ -618,6 +623,7 @@ class _Importer:
                 bc, key = self.pinned_p[node]
                 Cv = float(e["C"].split()[0])
                 e["capacitive"] = False
+                self.drop_initial(eid, "V")
                 cid = self.id_of(f"{block}_C")
                 self.add(cid, "flow_source", [node, "ground"], value=self.slope(bc, key, Cv, Q))
                 if stores[0].plus == "in":  # their flow_in includes the capacitor's flow
@@ -637,6 +643,7 @@ class _Importer:
                     bc, key = self.pinned_q[node]
                     Lv = float(e["L"].split()[0])
                     e["inductive"] = False
+                    self.drop_initial(eid, "Q_out")
                     mid = f"{eid}_L"
                     e["nodes"] = [mid, e["nodes"][1], e["nodes"][2]] if end == "in" else [e["nodes"][0], mid, e["nodes"][2]]
                     pid = self.id_of(f"{block}_L")
@@ -644,6 +651,21 @@ class _Importer:
                     sign = 1.0 if end == "out" else -1.0
                     self.add(pid, "pressure_source", [mid, node], value=self.slope(bc, key, sign * Lv, P))
                     break
+
+    def coronary_start(self, name, eid, vals, Ram0, ins, outs, ic, start):
+        """Physical volumes of an open-loop coronary at their initial condition: their
+        volume_im is Cc (P_im - Pim + Pim_0 - P_Cim_0), offset by its value at the start
+        (OpenLoopCoronaryBC.cpp setup_initial_state_dependent_params: P_Cim_0 = P_a - Ram Q_am,
+        P_a = P_in - Ra1 Q_in, Q_am = Q_in - Ca dP_a/dt with dP_a/dt = 0, Pim_0 = Pim(0))."""
+        other = ins[0] if ins else outs[0]
+        var = f"{other}:{name}" if ins else f"{name}:{other}"
+        p_in, q_in = ic(f"pressure:{var}"), ic(f"flow:{var}")
+        Pa = p_in - float(self.value(name, vals, "Ra1")) * q_in
+        pim = vals["Pim"]
+        pim0 = float(pim[0] if isinstance(pim, list) else pim)
+        Cc, V = float(self.value(name, vals, "Cc")), self.u["V"]
+        start(eid, "V_a", float(self.value(name, vals, "Ca")) * Pa, V)
+        start(eid, "V_im", ic(f"volume_im:{name}") + Cc * ((Pa - Ram0 * q_in) - pim0), V)
 
     def chamber_sphere(self, name, vals, nodes, ic, start):
         """A ChamberSphere: parameters in this unit system's pressure, length and time (their
@@ -689,6 +711,11 @@ class _Importer:
         p_in, q_in = ic(f"pressure:{up}:{name}"), ic(f"flow:{up}:{name}")
         start(eid, "V_a", Ca * (p_in - Ra * q_in), self.u["V"], store=True)
         start(eid, "V_im", ic(f"volume_im:{name}"), self.u["V"], store=True)
+
+    def drop_initial(self, eid, state):
+        """A state the index reduction removed has no initial value (theirs is fixed by the source)."""
+        self.initial.pop(f"{eid}.{state}", None)
+        self.initial_given.pop(f"{eid}.{state}", None)
 
     def block_of(self, eid):
         return next(name for name, ident in self.ids.items() if ident == eid)
