@@ -23,11 +23,12 @@ from hemocircuit.errors import NetlistError
 UPSTREAM = os.environ.get("HEMOCIRCUIT_SVZEROD_UPSTREAM")
 pytestmark = pytest.mark.skipif(not UPSTREAM, reason="HEMOCIRCUIT_SVZEROD_UPSTREAM not set")
 
-#: max relative distance (pressure, flow) of their stored result from their dt/10 solution,
-#: measured with their solver (svzerod 3.2, which reproduces these stored results to 1e-11),
-#: rounded up; cases not listed are converged within 1e-3 of the issue's tolerance
-GAP = {"closedLoopHeart_singleVessel_decomposed": (0.37, 0.062),
-       "closedLoopHeart_withCoronaries": (0.23, 0.22),
+#: max distance (pressure, flow) of their stored result from their dt/10 solution over the
+#: compared rows, relative to the stored result's range (the scale run_case uses), measured
+#: with their solver (svzerod 3.2, which reproduces these stored results to 1e-11), rounded
+#: up; cases not listed are converged within 1e-3 of the issue's tolerance
+GAP = {"closedLoopHeart_singleVessel_decomposed": (0.45, 0.065),
+       "closedLoopHeart_withCoronaries": (0.24, 0.25),
        "pulsatileFlow_CStenosis_steadyPressure_definedPeriod": (2.5e-4, 1.2e-2)}
 SKIP = ("steadyFlow_calibration", "chamber_sphere", "pulsatileFlow_R_coronary_cycle_error",
         "pulsatileFlow_bifurcationR_RCR_cycle_error")
