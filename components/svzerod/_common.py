@@ -37,3 +37,24 @@ def stenosis_linearised(R, S, q0):
 def k_stenosis_linearised(R, S, q0):
     a = abs(q0)
     return R + 2.0 * S * a, -S * a * q0
+
+
+def each_element(p, names, x, t, *more):
+    """Parameters ``names`` stacked (..., len(names)), states, times and ``more`` arrays
+    broadcast to one (B, E) shape: (shape, P, X, T, *more), for blocks whose numpy hooks call
+    their compiled per-element functions."""
+    shape = batch_shape(p, x.shape[:-1], np.shape(t), *(m.shape[:-1] for m in more))
+    P = np.stack([np.broadcast_to(np.asarray(p[k], float), shape) for k in names], axis=-1)
+    X = np.broadcast_to(x, shape + x.shape[-1:])
+    T = np.broadcast_to(np.asarray(t, float), shape)
+    return (shape, P, X, T) + tuple(np.broadcast_to(m, shape + m.shape[-1:]) for m in more)
+
+
+def kernel_derivatives(derivs, p, names, x, u, t):
+    """dx/dt (B, E, S) from a compiled per-element ``derivs(p, x, u, t, iopt, dx)``."""
+    shape, P, X, T, U = each_element(p, names, x, t, u)
+    dx = np.zeros(shape + x.shape[-1:])
+    for idx in np.ndindex(shape):
+        derivs(np.ascontiguousarray(P[idx]), np.ascontiguousarray(X[idx]), np.ascontiguousarray(U[idx]),
+               float(T[idx]), None, dx[idx])
+    return dx

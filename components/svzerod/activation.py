@@ -11,12 +11,15 @@ Equations from SimVascular/svZeroDSolver src/model/ActivationFunction.cpp (commi
   wrapping_cosine   Tsa' = T Tsa, tp = T / tpwave, tc = fmod(t, T):
                     tc <= tp: 0.5 (1 - cos(2 pi (tc - tp + Tsa')/Tsa'));
                     T - Tsa' + tp <= tc < T: 0.5 (1 - cos(2 pi (tc - tp - (T - Tsa'))/Tsa')); else 0
+  fourier           tc = fmod(t, T); F = sum_i a_i cos(2 pi i tc/T) - b_i sin(2 pi i tc/T) (their
+                    25-mode table FT_ELAST, J. Tran / Menon 2023); A = (F - min F)/(max F - min F)
 fmod is C's (sign of the dividend), as in their code: piecewise_cosine is 0 before its first
 contraction start.  Their two_hill normalisation scans [0, T) with a 1e-5 s step; here the
 maximum is found exactly: d/ds log A = 0 at m1/(1 + g1) = m2 g2/(1 + g2), whose left side
 minus right side decreases in s, so bisection finds it (then the maximum over [0, T) is at
-min(s*, T)).  The 25-mode ``fourier`` activation is not implemented (its normalisation needs
-a min/max scan per parameter set).
+min(s*, T)).  The Fourier series is a function of the phase tc/T alone, so its min and max
+(their scan of 10000 points of the cycle, FourierActivation::calculate_normalization) are
+constants, computed once here with the same scan.  It has no parameters.
 
 Chamber components take these as parameters (``ACT_PARAMS``, times in s, the rest
 dimensionless) and the option ``activation``; only the parameters of the chosen function are used.
@@ -31,7 +34,7 @@ from hemocircuit.component import Param
 
 from ._common import jit
 
-KINDS = ("half_cosine", "piecewise_cosine", "two_hill", "wrapping_cosine")
+KINDS = ("half_cosine", "piecewise_cosine", "two_hill", "wrapping_cosine", "fourier")
 
 #: (name, unit) in the order the kernels read them
 ACT_PARAMS = (("t_active", "s"), ("t_twitch", "s"),
@@ -43,7 +46,8 @@ ACT_PARAMS = (("t_active", "s"), ("t_twitch", "s"),
 USED = {"half_cosine": ("t_active", "t_twitch"),
         "piecewise_cosine": ("contract_start", "relax_start", "contract_duration", "relax_duration"),
         "two_hill": ("t_shift", "tau_1", "tau_2", "m1", "m2"),
-        "wrapping_cosine": ("Tsa", "tpwave")}
+        "wrapping_cosine": ("Tsa", "tpwave"),
+        "fourier": ()}
 POSITIVE = ("t_twitch", "contract_duration", "relax_duration", "tau_1", "tau_2", "m1", "m2", "Tsa", "tpwave")
 
 
@@ -52,6 +56,40 @@ POSITIVE = ("t_twitch", "contract_duration", "relax_duration", "tau_1", "tau_2",
 _DEFAULTS = {"t_active": 0.2, "t_twitch": 0.3, "contract_start": 0.207, "relax_start": 0.29625,
              "contract_duration": 0.08925, "relax_duration": 0.26975, "t_shift": 0.207, "tau_1": 0.18551724137931036,
              "tau_2": 0.31172413793103454, "m1": 1.32, "m2": 27.4, "Tsa": 0.40742, "tpwave": 8.976868}
+
+
+#: their FT_ELAST table (ActivationFunction.cpp): (a_i, b_i) of cos and -sin of mode i
+FT_ELAST = np.array([[0.283748803, 0.000000000], [0.031830626, -0.374299825], [-0.209472400, -0.018127770],
+                     [0.020520047, 0.073971113], [0.008316883, -0.047249597], [-0.041677660, 0.003212163],
+                     [0.000867323, 0.019441411], [-0.001675379, -0.005565534], [-0.011252277, 0.003401432],
+                     [-0.000414677, 0.008376795], [0.000253749, -0.000071880], [-0.002584966, 0.001566861],
+                     [0.000584752, 0.003143555], [0.000028502, -0.000024787], [0.000022961, -0.000007476],
+                     [0.000018735, -0.000001281], [0.000015573, 0.000001781], [0.000013133, 0.000003494],
+                     [0.000011199, 0.000004507], [0.000009634, 0.000005117], [0.000008343, 0.000005481],
+                     [0.000007265, 0.000005687], [0.000006354, 0.000005789], [0.000005575, 0.000005821],
+                     [0.000004903, 0.000005805]])
+_FT_A = np.ascontiguousarray(FT_ELAST[:, 0])
+_FT_B = np.ascontiguousarray(FT_ELAST[:, 1])
+
+
+def _fourier_scan(n=10000):
+    """(min, max - min) of the series over their n-point scan of one cycle (phase k/n)."""
+    ph = 2.0 * np.pi * np.arange(n)[:, None] * np.arange(25)[None, :] / n
+    f = np.cos(ph) @ _FT_A - np.sin(ph) @ _FT_B
+    return float(f.min()), float(f.max() - f.min())
+
+
+FOURIER_MIN, FOURIER_RANGE = _fourier_scan()
+
+
+@jit
+def fourier_raw(tc, T):
+    """Their un-normalised 25-mode series at time tc in the cycle (the heart block's F(t))."""
+    F = 0.0
+    for i in range(25):
+        w = 2.0 * math.pi * i * tc / T
+        F += _FT_A[i] * math.cos(w) - _FT_B[i] * math.sin(w)
+    return F
 
 
 def act_parameters():
@@ -122,6 +160,8 @@ def activation(kind, t, T, a):
         g1 = (s / a[7]) ** a[9]
         g2 = (s / a[8]) ** a[10]
         return g1 / (1.0 + g1) / (1.0 + g2) / _two_hill_max(T, a[7], a[8], a[9], a[10])
+    if kind == 4:  # fourier
+        return (fourier_raw(np.fmod(t, T), T) - FOURIER_MIN) / FOURIER_RANGE
     # wrapping_cosine
     Tsa = T * a[11]
     tp = T / a[12]

@@ -23,7 +23,8 @@ pulmonary RC only sets the back-pressure P_pul.  So the blood volume is
 V_RA + V_RV + V_LA + V_LV + Cpa P_out (not Cp P_pul), which is what the stores declare.
 Units: L* [mmHg*s^2/mL], R* and Rpd [mmHg*s/mL], Cp, Cpa [mL/mmHg], Erv_s, Elv_s, Emax_* [mmHg/mL],
 Kxp_* [mmHg], Kxv_* [1/mL], V* [mL], Tsa, tpwave, iml, imr dimensionless (iml, imr scale the
-intramyocardial pressure of their closed-loop coronary blocks; unused here), period [s].
+intramyocardial pressure of the closed-loop coronary blocks, which read them, Elv_s/Erv_s,
+Vlv_u/Vrv_u and the state-only observables V_LV/V_RV through netlist expressions), period [s].
 States: V_RA, Q_RA, V_RV, Q_RV, V_pul = Cp P_pul, V_LA, Q_LA, V_LV, Q_LV, V_ao = Cpa P_out.
 Local unknowns [P_in, P_out, P_ref, q_in, q_out]: branch (in, ref) P_in - P_ref = P_RA carrying
 Q_in; branch (out, ref) P_out - P_ref = V_ao/Cpa carrying -Q_out.
@@ -36,14 +37,15 @@ import numpy as np
 
 from hemocircuit.component import Component, Observable, Param, State, Storage
 
-from ._common import batch_shape, C_UNIT, E_UNIT, L_UNIT, R_UNIT, jit
+from ._common import batch_shape, C_UNIT, E_UNIT, L_UNIT, R_UNIT, each_element, jit, kernel_derivatives
+from .activation import fourier_raw
 
 _P = {"period": ("s", "cardiac period (their cardiac_cycle_period)"),
       "Tsa": ("dimensionless", "atrial systole fraction of the period"),
       "tpwave": ("dimensionless", "P-wave divisor of the period"),
       "Erv_s": (E_UNIT, "right ventricular elastance scale"), "Elv_s": (E_UNIT, "left ventricular elastance scale"),
-      "iml": ("dimensionless", "left intramyocardial pressure scale (unused)"),
-      "imr": ("dimensionless", "right intramyocardial pressure scale (unused)"),
+      "iml": ("dimensionless", "left intramyocardial pressure scale (read by closed_loop_coronary)"),
+      "imr": ("dimensionless", "right intramyocardial pressure scale (read by closed_loop_coronary)"),
       "Lra_v": (L_UNIT, "RA outflow inductance"), "Rra_v": (R_UNIT, "RA outflow resistance"),
       "Lrv_a": (L_UNIT, "RV outflow inductance"), "Rrv_a": (R_UNIT, "RV outflow resistance"),
       "Lla_v": (L_UNIT, "LA outflow inductance"), "Rla_v": (R_UNIT, "LA outflow resistance"),
@@ -57,18 +59,6 @@ _P = {"period": ("s", "cardiac period (their cardiac_cycle_period)"),
       "Vaso_ra": ("mL", "RA rest volume"), "Vaso_la": ("mL", "LA rest volume")}
 _POSITIVE = {"period", "tpwave", "Tsa", "Lra_v", "Lrv_a", "Lla_v", "Llv_a", "Rpd", "Cp", "Cpa"}
 _NONNEG = {"Rra_v", "Rrv_a", "Rla_v", "Rlv_ao"}
-
-_FT = np.array([[0.283748803, 0.000000000], [0.031830626, -0.374299825], [-0.209472400, -0.018127770],
-                [0.020520047, 0.073971113], [0.008316883, -0.047249597], [-0.041677660, 0.003212163],
-                [0.000867323, 0.019441411], [-0.001675379, -0.005565534], [-0.011252277, 0.003401432],
-                [-0.000414677, 0.008376795], [0.000253749, -0.000071880], [-0.002584966, 0.001566861],
-                [0.000584752, 0.003143555], [0.000028502, -0.000024787], [0.000022961, -0.000007476],
-                [0.000018735, -0.000001281], [0.000015573, 0.000001781], [0.000013133, 0.000003494],
-                [0.000011199, 0.000004507], [0.000009634, 0.000005117], [0.000008343, 0.000005481],
-                [0.000007265, 0.000005687], [0.000006354, 0.000005789], [0.000005575, 0.000005821],
-                [0.000004903, 0.000005805]])
-_FT_A = np.ascontiguousarray(_FT[:, 0])
-_FT_B = np.ascontiguousarray(_FT[:, 1])
 
 _STATES = ("V_RA", "Q_RA", "V_RV", "Q_RV", "V_pul", "V_LA", "Q_LA", "V_LV", "Q_LV", "V_ao")
 (PERIOD, TSA, TPWAVE, ERV_S, ELV_S, IML, IMR, LRA_V, RRA_V, LRV_A, RRV_A, LLA_V, RLA_V, LLV_A, RLV_AO, VRV_U,
@@ -87,11 +77,7 @@ def _activations(t, p):
         AA = 0.5 * (1.0 - math.cos(2.0 * math.pi * (tc - tp + Tsa) / Tsa))
     elif tc >= (T - Tsa) + tp and tc < T:
         AA = 0.5 * (1.0 - math.cos(2.0 * math.pi * (tc - tp - (T - Tsa)) / Tsa))
-    F = 0.0
-    for i in range(25):
-        w = 2.0 * math.pi * i * tc / T
-        F += _FT_A[i] * math.cos(w) - _FT_B[i] * math.sin(w)
-    return AA, F
+    return AA, fourier_raw(tc, T)
 
 
 @jit
@@ -152,6 +138,8 @@ def heart_derivs(p, x, u, t, iopt, dx):
 def heart_observe(p, x, iopt, out):
     out[0] = x[0] + x[2] + x[5] + x[7]
     out[1] = x[9]
+    out[2] = x[2]
+    out[3] = x[7]
 
 
 class ClosedLoopHeartAndPulmonary(Component):
@@ -183,9 +171,16 @@ class ClosedLoopHeartAndPulmonary(Component):
     def storages(self):
         return (Storage("in", "ref", "V_heart"), Storage("out", "ref", "V_ao", state="V_ao"))
 
+    def volume_observables(self):
+        """Two stores: the chambers' volume is V(CLH), the aortic capacitor's CLH.V_ao (one
+        V(ID) column cannot hold both)."""
+        return ("V_heart",)
+
     def observables(self):
         return (Observable("V_heart", "mL", "volume of the four chambers", state_only=True),
                 Observable("V_ao", "mL", "aortic capacitor volume", state_only=True),
+                Observable("V_RV", "mL", "right ventricular volume (read by closed_loop_coronary)", state_only=True),
+                Observable("V_LV", "mL", "left ventricular volume (read by closed_loop_coronary)", state_only=True),
                 Observable("P_RV", "mmHg", "right ventricular pressure"),
                 Observable("P_pul", "mmHg", "pulmonary pressure"),
                 Observable("P_LA", "mmHg", "left atrial pressure"),
@@ -193,17 +188,8 @@ class ClosedLoopHeartAndPulmonary(Component):
                 Observable("Q_in", "mL/s", "flow into the right atrium"),
                 Observable("Q_out", "mL/s", "flow out of the aortic capacitor"))
 
-    def _each(self, p, x, t, *more):
-        """Broadcast parameters, states, time (and ``more`` arrays) to one (B, E) shape:
-        (shape, P (..., 28), X (..., 10), T (...), more...)."""
-        shape = batch_shape(p, x.shape[:-1], np.shape(t), *(m.shape[:-1] for m in more))
-        P = np.stack([np.broadcast_to(np.asarray(p[k], float), shape) for k in _P], axis=-1)
-        X = np.broadcast_to(x, shape + x.shape[-1:])
-        T = np.broadcast_to(np.asarray(t, float), shape)
-        return (shape, P, X, T) + tuple(np.broadcast_to(m, shape + m.shape[-1:]) for m in more)
-
     def stamp(self, p, x, u, t, src=None):
-        shape, P, X, T = self._each(p, x, t)
+        shape, P, X, T = each_element(p, tuple(_P), x, t)
         A = np.zeros(shape + (5, 5))
         b = np.zeros(shape + (5,))
         for idx in np.ndindex(shape):
@@ -212,17 +198,13 @@ class ClosedLoopHeartAndPulmonary(Component):
         return A, b
 
     def derivatives(self, p, x, u, t, src=None):
-        shape, P, X, T, U = self._each(p, x, t, u)
-        dx = np.zeros(shape + (10,))
-        for idx in np.ndindex(shape):
-            heart_derivs(np.ascontiguousarray(P[idx]), np.ascontiguousarray(X[idx]), np.ascontiguousarray(U[idx]),
-                         float(T[idx]), None, dx[idx])
-        return dx
+        return kernel_derivatives(heart_derivs, p, tuple(_P), x, u, t)
 
     def observe(self, p, x, u, t, src=None):
-        out = {"V_heart": x[..., 0] + x[..., 2] + x[..., 5] + x[..., 7], "V_ao": x[..., 9]}
+        out = {"V_heart": x[..., 0] + x[..., 2] + x[..., 5] + x[..., 7], "V_ao": x[..., 9],
+               "V_RV": x[..., 2], "V_LV": x[..., 7]}
         if u is not None:
-            shape, P, X, T = self._each(p, x, t)
+            shape, P, X, T = each_element(p, tuple(_P), x, t)
             pr = np.zeros(shape + (6,))
             for idx in np.ndindex(shape):
                 pr[idx] = _pressures(np.ascontiguousarray(P[idx]), np.ascontiguousarray(X[idx]), float(T[idx]))
@@ -245,4 +227,4 @@ class ClosedLoopHeartAndPulmonary(Component):
 
     def kernel(self):
         from hemocircuit.kernels import Kernel
-        return Kernel(stamp=heart_stamp, derivs=heart_derivs, observe=heart_observe, observables=("V_heart", "V_ao"))
+        return Kernel(stamp=heart_stamp, derivs=heart_derivs, observe=heart_observe, observables=("V_heart", "V_ao", "V_RV", "V_LV"))

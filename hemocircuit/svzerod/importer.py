@@ -6,14 +6,16 @@ Every value is written with its unit, so the netlist converts to the circuit's m
 at load time.
 
 Mapping (one element per block, named after it; blocks in components/svzerod/):
-  vessels  BloodVessel -> blood_vessel, BloodVesselCRL -> blood_vessel_crl
+  vessels  BloodVessel -> blood_vessel, BloodVesselCRL -> blood_vessel_crl, BloodVesselRC
+           (Rpd, Cp) -> blood_vessel_rc (a flow-through RC: Q_in = Q_out), ChamberSphere ->
+           chamber_sphere
            (nodes [inlet, outlet, ground]; options capacitive/inductive from C, L != 0)
   junctions NORMAL_JUNCTION -> one node named after the junction (ideal: equal pressures,
            mass conservation); BloodVesselJunction -> one blood_vessel per outlet,
            ``J_outletname`` (their equations are exactly parallel R + stenosis + L branches)
   BCs      FLOW -> flow_source, PRESSURE -> pressure_source (their periodic time series as a
            ``periodic`` pwl waveform: one cycle), RESISTANCE -> resistance_bc,
-           RCR -> rcr_bc, CORONARY -> coronary_bc
+           RCR -> rcr_bc, CORONARY -> coronary_bc, CORONARY_VAR_RES -> coronary_var_res_bc
 Connection nodes are named ``A__B`` (upstream block, downstream block), a normal junction's
 node after the junction.  ``SvzModel.columns`` maps their output names (``pressure:A:B``,
 ``flow:A:B`` and, per vessel, pressure_in/out, flow_in/out) to hemocircuit output columns.
@@ -28,24 +30,32 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import NetlistError
+from ..units import parse_quantity
 
 UNIT_SYSTEMS = {
-    "cgs": {"P": "dyn/cm**2", "Q": "mL/s", "V": "mL", "t": "s"},
-    "mmHg": {"P": "mmHg", "Q": "mL/s", "V": "mL", "t": "s"},
-    "SI": {"P": "Pa", "Q": "m**3/s", "V": "m**3", "t": "s"},
+    "cgs": {"P": "dyn/cm**2", "Q": "mL/s", "V": "mL", "t": "s", "L": "cm"},
+    "mmHg": {"P": "mmHg", "Q": "mL/s", "V": "mL", "t": "s", "L": "cm"},
+    "SI": {"P": "Pa", "Q": "m**3/s", "V": "m**3", "t": "s", "L": "m"},
 }
 
 SIM_DEFAULTS = {"steady_initial": True, "output_all_cycles": False, "output_variable_based": False,
                 "output_mean_only": False, "output_derivative": False, "output_interval": 1,
                 "absolute_tolerance": 1e-8}
 
-SUPPORTED_BC = ("FLOW", "PRESSURE", "RESISTANCE", "RCR", "CORONARY", "ClosedLoopRCR")
+SUPPORTED_BC = ("FLOW", "PRESSURE", "RESISTANCE", "RCR", "CORONARY", "CORONARY_VAR_RES", "ClosedLoopRCR",
+                "ClosedLoopCoronaryLeft", "ClosedLoopCoronaryRight")
 SUPPORTED_VALVES = ("ValveTanh", "PiecewiseValve")
-SUPPORTED_CHAMBERS = ("ChamberElastanceInductor", "LinearElastanceChamber")
+SUPPORTED_CHAMBERS = ("ChamberElastanceInductor", "ChamberElastanceInductorExponential", "LinearElastanceChamber",
+                      "ChamberSphere")
 SUPPORTED_CLOSED_LOOP = ("ClosedLoopHeartAndPulmonary",)
 #: their block names of the heart and its two junctions (SimulationParameters.cpp, create_closed_loop)
 HEART, HEART_IN, HEART_OUT = "CLH", "J_heart_inlet", "J_heart_outlet"
-SUPPORTED_VESSELS = ("BloodVessel", "BloodVesselCRL")
+#: closed-loop coronaries: their block type -> the heart's (pressure scale, elastance, unstressed
+#: volume, ventricular volume) they read (ClosedLoopCoronaryLeftBC.cpp / RightBC.cpp)
+CLOSED_LOOP_CORONARY = ("ClosedLoopCoronaryLeft", "ClosedLoopCoronaryRight")
+_CORONARY_SIDE = {"ClosedLoopCoronaryLeft": ("iml", "Elv_s", "Vlv_u", "V_LV"),
+                  "ClosedLoopCoronaryRight": ("imr", "Erv_s", "Vrv_u", "V_RV")}
+SUPPORTED_VESSELS = ("BloodVessel", "BloodVesselCRL", "BloodVesselRC", "ChamberSphere")
 
 
 @dataclass
@@ -57,7 +67,9 @@ class SvzModel:
     netlist: dict
     period: float
     sim: dict
-    columns: dict = field(default_factory=dict)  # their name -> (our column, sign)
+    columns: dict = field(default_factory=dict)  # their name -> our column
+    factors: dict = field(default_factory=dict)  # their name -> factor from our column's unit to
+    # theirs, for variables that are not pressures, flows or chamber volumes (ChamberSphere's)
     block_types: list = field(default_factory=list)
     vessels: list = field(default_factory=list)  # vessel names (their per-block output)
     units: dict = field(default_factory=dict)
@@ -103,6 +115,9 @@ class _Importer:
         self.uE = f"({P})/({V})"
         self.elements, self.columns, self.types = [], {}, set()
         self.chamber_elements = []
+        self.timed_elements = []  # elements (not chambers) whose 'period' is the model's
+        self.extra_columns = {}  # their internal variable -> (our column, factor from its unit to theirs)
+        self.factors = {}  # their name -> factor from our column's unit to theirs (not P, Q, Vc)
         self.ids = {}
         self.raw = {}  # (block, key) -> (times from 0, values, period) of a time series
         self.pinned_p, self.pinned_q = {}, {}  # node -> (BC name, its value key) of PRESSURE / FLOW
@@ -168,6 +183,12 @@ class _Importer:
         d = factor * np.diff(v) / np.diff(t)
         rows = [[_fmt(tt, "s"), _fmt(dd, unit)] for tt, dd in zip(t[:-1], d)]
         return {"periodic": {"period": _fmt(period, "s"), "steps": rows}}
+
+    def only_keys(self, block, values, keys):
+        """A block's values may hold only ``keys`` (and ``_comment`` entries)."""
+        unknown = sorted(k for k in values if not str(k).startswith("_") and k not in keys)
+        if unknown:
+            raise _err(f"block '{block}': unknown value(s) {unknown} (it takes {', '.join(keys)})", block, self.path)
 
     def add(self, eid, typ, nodes, **vals):
         self.elements.append({"id": eid, "type": typ, "nodes": nodes, **vals})
@@ -241,8 +262,11 @@ class _Importer:
                 if key not in prm:
                     raise _err(f"valve '{name}': missing params.{key}", name, path)
             conns += [(prm["upstream_block"], name), (name, prm["downstream_block"])]
-        closed_bcs = [n for n, b in bcs.items() if b.get("bc_type") == "ClosedLoopRCR"
-                      and (b.get("bc_values") or {}).get("closed_loop_outlet") is True]
+        # blocks that drain into the heart: ClosedLoopRCR with closed_loop_outlet, and always the
+        # closed-loop coronaries (their SimulationParameters.cpp, create_boundary_conditions)
+        closed_bcs = [n for n, b in bcs.items() if (b.get("bc_type") == "ClosedLoopRCR"
+                      and (b.get("bc_values") or {}).get("closed_loop_outlet") is True)
+                      or b.get("bc_type") in CLOSED_LOOP_CORONARY]
         if heart is not None:
             self.types.add("ClosedLoopHeartAndPulmonary")
             for jn, ins, outs in ((HEART_IN, closed_bcs, [HEART]), (HEART_OUT, [HEART], list(heart.get("outlet_blocks") or []))):
@@ -262,6 +286,7 @@ class _Importer:
         for a, b in conns:
             outlet.setdefault(a, []).append(b)
             inlet.setdefault(b, []).append(a)
+        self.inlet_of = {k: v[0] for k, v in inlet.items()}
         known = set(by_id.values()) | set(bcs) | set(junctions) | set(valves) | set(chambers) | (
             {HEART} if heart is not None else set())
         for a, b in conns:
@@ -313,6 +338,19 @@ class _Importer:
                 raise _err(f"vessel '{name}': unknown zero_d_element_type {typ!r} (supported: {SUPPORTED_VESSELS})",
                            name, path)
             vals = v["zero_d_element_values"]
+            if typ == "ChamberSphere":  # a chamber listed among their vessels
+                self.chamber_sphere(name, vals, two_port("vessel", name), ic, start)
+                q_in[name], q_out[name] = f"{self.ids[name]}.Q_in", f"{self.ids[name]}.Q_out"
+                continue
+            if typ == "BloodVesselRC":  # a flow-through RC (Q_in = Q_out), not a CRL without L
+                self.only_keys(name, vals, ("Rpd", "Cp"))
+                eid = self.id_of(name)
+                Cp = float(self.value(name, vals, "Cp"))
+                self.add(eid, "blood_vessel_rc", list(two_port("vessel", name)) + ["ground"],
+                         Rpd=_fmt(self.value(name, vals, "Rpd"), self.uR), Cp=_fmt(Cp, self.uC))
+                q_in[name], q_out[name] = f"{eid}.Q_in", f"{eid}.Q_out"
+                start(eid, "X", Cp * ic(f"pressure:{inlet[name][0]}:{name}"), V)
+                continue
             R = self.value(name, vals, "R_poiseuille")
             C, L = float(vals.get("C", 0.0)), float(vals.get("L", 0.0))
             S = float(vals.get("stenosis_coefficient", 0.0))
@@ -368,6 +406,10 @@ class _Importer:
         for name, b in chambers.items():
             typ, vals = b["type"], b.get("values") or {}
             self.types.add(typ)
+            if typ == "ChamberSphere":  # its own activation, no activation_function
+                self.chamber_sphere(name, vals, two_port("chamber", name), ic, start)
+                q_in[name], q_out[name] = f"{self.ids[name]}.Q_in", f"{self.ids[name]}.Q_out"
+                continue
             eid = self.id_of(name)
             act = self.activation(name, b.get("activation_function"))
             if typ == "ChamberElastanceInductor":
@@ -375,6 +417,14 @@ class _Importer:
                 kw.update({k: _fmt(self.value(name, vals, k), V) for k in ("Vrd", "Vrs")})
                 kw["Impedance"] = _fmt(self.value(name, vals, "Impedance"), self.uL)
                 ctype = "chamber_elastance_inductor"
+            elif typ == "ChamberElastanceInductorExponential":
+                self.only_keys(name, vals, ("Emax", "Kxp", "Kxv", "Vaso", "Impedance"))
+                kw = {"Emax": _fmt(self.value(name, vals, "Emax"), self.uE),
+                      "Kxp": _fmt(self.value(name, vals, "Kxp"), P),
+                      "Kxv": _fmt(self.value(name, vals, "Kxv"), f"1/({V})"),
+                      "Vaso": _fmt(self.value(name, vals, "Vaso"), V),
+                      "Impedance": _fmt(self.value(name, vals, "Impedance"), self.uL)}
+                ctype = "chamber_elastance_inductor_exponential"
             else:
                 kw = {k: _fmt(self.value(name, vals, k), self.uE) for k in ("Emax", "Epass")}
                 kw["Vrest"] = _fmt(self.value(name, vals, "Vrest"), V)
@@ -383,7 +433,7 @@ class _Importer:
             self.add(eid, ctype, list(two_port("chamber", name)) + ["ground"], **kw, **act)
             q_in[name], q_out[name] = f"{eid}.Q_in", f"{eid}.Q_out"
             start(eid, "Vc", ic(f"Vc:{name}"), V, store=True)
-            if typ == "ChamberElastanceInductor":
+            if typ != "LinearElastanceChamber":  # the inductor's flow
                 start(eid, "Q_out", ic(f"flow:{name}:{outlet[name][0]}"), Q)
 
         # the closed-loop heart
@@ -407,7 +457,7 @@ class _Importer:
 
         # boundary conditions
         flow_col = {}
-        self.closed = not any(b.get("bc_type") != "ClosedLoopRCR" for b in bcs.values())
+        self.closed = not any(b.get("bc_type") not in ("ClosedLoopRCR",) + CLOSED_LOOP_CORONARY for b in bcs.values())
         for name, b in bcs.items():
             typ = b.get("bc_type")
             self.types.add(typ)
@@ -422,6 +472,10 @@ class _Importer:
                          C=_fmt(C, self.uC), Rd=_fmt(self.value(name, vals, "Rd"), self.uR))
                 q_in[name], q_out[name] = f"{eid}.Q_in", f"{eid}.Q_out"
                 start(eid, "V", float(C) * ic(f"P_c:{name}"), V, store=True)
+                continue
+            if typ in CLOSED_LOOP_CORONARY:
+                self.closed_loop_coronary(name, typ, vals, two_port("boundary condition", name), ic, start, heart)
+                q_in[name], q_out[name] = f"{eid}.Q_in", f"{eid}.Q_out"
                 continue
             ins, outs = inlet.get(name, []), outlet.get(name, [])
             if len(ins) + len(outs) != 1:
@@ -445,13 +499,23 @@ class _Importer:
                 C = self.value(name, vals, "C")
                 self.add(eid, "rcr_bc", [nd, "ground"], Rp=_fmt(self.value(name, vals, "Rp"), self.uR),
                          C=_fmt(C, self.uC), Rd=_fmt(self.value(name, vals, "Rd"), self.uR), Pd=pd)
-                start(eid, "V", float(C) * ic(f"P_c:{name}"), V)
+                start(eid, "V", float(C) * ic(f"pressure_c:{name}"), V)  # their WindkesselBC's name
             elif typ == "CORONARY":
                 pim, _ = self.series(name, vals, "Pim", P, steady)
                 self.add(eid, "coronary_bc", [nd, "ground"],
                          **{k: _fmt(self.value(name, vals, k), self.uR) for k in ("Ra1", "Ra2", "Rv1")},
                          **{k: _fmt(self.value(name, vals, k), self.uC) for k in ("Ca", "Cc")},
                          Pim=pim, P_v=_fmt(self.value(name, vals, "P_v"), P))
+                self.coronary_start(name, eid, vals, float(self.value(name, vals, "Ra2")), ins, outs, ic, start)
+            elif typ == "CORONARY_VAR_RES":
+                pim, _ = self.series(name, vals, "Pim", P, steady)
+                self.add(eid, "coronary_var_res_bc", [nd, "ground"],
+                         **{k: _fmt(self.value(name, vals, k), self.uR) for k in ("Ra1", "Ra2_min", "Rv1", "Ra2_max")},
+                         **{k: _fmt(self.value(name, vals, k), self.uC) for k in ("Ca", "Cc")},
+                         **{k: _fmt(self.value(name, vals, k), "s") for k in ("T_vc", "T_vr")},
+                         Pim=pim, P_v=_fmt(self.value(name, vals, "P_v"), P))
+                self.timed_elements.append(eid)  # Ram(t) uses the model's cardiac period
+                self.coronary_start(name, eid, vals, float(self.value(name, vals, "Ra2_min")), ins, outs, ic, start)
             else:
                 raise _err(f"boundary condition '{name}': unknown or unsupported bc_type {typ!r} "
                            f"(supported: {', '.join(SUPPORTED_BC)})", name, path)
@@ -462,10 +526,10 @@ class _Importer:
             raise _err(f"simulation_parameters: cardiac_period {sp!r} s differs from the period "
                        f"{self.period!r} s of block '{self.period_block}'", self.period_block, path)
         period = self.period if self.period is not None else (float(sp) if sp is not None else 1.0)
-        for eid, act in self.chamber_elements:  # activation functions use the model's period
-            for e in self.elements:
-                if e["id"] == eid:
-                    e["period"] = _fmt(period, "s")
+        timed = {eid for eid, _ in self.chamber_elements} | set(self.timed_elements)
+        for e in self.elements:  # activation functions and Ram(t) use the model's period
+            if e["id"] in timed:
+                e["period"] = _fmt(period, "s")
 
         self.derived = {}
         self.reduce_ideal_sources(q_in, q_out)
@@ -492,14 +556,23 @@ class _Importer:
         for name in chambers:
             cols[f"Vc:{name}"] = f"V({self.ids[name]})"  # a volume store
         for name, b in bcs.items():
-            if b.get("bc_type") in ("RCR", "ClosedLoopRCR"):
+            # internal variables (their setup_dofs names): WindkesselBC pressure_c,
+            # ClosedLoopRCRBC P_c, ClosedLoopCoronaryBC volume_im (no offset, as ours)
+            if b.get("bc_type") == "RCR":
+                cols[f"pressure_c:{name}"] = f"{self.ids[name]}.P_c"
+            elif b.get("bc_type") == "ClosedLoopRCR":
                 cols[f"P_c:{name}"] = f"{self.ids[name]}.P_c"
+            elif b.get("bc_type") in CLOSED_LOOP_CORONARY:
+                cols[f"volume_im:{name}"] = f"{self.ids[name]}.V_im"
+                self.factors[f"volume_im:{name}"] = parse_quantity("1 mL", self.u["V"])
         for v in vessels:
             name = v["vessel_name"]
             cols[f"{name}:flow_in"] = q_in[name]
             cols[f"{name}:flow_out"] = q_out[name]
             cols[f"{name}:pressure_in"] = f"P({node(inlet[name][0], name)})"
             cols[f"{name}:pressure_out"] = f"P({node(name, outlet[name][0])})"
+        for their, (col, factor) in self.extra_columns.items():
+            cols[their], self.factors[their] = col, factor
         self.columns = cols
         self.period_value = period
         self.law_node = node(HEART_IN, HEART) if heart is not None else (
@@ -550,6 +623,7 @@ class _Importer:
                 bc, key = self.pinned_p[node]
                 Cv = float(e["C"].split()[0])
                 e["capacitive"] = False
+                self.drop_initial(eid, "V")
                 cid = self.id_of(f"{block}_C")
                 self.add(cid, "flow_source", [node, "ground"], value=self.slope(bc, key, Cv, Q))
                 if stores[0].plus == "in":  # their flow_in includes the capacitor's flow
@@ -569,6 +643,7 @@ class _Importer:
                     bc, key = self.pinned_q[node]
                     Lv = float(e["L"].split()[0])
                     e["inductive"] = False
+                    self.drop_initial(eid, "Q_out")
                     mid = f"{eid}_L"
                     e["nodes"] = [mid, e["nodes"][1], e["nodes"][2]] if end == "in" else [e["nodes"][0], mid, e["nodes"][2]]
                     pid = self.id_of(f"{block}_L")
@@ -576,6 +651,71 @@ class _Importer:
                     sign = 1.0 if end == "out" else -1.0
                     self.add(pid, "pressure_source", [mid, node], value=self.slope(bc, key, sign * Lv, P))
                     break
+
+    def coronary_start(self, name, eid, vals, Ram0, ins, outs, ic, start):
+        """Physical volumes of an open-loop coronary at their initial condition: their
+        volume_im is Cc (P_im - Pim + Pim_0 - P_Cim_0), offset by its value at the start
+        (OpenLoopCoronaryBC.cpp setup_initial_state_dependent_params: P_Cim_0 = P_a - Ram Q_am,
+        P_a = P_in - Ra1 Q_in, Q_am = Q_in - Ca dP_a/dt with dP_a/dt = 0, Pim_0 = Pim(0))."""
+        other = ins[0] if ins else outs[0]
+        var = f"{other}:{name}" if ins else f"{name}:{other}"
+        p_in, q_in = ic(f"pressure:{var}"), ic(f"flow:{var}")
+        Pa = p_in - float(self.value(name, vals, "Ra1")) * q_in
+        pim = vals["Pim"]
+        pim0 = float(pim[0] if isinstance(pim, list) else pim)
+        Cc, V = float(self.value(name, vals, "Cc")), self.u["V"]
+        start(eid, "V_a", float(self.value(name, vals, "Ca")) * Pa, V)
+        start(eid, "V_im", ic(f"volume_im:{name}") + Cc * ((Pa - Ram0 * q_in) - pim0), V)
+
+    def chamber_sphere(self, name, vals, nodes, ic, start):
+        """A ChamberSphere: parameters in this unit system's pressure, length and time (their
+        case is SI read as numbers: any consistent system gives the same numbers); their
+        internal variables radius, velo, stress, tau, volume as output columns with the factors
+        from ours (cm, mmHg, mL)."""
+        from hemocircuit.components.svzerod.chamber_sphere import _P
+
+        P, Lu, V = self.u["P"], self.u["L"], self.u["V"]
+        ours = {"mmHg*s**2/cm**2": f"({P})*s**2/({Lu})**2", "cm": Lu, "mmHg": P, "mmHg*s": f"({P})*s",
+                "1/s": "1/s", "s": "s"}
+        self.only_keys(name, vals, tuple(k for k in _P if k != "period"))
+        eid = self.id_of(name)
+        kw = {k: _fmt(self.value(name, vals, k), ours[u]) for k, (u, _, _) in _P.items() if k != "period"}
+        self.add(eid, "chamber_sphere", [nodes[0], nodes[1], "ground"], **kw)
+        self.timed_elements.append(eid)
+        for their, ours_, unit, mine, state in (
+                ("radius", f"{eid}.r", Lu, "cm", "r"), ("velo", f"{eid}.v", f"({Lu})/s", "cm/s", "v"),
+                ("tau", f"{eid}.tau", P, "mmHg", "tau"), ("volume", f"V({eid})", V, "mL", "V"),
+                ("stress", f"{eid}.S", P, "mmHg", None)):
+            self.extra_columns[f"{their}:{name}"] = (ours_, parse_quantity(f"1 {mine}", unit))
+            if state is not None:
+                start(eid, state, ic(f"{their}:{name}"), unit, store=state == "V")
+
+    def closed_loop_coronary(self, name, typ, vals, nodes, ic, start, heart):
+        """A ClosedLoopCoronaryLeft/Right: a ``closed_loop_coronary`` whose intramyocardial
+        pressure follows the heart's ventricle through expressions of the heart's parameters
+        and of its state-only observable V_LV / V_RV."""
+        if heart is None:
+            raise _err(f"boundary condition '{name}': {typ} needs a ClosedLoopHeartAndPulmonary block in "
+                       "'closed_loop_blocks' (it reads the ventricular pressure of block CLH)", name, self.path)
+        self.only_keys(name, vals, ("Ra", "Ram", "Rv", "Ca", "Cim"))
+        im, E, Vu, Vv = _CORONARY_SIDE[typ]
+        h = self.ids.get(HEART) or _ident(HEART, self.path)
+        eid = self.ids[name]
+        Ra, Ca = float(self.value(name, vals, "Ra")), float(self.value(name, vals, "Ca"))
+        self.add(eid, "closed_loop_coronary", [nodes[0], nodes[1], "ground"],
+                 **{k: _fmt(self.value(name, vals, k), self.uR) for k in ("Ra", "Ram", "Rv")},
+                 **{k: _fmt(self.value(name, vals, k), self.uC) for k in ("Ca", "Cim")},
+                 im=f"= {h}.{im}", E_s=f"= {h}.{E}", V_u=f"= {h}.{Vu}", V_vent=f"= {h}.{Vv}",
+                 period=f"= {h}.period")
+        up = self.inlet_of[name]
+        p_in, q_in = ic(f"pressure:{up}:{name}"), ic(f"flow:{up}:{name}")
+        start(eid, "V_a", Ca * (p_in - Ra * q_in), self.u["V"], store=True)
+        start(eid, "V_im", ic(f"volume_im:{name}"), self.u["V"], store=True)
+
+    def drop_initial(self, eid, state):
+        """A state the index reduction removed has no initial value (theirs is fixed by the source)."""
+        self.initial.pop(f"{eid}.{state}", None)
+        self.initial_given.pop(f"{eid}.{state}", None)
 
     def block_of(self, eid):
         return next(name for name, ident in self.ids.items() if ident == eid)
@@ -594,7 +734,7 @@ class _Importer:
         unknown = sorted(k for k in af if k != "type" and not k.startswith("_") and k not in USED[kind])
         if unknown:
             raise _err(f"chamber '{name}': unknown parameter(s) {unknown} for activation {kind} "
-                       f"(it takes {', '.join(USED[kind])})", name, self.path)
+                       f"(it takes {', '.join(USED[kind]) or 'none'})", name, self.path)
         units = dict(ACT_PARAMS)
         out = {"activation": kind}
         for k in USED[kind]:
@@ -664,7 +804,7 @@ def import_svzerod(path_or_cfg, units: str = "cgs", name=None, source=None) -> S
         mean_netlist["derived"] = steady.derived
     if imp.closed:
         mean_netlist["constraints"] = netlist["constraints"]
-    return SvzModel(name, netlist, imp.period_value, sim, imp.columns, sorted(imp.types), vessels,
+    return SvzModel(name, netlist, imp.period_value, sim, imp.columns, imp.factors, sorted(imp.types), vessels,
                     imp.u, mean_netlist, imp.initial, imp.closed, imp.initial_given)
 
 
