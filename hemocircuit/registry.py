@@ -29,6 +29,9 @@ def _classes_in(module):
 def component_types() -> dict[str, type[Component]]:
     """Map type name -> Component subclass, for every component found."""
     from . import components as pkg
+    from .kernels.freshness import ensure_fresh
+
+    ensure_fresh()  # before any kernel is compiled or loaded from numba's cache
 
     found: dict[str, type[Component]] = {}
 

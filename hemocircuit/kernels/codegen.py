@@ -26,6 +26,8 @@ import sys
 import time
 from pathlib import Path
 
+from . import freshness
+
 _TEMPLATE = Path(__file__).with_name("engine_template.py")
 _HERE = Path(__file__).parent
 # sources whose constants are frozen into the compiled code (units: the mmHg/Pa factors)
@@ -95,6 +97,7 @@ def _fingerprint(kernels) -> tuple[str, str]:
     files = {inspect.getsourcefile(sys.modules[name.split(":")[0]]) for name in names}
     for f in sorted(files):  # the kernels' own source: an edit there recompiles
         h.update(Path(f).read_bytes())
+    h.update(freshness.key().encode())  # and an edit of any file they call into (freshness)
     return hashlib.sha256(";".join(names).encode()).hexdigest()[:12], h.hexdigest()[:12]
 
 
@@ -130,6 +133,7 @@ def engine_module(kernels):
     mod = _loaded.get(key)
     if mod is not None:
         return mod
+    freshness.ensure_fresh()
     name = "hemocircuit_engine_{}_{}".format(*key)
     folder = cache_dir()
     path = folder / f"{name}.py"
