@@ -69,12 +69,14 @@ def _limit_events(circuit, limits):
 
 
 def simulate(circuit, t_end, dt=None, t0=0.0, x0=None, protocol=None, method="BDF", rtol=1e-6, atol=None,
-             max_step=np.inf, first_step=None, engine="auto", ic=None, progress=None):
+             max_step=np.inf, first_step=None, engine="auto", ic=None, progress=None, output_from=None):
     """Integrate from t0 to t_end [s].
 
     x0: initial states (default: the operating point after the protocol's initial settings).
     dt: output interval [s] (default: the solver's own steps; the compiled engine, which has
         no step list, then reports 1001 evenly spaced times).
+    output_from: first output time [s] (SPICE's TSTART): the run starts at t0, but only the
+        rows from this time on are kept and get outputs (e.g. the last cardiac cycle).
     protocol: a Protocol (or path to a protocol YAML) with initial settings and timed events.
     ic: {ID.STATE: value} states to override in that start (x0 or the operating point), e.g.
         {'Cv.V': '20 mL'}; units allowed, plain numbers are in the state's unit (hemocircuit.ic).
@@ -93,10 +95,11 @@ def simulate(circuit, t_end, dt=None, t0=0.0, x0=None, protocol=None, method="BD
     settings = {"t_end": t_end, "dt": dt, "t0": t0, "method": method, "engine": engine, "rtol": rtol,
                 "atol": atol, "max_step": None if max_step == np.inf else max_step, "first_step": first_step,
                 "ic": dict(ic) if ic else None, "x0": None if x0 is None else "given",
-                "protocol": protocol if isinstance(protocol, str) else getattr(protocol, "file", None)}
+                "protocol": protocol if isinstance(protocol, str) else getattr(protocol, "file", None),
+                "output_from": output_from}
     try:
         res = _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step, first_step, engine, ic,
-                        progress)
+                        progress, output_from)
     except SolverError as exc:
         if exc.partial is not None:
             stamp(exc.partial, "tran", circuit, settings, started, status="partial")
@@ -119,7 +122,7 @@ def simulate(circuit, t_end, dt=None, t0=0.0, x0=None, protocol=None, method="BD
 
 
 def _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step, first_step, engine, ic,
-              progress=None):
+              progress=None, output_from=None):
     from ..progress import bar
     from .op import operating_point
 
@@ -134,6 +137,10 @@ def _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step
         raise SolverError("no end time given (t_end or a protocol's t_end)")
     if c.B != 1:
         raise SolverError("simulate() runs one parameter set; use hemocircuit.batch for many")
+    if output_from is not None and not (isinstance(output_from, (int, float, np.number))
+                                        and np.isfinite(output_from) and t0 <= output_from <= t_end):
+        raise SolverError(f"output_from = {output_from!r} s: the first output time must lie in the run, "
+                          f"between t0 = {t0:g} s and t_end = {t_end:g} s")
     x = operating_point(c, t=t0).x if x0 is None else np.asarray(x0, dtype=float).copy()
     if ic:
         from ..ic import apply_ic
@@ -154,10 +161,10 @@ def _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step
         if system is not None:
             with bar(t_end - t0, "tran (simulated time)", unit="s", progress=progress) as pbar:
                 return _simulate_compiled(system, c, x, t0, t_end, dt, events, rtol, atol, max_step, first_step,
-                                          pbar)
+                                          pbar, output_from)
     ts, xs, segs = [], [], []
     nfev = njev = nsteps = 0
-    t_grid = None if dt is None else np.arange(t0, t_end + 0.5 * dt, dt)
+    t_grid = None if dt is None else _from(np.arange(t0, t_end + 0.5 * dt, dt), output_from)
     pbar = bar(t_end - t0, "tran (simulated time)", unit="s", progress=progress).__enter__()
 
     def one_segment(c, t_a, t_b, x_a):
@@ -195,7 +202,7 @@ def _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step
     def _partial():
         if not ts:
             return None
-        return _collect(c, ts, xs, segs)
+        return _collect(c, ts, xs, segs, output_from)
 
     bounds = [t0] + [e[0] for e in events] + [t_end]
     try:
@@ -204,7 +211,7 @@ def _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step
         raise Interrupted.of(exc, partial=_partial()) from None
     finally:
         pbar.close()
-    res = _collect(segs[-1] if segs else c, ts, xs, segs)
+    res = _collect(segs[-1] if segs else c, ts, xs, segs, output_from)
     res.stats = {"nfev": nfev, "njev": njev, "nsteps": nsteps, "method": method}
     return res
 
@@ -240,10 +247,21 @@ def _scipy_segments(c, x, bounds, events, limits, one_segment, ts, xs, segs):
                     cur = b
 
 
-def _collect(c_last, ts, xs, segs):
-    """Stack segments (dropping duplicated boundary points) and compute outputs per segment."""
+def _from(t, t_from):
+    """The times of ``t`` from ``t_from`` on (all if it is None; to rounding of a grid)."""
+    if t_from is None:
+        return t
+    return t[t >= t_from - 1e-12 * max(1.0, abs(t_from))]
+
+
+def _collect(c_last, ts, xs, segs, t_from=None):
+    """Stack segments (dropping duplicated boundary points and rows before ``t_from``) and
+    compute outputs per segment."""
     t_all, x_all, cols = [], [], {}
     for t, x, c in zip(ts, xs, segs):
+        if t_from is not None:
+            keep = _from(t, t_from).size
+            t, x = t[t.size - keep:], x[x.shape[0] - keep:]  # times increase within a segment
         if t.size == 0:
             continue
         if t_all and t_all[-1].size and t[0] <= t_all[-1][-1]:
@@ -261,7 +279,8 @@ def _collect(c_last, ts, xs, segs):
     return TransientResult(t, x, columns, c_last.column_units(), c_last.state_names)
 
 
-def _simulate_compiled(system, c, x, t0, t_end, dt, events, rtol, atol, max_step, first_step, bar=None):
+def _simulate_compiled(system, c, x, t0, t_end, dt, events, rtol, atol, max_step, first_step, bar=None,
+                       output_from=None):
     """simulate() on the compiled engine: kernel calls per protocol segment (hard limits and
     source breakpoints are handled inside the kernel), in pieces (:func:`_compiled_segment`):
     at most PIECE_STEPS steps each and, with a progress ``bar`` shown, about 50 per segment."""
@@ -274,6 +293,8 @@ def _simulate_compiled(system, c, x, t0, t_end, dt, events, rtol, atol, max_step
         t_grid = t_grid[t_grid <= t_end + 1e-9 * max(1.0, abs(t_end))]
         if t_grid[-1] < t_end:
             t_grid = np.append(t_grid, t_end)
+    # (rows before output_from are integrated and dropped by _collect, so that the calls of
+    # the integrator stay short: Python regains control between output rows, see PIECE_STEPS)
     bounds = [t0] + [e[0] for e in events] + [t_end]
     ts, xs, segs = [], [], []
     stats = {"steps": 0, "rejected": 0, "nfev": 0, "limit_events": 0}
@@ -295,8 +316,12 @@ def _simulate_compiled(system, c, x, t0, t_end, dt, events, rtol, atol, max_step
         try:
             x = _compiled_segment(system, c, tpts, x, rtol, atol, h0, max_step, stats, ts, xs, segs, bar, t0)
         except KeyboardInterrupt as exc:
-            raise Interrupted.of(exc, partial=_collect(c, ts, xs, segs) if ts else None) from None
-    res = _collect(c, ts, xs, segs)
+            raise Interrupted.of(exc, partial=_collect(c, ts, xs, segs, output_from) if ts else None) from None
+        except SolverError as exc:  # its partial: the rows from output_from on, as the result's
+            if exc.partial is not None and output_from is not None:
+                exc.partial = _collect(c, ts, xs, segs, output_from)
+            raise
+    res = _collect(c, ts, xs, segs, output_from)
     from ..kernels.tableaus import DEFAULT
     res.stats = {**stats, "method": f"{DEFAULT.upper()} (compiled)"}
     return res
@@ -334,12 +359,15 @@ def _compiled_range(system, c, P, tpts, x, rtol, atol, h0, max_step, stats, ts, 
     segment took so far, at most MAX_STEPS); appends to ts, xs, segs; returns (final state, used)."""
     from ..execution import check_interrupted
 
-    breaks = c.breakpoints(tpts[0], tpts[-1])
+    # steps end on every breakpoint; where a waveform only changes its slope (a pwl table's
+    # times) its value is continuous and the integrator needs no new evaluation there
+    breaks = c.breakpoints(tpts[0], tpts[-1], kinks=False)
+    kinks = sorted(set(c.breakpoints(tpts[0], tpts[-1])) - set(breaks))
     budget = PIECE_STEPS
     while True:
         check_interrupted()
-        X, st = system.integrate(tpts, x, P, rtol=rtol, atol=atol, breaks=breaks, h0=h0, hmax=max_step,
-                                 max_steps=min(budget, MAX_STEPS - used))
+        X, st = system.integrate(tpts, x, P, rtol=rtol, atol=atol, breaks=breaks, kinks=kinks, h0=h0,
+                                 hmax=max_step, max_steps=min(budget, MAX_STEPS - used))
         for key in stats:
             stats[key] += st[key]
         used += st["steps"]
