@@ -286,22 +286,32 @@ def test_pwl_kinks_end_steps_without_an_evaluation(tmp_path):
     assert np.max(np.abs(as_kinks[:, 0] - np.asarray(ref.x)[rows, 0])) < 1e-5 * 40
 
 
-def test_output_from_keeps_the_later_rows(tmp_path):
+def test_output_from_keeps_the_later_rows(tmp_path, monkeypatch):
     """simulate(output_from=...) integrates from t0 but keeps the rows from that time on: the
-    same rows, bit for bit, as the full run's (on both engines); a time outside the run is
-    refused."""
+    same rows, bit for bit, as the full run's (on both engines); a run longer than a piece of
+    the compiled integrator continues through the early rows it keeps as restart points; a
+    time outside the run is refused."""
+    from hemocircuit.analyses import transient
     from hemocircuit.errors import SolverError
 
     c = _pwl_rc(tmp_path, n=50)
+    lates = {}
     for engine in ("compiled", "scipy"):
-        full = c.simulate(10.0, dt=0.1, x0=np.array([40.0]), engine=engine, rtol=1e-7, progress=False)
-        late = c.simulate(10.0, dt=0.1, x0=np.array([40.0]), engine=engine, rtol=1e-7, progress=False,
+        full = c.simulate(10.0, dt=0.01, x0=np.array([40.0]), engine=engine, rtol=1e-7, progress=False)
+        late = c.simulate(10.0, dt=0.01, x0=np.array([40.0]), engine=engine, rtol=1e-7, progress=False,
                            output_from=7.0)
         sel = np.asarray(full.t) >= 7.0 - 1e-9
         assert np.asarray(late.t).tolist() == np.asarray(full.t)[sel].tolist() and late.t[0] == pytest.approx(7.0)
         for col in ("P(a)", "Q(R1)"):
             assert np.asarray(late[col]).tolist() == np.asarray(full[col])[sel].tolist(), (engine, col)
         assert late.metadata["settings"]["output_from"] == 7.0
+        lates[engine] = late
+    late = lates["compiled"]
+    monkeypatch.setattr(transient, "PIECE_STEPS", 40)  # the run takes 102 steps: 3 pieces
+    pieces = c.simulate(10.0, dt=0.01, x0=np.array([40.0]), engine="compiled", rtol=1e-7, progress=False,
+                        output_from=7.0)
+    assert np.asarray(pieces.t).tolist() == np.asarray(late.t).tolist()
+    assert np.max(np.abs(np.asarray(pieces["P(a)"]) - np.asarray(late["P(a)"]))) < 1e-5 * 40
     for bad in (-1.0, 10.5, float("nan"), "7 s"):
         with pytest.raises(SolverError, match="output_from"):
             c.simulate(10.0, dt=0.1, x0=np.array([40.0]), progress=False, output_from=bad)

@@ -293,8 +293,12 @@ def _simulate_compiled(system, c, x, t0, t_end, dt, events, rtol, atol, max_step
         t_grid = t_grid[t_grid <= t_end + 1e-9 * max(1.0, abs(t_end))]
         if t_grid[-1] < t_end:
             t_grid = np.append(t_grid, t_end)
-    # (rows before output_from are integrated and dropped by _collect, so that the calls of
-    # the integrator stay short: Python regains control between output rows, see PIECE_STEPS)
+    if output_from is not None:
+        # rows before output_from are dropped by _collect; ~100 of them stay as the points a
+        # run that needs more than PIECE_STEPS continues from (not every dt: dense output)
+        late = _from(t_grid, output_from)
+        early = t_grid[:t_grid.size - late.size]
+        t_grid = np.concatenate([early[::max(1, early.size // 100)], late])
     bounds = [t0] + [e[0] for e in events] + [t_end]
     ts, xs, segs = [], [], []
     stats = {"steps": 0, "rejected": 0, "nfev": 0, "limit_events": 0}
