@@ -6,9 +6,13 @@ Reads the cases and their times (the README's speed table: Release build, in-pro
 ``pysvzerod.simulate``, median of 5) from a folder laid out like ``../shared/svzerod/``; skips
 when it is absent.  Ours: the conformance runner's solve (hemocircuit.svzerod.conformance:
 operating point or their initial condition, then the transient at the case's integrator
-tolerance), after one untimed run that loads the compiled engine; loading the model and
-compiling are excluded, as in theirs.  Prints the median and minimum wall time, the median CPU
-time and the ratio of our median wall time to the middle of their range.
+tolerance, rows of the cycles they write), after one untimed run that loads the compiled
+engine; loading the model and compiling are excluded, as in theirs.  Prints the median and
+minimum wall time, the median CPU time, the ratios of our median wall and CPU times to the
+middle of their range, and the accuracy of the timed run: its largest error against their
+converged results (``converged/``, relative to each variable's range, as the conformance
+runner) next to the acceptance tolerance of the case.  The machine is shared: the load
+average is printed, and under load the CPU times are the figures to read.
 """
 from __future__ import annotations
 
@@ -41,22 +45,31 @@ def main(argv=None):
     if not os.path.isdir(os.path.join(folder, "cases")):
         print(f"no svZeroDSolver cases in {folder}: skipped")
         return 0
-    from hemocircuit.svzerod.conformance import case_rtol, simulate_case, their_times
+    from hemocircuit.svzerod.conformance import case_rtol, compare, read_result, simulate_case, their_times, tolerances
     from hemocircuit.svzerod.importer import guess_units, import_svzerod
 
     theirs = their_times(os.path.join(folder, "README.md"))
-    print(f"{'case':30s} {'rtol':>6s} {'ours median':>12s} {'min':>9s} {'CPU':>9s} {'theirs':>12s} {'ratio':>6s}")
+    print("load average %.1f %.1f %.1f" % os.getloadavg())
+    print(f"{'case':30s} {'rtol':>6s} {'ours median':>12s} {'min':>9s} {'CPU':>9s} {'theirs':>12s} "
+          f"{'wall x':>6s} {'CPU x':>6s} {'err P / Q vs converged':>22s} {'tol':>6s}")
     for name in args.case or TIMED:
         path = os.path.join(folder, "cases", f"{name}.json")
         with open(path) as fh:
             model = import_svzerod(path, units=guess_units(json.load(fh)))
         rtol = case_rtol(model)
         simulate_case(model, rtol=rtol)  # loads (or compiles) the engine
-        _, _, _, times = simulate_case(model, rtol=rtol, timed_runs=args.repeat)
+        res, keep, t_out, times = simulate_case(model, rtol=rtol, timed_runs=args.repeat)
+        err = "-"
+        conv = os.path.join(folder, "converged", f"result_{name}.json")
+        if os.path.isfile(conv):
+            e_p, e_q, _, _ = compare(model, res, keep, t_out, read_result(conv))
+            err = f"{e_p:.1e} / {e_q:.1e}"
         wall, cpu = np.median(times, axis=0) * 1e3
         ref = theirs.get(name, "")
         print(f"{name:30s} {rtol:6.0e} {wall:9.2f} ms {times[:, 0].min() * 1e3:6.2f} ms {cpu:6.2f} ms "
-              f"{ref:>12s} {wall / their_ms(ref):6.2f}")
+              f"{ref:>12s} {wall / their_ms(ref):6.2f} {cpu / their_ms(ref):6.2f} {err:>22s} "
+              f"{tolerances(name, model)[0]:6.0e}")
+    print("load average %.1f %.1f %.1f" % os.getloadavg())
     return 0
 
 

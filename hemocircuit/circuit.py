@@ -105,7 +105,7 @@ class Group:
         tt = np.asarray(t, dtype=float)
         src = np.zeros(np.broadcast_shapes(tt.shape[:1] if tt.ndim else (1,), (B,)) + (self.E,))
         for i, _, wf in self.waves:
-            src[:, i] = np.vectorize(wf, otypes=[float])(tt.reshape(-1)) if tt.ndim else wf(float(tt))
+            src[:, i] = wf.sample(tt) if tt.ndim else wf(float(tt))
         return src
 
 
@@ -1089,13 +1089,17 @@ class Circuit:
                 st = g.comp.stamp(p, x[:, g.sidx], None, tt, None) + (None,)
             A_loc, b_loc, src = st
             ul = u[:, g.uidx]
-            flows = np.einsum("beij,bej->bei", np.broadcast_to(A_loc, (T,) + A_loc.shape[1:]), ul) - b_loc
+            # the branch flow: the first row of the local residual A u - b (only it is reported)
+            flows = None
+            if g.K:
+                A_row = A_loc[:, :, 0, :]
+                flows = np.einsum("bej,bej->be", np.broadcast_to(A_row, (T,) + A_row.shape[1:]), ul) - b_loc[..., 0]
             xl = x[:, g.sidx]
             obs = g.comp.observe(p, xl, ul, tt, src)
             store_vols = set(g.comp.volume_observables())  # volumes are V(id)
             obs_names = [o.name for o in g.observables]
             for i, e in enumerate(g.ids):
-                out[f"Q({e})"] = flows[:, i, 0] if g.K else np.zeros(T)
+                out[f"Q({e})"] = flows[:, i] if g.K else np.zeros(T)
                 for j, s in enumerate(g.states):
                     if s.name not in obs_names:
                         out[f"{e}.{s.name}"] = xl[:, i, j]
@@ -1121,13 +1125,14 @@ class Circuit:
                                 None if reset is None else g.sidx[i, names.index(reset)]))
         return out
 
-    def breakpoints(self, t0, t1):
+    def breakpoints(self, t0, t1, kinks=True):
         """Scheduled discontinuities in (t0, t1): waveform breakpoints and the elements' own
-        (Component.breakpoints, e.g. a source's sine term switching on)."""
+        (Component.breakpoints, e.g. a source's sine term switching on).  ``kinks=False``
+        leaves out the waveforms' slope-only kinks (Waveform.jumps: where the value may jump)."""
         pts = set()
         for g in self.groups:
             for _, _, wf in g.waves:
-                pts.update(b for b in wf.breakpoints(t0, t1) if t0 < b < t1)
+                pts.update(b for b in (wf.breakpoints(t0, t1) if kinks else wf.jumps(t0, t1)) if t0 < b < t1)
             pts.update(float(b) for b in g.comp.breakpoints(g.p, t0, t1) if t0 < b < t1)
         return sorted(pts)
 

@@ -12,7 +12,9 @@ Netlist forms (every number with a unit; the source's own unit gives the value d
                                                    evaluated at t0 + (t - t0) mod period, t0 its
                                                    first time (svZeroDSolver's time series)
 Tables are parsed at load time; evaluation is plain numpy.  ``breakpoints(t0, t1)`` lists the
-times in (t0, t1) where the value or its slope jumps, so the transient solver restarts there.
+times in (t0, t1) where the value or its slope jumps, so the transient solver restarts there;
+``jumps(t0, t1)`` the ones of them where the value itself may jump (the others are slope-only
+kinks, where the compiled integrator ends a step but needs no new evaluation).
 """
 from __future__ import annotations
 
@@ -37,6 +39,15 @@ class Waveform:
         waveform needs a finite range)."""
         return []
 
+    def jumps(self, t0=-np.inf, t1=np.inf) -> list[float]:
+        """The breakpoints where the value itself may jump, not only its slope (by default all)."""
+        return self.breakpoints(t0, t1)
+
+    def sample(self, t) -> np.ndarray:
+        """Values at the times ``t`` (1-D array) [s]: the numbers calling it at each time gives
+        (the output of a run evaluates every source at all its rows at once)."""
+        return np.array([self(x) for x in np.asarray(t, dtype=float).reshape(-1).tolist()], dtype=float)
+
 
 @dataclass
 class Constant(Waveform):
@@ -44,6 +55,9 @@ class Constant(Waveform):
 
     def __call__(self, t):
         return self.value
+
+    def sample(self, t):
+        return np.full(np.asarray(t).reshape(-1).shape, float(self.value))
 
 
 @dataclass
@@ -58,8 +72,23 @@ class Table(Waveform):
         i = np.searchsorted(self.times, t, side="right") - 1
         return float(self.values[max(i, 0)])
 
+    def sample(self, t):
+        t = np.asarray(t, dtype=float).reshape(-1)
+        if self.linear:  # np.interp of an array: element by element the scalar call's numbers
+            return np.interp(t, self.times, self.values).astype(float)
+        i = np.searchsorted(self.times, t, side="right") - 1
+        return np.asarray(self.values, dtype=float)[np.maximum(i, 0)]
+
     def breakpoints(self, t0=-np.inf, t1=np.inf):
         return [float(x) for x in self.times]
+
+    def jumps(self, t0=-np.inf, t1=np.inf):
+        if not self.linear:  # a step at every time
+            return self.breakpoints(t0, t1)
+        # linear interpolation is continuous except at a repeated time with another value
+        t, v = np.asarray(self.times, dtype=float), np.asarray(self.values, dtype=float)
+        at = (t[1:] == t[:-1]) & (v[1:] != v[:-1])
+        return sorted({float(x) for x in t[1:][at]})
 
 
 @dataclass
@@ -86,8 +115,17 @@ class Sum(Waveform):
     def __call__(self, t):
         return sum(p(t) for p in self.parts)
 
+    def sample(self, t):
+        acc = np.zeros(np.asarray(t).reshape(-1).shape)  # parts added left to right, as sum()
+        for p in self.parts:
+            acc = acc + p.sample(t)
+        return acc
+
     def breakpoints(self, t0=-np.inf, t1=np.inf):
         return sorted({b for p in self.parts for b in p.breakpoints(t0, t1)})
+
+    def jumps(self, t0=-np.inf, t1=np.inf):
+        return sorted({b for p in self.parts for b in p.jumps(t0, t1)})
 
 
 @dataclass
@@ -105,14 +143,36 @@ class Periodic(Waveform):
     def __call__(self, t):
         return self.table(self.phase(t))
 
+    def sample(self, t):
+        t0 = float(self.table.times[0])
+        # np.remainder has Python's float % rules (sign of the divisor, same rounding)
+        return self.table.sample(t0 + np.remainder(np.asarray(t, dtype=float).reshape(-1) - t0, self.period))
+
     def breakpoints(self, t0=-np.inf, t1=np.inf):
+        # the table's times in every cycle, and the cycle boundaries (the value may jump there)
+        return self._every_cycle(np.append(self.table.times, self.table.times[0]), t0, t1)
+
+    def jumps(self, t0=-np.inf, t1=np.inf):
+        tab = self.table
+        if not tab.linear:
+            return self.breakpoints(t0, t1)
+        t, v = np.asarray(tab.times, dtype=float), np.asarray(tab.values, dtype=float)
+        # the boundary is continuous when the cycle ends on its first value (held or reached
+        # at t0 + period) and no time is repeated at either end; otherwise the value may jump
+        # there (listed as the cycle's start and its table's end: to rounding, one time)
+        smooth = t.size == 1 or (v[-1] == v[0] and t[1] != t[0] and t[-1] != t[-2])
+        return self._every_cycle(np.asarray(tab.jumps() + ([] if smooth else [t[0], t[-1]]), dtype=float), t0, t1)
+
+    def _every_cycle(self, times, t0, t1):
+        """``times`` (of one cycle) repeated in every cycle: those in [t0, t1]."""
         if not (np.isfinite(t0) and np.isfinite(t1)):
             raise ValueError("a periodic waveform's breakpoints need a finite time range")
+        if not len(times):
+            return []
         first = float(self.table.times[0])
         k0 = int(np.floor((t0 - first) / self.period))
         k1 = int(np.ceil((t1 - first) / self.period))
-        # the table's times in every cycle, and the cycle boundaries (the value may jump there)
-        offs = np.unique(np.append(self.table.times - first, 0.0))
+        offs = np.unique(np.asarray(times, dtype=float) - first)
         pts = (first + self.period * np.arange(k0, k1 + 1)[:, None] + offs[None, :]).ravel()
         return [float(b) for b in np.unique(pts) if t0 <= b <= t1]
 

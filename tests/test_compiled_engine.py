@@ -208,14 +208,7 @@ def test_pwl_kinks_keep_the_jacobian(tmp_path):
     """A pwl source with 200 slope-only kinks: stepping onto each kink without a restart
     (soft_kinks) gives the same course as restarting at every one, with fewer evaluations;
     a value jump (steps table) still restarts."""
-    tt = np.linspace(0.0, 10.0, 200)
-    rows = ", ".join(f"[{a:.6f} s, {80 + 10 * np.sin(2 * np.pi * 0.2 * a):.6f} mmHg]" for a in tt)
-    (tmp_path / "pwl.yaml").write_text(
-        "name: pwl-rc\nelements:\n"
-        f"  - {{id: Ps, type: pressure_source, nodes: [in, ground], value: {{pwl: [{rows}]}}}}\n"
-        "  - {id: R1, type: resistor, nodes: [in, a], R: 2 mmHg*s/mL}\n"
-        "  - {id: C1, type: compliance, nodes: [a, ground], C: 0.5 mL/mmHg}\n")
-    c = hc.load(str(tmp_path / "pwl.yaml"))
+    c = _pwl_rc(tmp_path)
     system = CompiledSystem.of(c)
     t = np.linspace(0.0, 10.0, 201)
     x0 = np.array([40.0])
@@ -256,6 +249,72 @@ def _load_any(path):
         return c, apply_ic(c, np.zeros(c.nx), m.initial)
     c = hc.load(path)
     return c, np.asarray(operating_point(c).x, float)
+
+
+def _pwl_rc(tmp_path, n=200):
+    """R-C charged through a pwl pressure source of n points (80 + 10 sin(0.4 pi t) mmHg)."""
+    tt = np.linspace(0.0, 10.0, n)
+    rows = ", ".join(f"[{a:.6f} s, {80 + 10 * np.sin(2 * np.pi * 0.2 * a):.6f} mmHg]" for a in tt)
+    (tmp_path / "pwl.yaml").write_text(
+        "name: pwl-rc\nelements:\n"
+        f"  - {{id: Ps, type: pressure_source, nodes: [in, ground], value: {{pwl: [{rows}]}}}}\n"
+        "  - {id: R1, type: resistor, nodes: [in, a], R: 2 mmHg*s/mL}\n"
+        "  - {id: C1, type: compliance, nodes: [a, ground], C: 0.5 mL/mmHg}\n")
+    return hc.load(str(tmp_path / "pwl.yaml"))
+
+
+def test_pwl_kinks_end_steps_without_an_evaluation(tmp_path):
+    """A pwl table's times are slope-only kinks (its value is continuous): given as kinks the
+    integrator still ends a step on each but takes f(t-) for f(t+), one evaluation less per
+    kink, with the same steps and the same course (RODAS5P, a new Jacobian every step)."""
+    c = _pwl_rc(tmp_path)
+    system = CompiledSystem.of(c)
+    t = np.linspace(0.0, 10.0, 201)
+    x0, P = np.array([40.0]), system.params(c)[0]
+    brk = c.breakpoints(0.0, 10.0)
+    assert c.breakpoints(0.0, 10.0, kinks=False) == [] and len(brk) == 198  # interior table times
+    as_breaks, st_b = system.integrate(t, x0, P, rtol=1e-6, breaks=brk)
+    as_kinks, st_k = system.integrate(t, x0, P, rtol=1e-6, kinks=brk)
+    assert st_k["steps"] == st_b["steps"] and st_k["rejected"] == st_b["rejected"]
+    assert st_b["nfev"] - st_k["nfev"] == len(brk)  # the right-limit evaluation at each kink
+    assert np.max(np.abs(as_kinks - as_breaks)) < 1e-9 * 40
+    # and the course is the R-C's: dV/dt = (Ps(t) - V/C)/R, against a fine scipy run
+    ref = c.simulate(10.0, dt=0.05, x0=x0, engine="scipy", method="Radau", rtol=1e-10, progress=False)
+    rt = np.asarray(ref.t)
+    rows = np.searchsorted(rt, t - 1e-12)  # its rows also hold the table's times
+    assert np.max(np.abs(rt[rows] - t)) < 1e-12
+    assert np.max(np.abs(as_kinks[:, 0] - np.asarray(ref.x)[rows, 0])) < 1e-5 * 40
+
+
+def test_output_from_keeps_the_later_rows(tmp_path, monkeypatch):
+    """simulate(output_from=...) integrates from t0 but keeps the rows from that time on: the
+    same rows, bit for bit, as the full run's (on both engines); a run longer than a piece of
+    the compiled integrator continues through the early rows it keeps as restart points; a
+    time outside the run is refused."""
+    from hemocircuit.analyses import transient
+    from hemocircuit.errors import SolverError
+
+    c = _pwl_rc(tmp_path, n=50)
+    lates = {}
+    for engine in ("compiled", "scipy"):
+        full = c.simulate(10.0, dt=0.01, x0=np.array([40.0]), engine=engine, rtol=1e-7, progress=False)
+        late = c.simulate(10.0, dt=0.01, x0=np.array([40.0]), engine=engine, rtol=1e-7, progress=False,
+                           output_from=7.0)
+        sel = np.asarray(full.t) >= 7.0 - 1e-9
+        assert np.asarray(late.t).tolist() == np.asarray(full.t)[sel].tolist() and late.t[0] == pytest.approx(7.0)
+        for col in ("P(a)", "Q(R1)"):
+            assert np.asarray(late[col]).tolist() == np.asarray(full[col])[sel].tolist(), (engine, col)
+        assert late.metadata["settings"]["output_from"] == 7.0
+        lates[engine] = late
+    late = lates["compiled"]
+    monkeypatch.setattr(transient, "PIECE_STEPS", 40)  # the run takes 102 steps: 3 pieces
+    pieces = c.simulate(10.0, dt=0.01, x0=np.array([40.0]), engine="compiled", rtol=1e-7, progress=False,
+                        output_from=7.0)
+    assert np.asarray(pieces.t).tolist() == np.asarray(late.t).tolist()
+    assert np.max(np.abs(np.asarray(pieces["P(a)"]) - np.asarray(late["P(a)"]))) < 1e-5 * 40
+    for bad in (-1.0, 10.5, float("nan"), "7 s"):
+        with pytest.raises(SolverError, match="output_from"):
+            c.simulate(10.0, dt=0.1, x0=np.array([40.0]), progress=False, output_from=bad)
 
 
 @pytest.mark.parametrize("path", JAC_CASES, ids=os.path.basename)

@@ -329,6 +329,74 @@ def test_waveform_record_matches_call(i):
             assert (got == ref) or (np.isnan(got) and np.isnan(ref)), (t, got, ref)
 
 
+def _periodic_waves():
+    rows = [["0.5 s", "1 mmHg"], ["0.8 s", "4 mmHg"], ["0.8 s", "-2 mmHg"], ["1.5 s", "1 mmHg"]]
+    return [parse_waveform({"periodic": {"period": "1 s", "pwl": rows}}, "mmHg"),
+            parse_waveform({"periodic": {"period": "2.5 s", "steps": rows}}, "mmHg"),
+            Sum([parse_waveform({"periodic": {"period": "0.7 s", "pwl": [["0 s", "3 mmHg"], ["0.7 s", "5 mmHg"]]}},
+                                "mmHg"), Sine(offset=1.0, amplitude=-2.0, frequency=3.3, phase=0.0, start=0.0)])]
+
+
+@pytest.mark.parametrize("i", range(len(_waves()) + len(_periodic_waves())))
+def test_waveform_sample_matches_call(i):
+    """sample(t) over an array (the outputs of a run) is the scalar call at every time, bit for
+    bit, NaN and infinite times included."""
+    wf = (_waves() + _periodic_waves())[i]
+    ts = _times(wf) if i < len(_waves()) else np.concatenate(
+        [np.linspace(-3.0, 7.0, 2001), [0.5, 1.5, 0.8, np.nextafter(1.5, 0), math.nan, 1e6 + 0.3]])
+    with np.errstate(invalid="ignore"):
+        ref = np.array([wf(float(t)) for t in ts], dtype=float)
+        got = wf.sample(ts)
+    assert got.shape == ts.shape and got.dtype == np.float64
+    same = (got == ref) | (np.isnan(got) & np.isnan(ref))
+    assert same.all(), (ts[~same][:5], got[~same][:5], ref[~same][:5])
+
+
+def test_waveform_kinks_are_continuous():
+    """The breakpoints jumps() leaves out are slope-only kinks: the value's left and right
+    limits agree there (so the integrator may skip the re-evaluation); the jumps() of a pwl
+    table with a repeated time do jump."""
+    t0, t1 = -3.0, 25.0
+    kinks = jumps = 0
+    for wf in _waves() + _periodic_waves():
+        periodic = "Periodic" in repr(wf)
+        brk = set(wf.breakpoints(t0, t1)) if periodic else set(_breakpoints(wf))
+        jmp = set(wf.jumps(t0, t1))
+        assert jmp <= brk, wf
+        for b in sorted(brk - jmp):
+            if t0 < b < t1:
+                # the change across b shrinks with the distance (a jump would stay)
+                with np.errstate(invalid="ignore", over="ignore"):
+                    d1, d2 = (abs(wf(b + e) - wf(b - e)) for e in (1e-7, 1e-10))
+                    scale = 1e-12 * max(1.0, abs(wf(b)))
+                if np.isfinite(d1) and np.isfinite(d2):
+                    assert d2 <= 0.01 * d1 + scale, (wf, b, d1, d2)
+                    kinks += 1
+        if isinstance(wf, Table) and wf.linear:
+            for b in jmp:
+                assert abs(wf(b + 1e-9) - wf(b - 1e-9)) > 1e-3, (wf, b)
+                jumps += 1
+    assert kinks > 20 and jumps >= 2  # the examples have both
+
+
+def test_waveform_jumps_of_tables():
+    """A pwl table jumps only at a repeated time with another value, a steps table at every
+    time; a periodic pwl cycle that ends on its first value is continuous at the boundary."""
+    pwl = parse_waveform({"pwl": [["0 s", "1 mmHg"], ["1 s", "2 mmHg"], ["1 s", "5 mmHg"], ["2 s", "5 mmHg"],
+                                  ["2 s", "5 mmHg"], ["3 s", "0 mmHg"]]}, "mmHg")
+    assert pwl.jumps() == [1.0] and pwl.breakpoints() == [0.0, 1.0, 1.0, 2.0, 2.0, 3.0]
+    steps = parse_waveform({"steps": [["0 s", "1 mmHg"], ["1 s", "2 mmHg"]]}, "mmHg")
+    assert steps.jumps() == [0.0, 1.0]
+    closed = parse_waveform({"periodic": {"period": "1 s", "pwl": [["0 s", "2 mmHg"], ["0.4 s", "7 mmHg"],
+                                                                  ["1 s", "2 mmHg"]]}}, "mmHg")
+    assert closed.jumps(0.0, 3.0) == [] and closed.breakpoints(0.0, 3.0) == [0.0, 0.4, 1.0, 1.4, 2.0, 2.4, 3.0]
+    open_ = parse_waveform({"periodic": {"period": "1 s", "pwl": [["0 s", "2 mmHg"], ["0.4 s", "7 mmHg"],
+                                                                 ["1 s", "3 mmHg"]]}}, "mmHg")
+    assert open_.jumps(0.0, 3.0) == [0.0, 1.0, 2.0, 3.0]
+    short = parse_waveform({"periodic": {"period": "1 s", "pwl": [["0 s", "2 mmHg"], ["0.5 s", "3 mmHg"]]}}, "mmHg")
+    assert short.jumps(0.0, 2.0) == [0.0, 0.5, 1.0, 1.5, 2.0]  # held at 3 mmHg, back to 2 at each cycle
+
+
 def test_waveform_record_format():
     rec = kw.encode(parse_waveform({"steps": [["0 s", "80 mmHg"], ["10 s", "72 mmHg"]]}, "mmHg"))
     assert rec.tolist() == [kw.STEPS, 7, 2, 0.0, 10.0, 80.0, 72.0]

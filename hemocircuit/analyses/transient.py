@@ -71,12 +71,15 @@ def _limit_events(circuit, limits):
 
 
 def simulate(circuit, t_end, dt=None, t0=0.0, x0=None, protocol=None, method="BDF", rtol=1e-6, atol=None,
-             max_step=np.inf, first_step=None, engine="auto", ic=None, progress=None, compile="wait"):
+             max_step=np.inf, first_step=None, engine="auto", ic=None, progress=None, compile="wait",
+             output_from=None):
     """Integrate from t0 to t_end [s].
 
     x0: initial states (default: the operating point after the protocol's initial settings).
     dt: output interval [s] (default: the solver's own steps; the compiled engine, which has
         no step list, then reports 1001 evenly spaced times).
+    output_from: first output time [s] (SPICE's TSTART): the run starts at t0, but only the
+        rows from this time on are kept and get outputs (e.g. the last cardiac cycle).
     protocol: a Protocol (or path to a protocol YAML) with initial settings and timed events.
     ic: {ID.STATE: value} states to override in that start (x0 or the operating point), e.g.
         {'Cv.V': '20 mL'}; units allowed, plain numbers are in the state's unit (hemocircuit.ic).
@@ -102,12 +105,12 @@ def simulate(circuit, t_end, dt=None, t0=0.0, x0=None, protocol=None, method="BD
                 "atol": atol, "max_step": None if max_step == np.inf else max_step, "first_step": first_step,
                 "ic": dict(ic) if ic else None, "x0": None if x0 is None else "given",
                 "protocol": protocol if isinstance(protocol, str) else getattr(protocol, "file", None),
-                "compile": compile}
+                "compile": compile, "output_from": output_from}
     if compile not in ("wait", "background"):
         raise SolverError(f"compile {compile!r} (tran --compile, $HEMOCIRCUIT_COMPILE): choose 'wait' or 'background'")
     try:
         res = _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step, first_step, engine, ic,
-                        progress, compile)
+                        progress, compile, output_from)
     except SolverError as exc:
         if exc.partial is not None:
             stamp(exc.partial, "tran", circuit, settings, started, status="partial")
@@ -130,7 +133,7 @@ def simulate(circuit, t_end, dt=None, t0=0.0, x0=None, protocol=None, method="BD
 
 
 def _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step, first_step, engine, ic,
-              progress=None, compile="wait"):
+              progress=None, compile="wait", output_from=None):
     from ..progress import bar, wanted
     from .op import operating_point
 
@@ -146,6 +149,10 @@ def _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step
         raise SolverError("no end time given (t_end or a protocol's t_end)")
     if c.B != 1:
         raise SolverError("simulate() runs one parameter set; use hemocircuit.batch for many")
+    if output_from is not None and not (isinstance(output_from, (int, float, np.number))
+                                        and np.isfinite(output_from) and t0 <= output_from <= t_end):
+        raise SolverError(f"output_from = {output_from!r} s: the first output time must lie in the run, "
+                          f"between t0 = {t0:g} s and t_end = {t_end:g} s")
     x = operating_point(c, t=t0).x if x0 is None else np.asarray(x0, dtype=float).copy()
     if ic:
         from ..ic import apply_ic
@@ -175,12 +182,12 @@ def _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step
             else:
                 with bar(t_end - t0, "tran (simulated time)", unit="s", progress=progress) as pbar:
                     res = _simulate_compiled(system, c, x, t0, t_end, dt, events, rtol, atol, max_step, first_step,
-                                             pbar)
+                                             pbar, output_from=output_from)
                 background.mark_ready(system)
                 return res
     ts, xs, segs = [], [], []
     nfev = njev = nsteps = 0
-    t_grid = None if dt is None else np.arange(t0, t_end + 0.5 * dt, dt)
+    t_grid = None if dt is None else _from(np.arange(t0, t_end + 0.5 * dt, dt), output_from)
     pbar = bar(t_end - t0, "tran (simulated time)", unit="s", progress=progress).__enter__()
 
     def one_segment(c, t_a, t_b, x_a):
@@ -218,7 +225,7 @@ def _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step
     def _partial():
         if not ts:
             return None
-        return _collect(c, ts, xs, segs)
+        return _collect(c, ts, xs, segs, output_from)
 
     bounds = [t0] + [e[0] for e in events] + [t_end]
     compiled = None
@@ -229,7 +236,7 @@ def _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step
             from ..kernels.system import CompiledSystem
             compiled = _simulate_compiled(CompiledSystem.of(c_k), c_k, x_s, t_s, t_end, dt, events[k:], rtol, atol,
                                           max_step, first_step, pbar, t_grid=_output_grid(t0, t_end, dt),
-                                          parts=(ts, xs, segs), bar_t0=t0)
+                                          parts=(ts, xs, segs), bar_t0=t0, output_from=output_from)
     except KeyboardInterrupt as exc:
         raise Interrupted.of(exc, partial=_partial()) from None
     finally:
@@ -240,7 +247,7 @@ def _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step
                                                       f"engine was built, then {compiled.stats['method']}",
                           "switched_at": switch[1], "scipy": scipy_stats}
         return compiled
-    res = _collect(segs[-1] if segs else c, ts, xs, segs)
+    res = _collect(segs[-1] if segs else c, ts, xs, segs, output_from)
     res.stats = scipy_stats if handover is None else {**scipy_stats, "compiled_engine": "building in the background"}
     return res
 
@@ -317,10 +324,21 @@ def _scipy_segments(c, x, bounds, events, limits, one_segment, ts, xs, segs, han
     return None
 
 
-def _collect(c_last, ts, xs, segs):
-    """Stack segments (dropping duplicated boundary points) and compute outputs per segment."""
+def _from(t, t_from):
+    """The times of ``t`` from ``t_from`` on (all if it is None; to rounding of a grid)."""
+    if t_from is None:
+        return t
+    return t[t >= t_from - 1e-12 * max(1.0, abs(t_from))]
+
+
+def _collect(c_last, ts, xs, segs, t_from=None):
+    """Stack segments (dropping duplicated boundary points and rows before ``t_from``) and
+    compute outputs per segment."""
     t_all, x_all, cols = [], [], {}
     for t, x, c in zip(ts, xs, segs):
+        if t_from is not None:
+            keep = _from(t, t_from).size
+            t, x = t[t.size - keep:], x[x.shape[0] - keep:]  # times increase within a segment
         if t.size == 0:
             continue
         if t_all and t_all[-1].size and t[0] <= t_all[-1][-1]:
@@ -348,7 +366,7 @@ def _output_grid(t0, t_end, dt):
 
 
 def _simulate_compiled(system, c, x, t0, t_end, dt, events, rtol, atol, max_step, first_step, bar=None,
-                       t_grid=None, parts=None, bar_t0=None):
+                       t_grid=None, parts=None, bar_t0=None, output_from=None):
     """simulate() on the compiled engine: kernel calls per protocol segment (hard limits and
     source breakpoints are handled inside the kernel), in pieces (:func:`_compiled_segment`):
     at most PIECE_STEPS steps each and, with a progress ``bar`` shown, about 50 per segment.
@@ -358,6 +376,12 @@ def _simulate_compiled(system, c, x, t0, t_end, dt, events, rtol, atol, max_step
 
     if t_grid is None:
         t_grid = _output_grid(t0, t_end, dt)
+    if output_from is not None:
+        # rows before output_from are dropped by _collect; ~100 of them stay as the points a
+        # run that needs more than PIECE_STEPS continues from (not every dt: dense output)
+        late = _from(t_grid, output_from)
+        early = t_grid[:t_grid.size - late.size]
+        t_grid = np.concatenate([early[::max(1, early.size // 100)], late])
     bounds = [t0] + [e[0] for e in events] + [t_end]
     ts, xs, segs = parts if parts is not None else ([], [], [])
     stats = {"steps": 0, "rejected": 0, "nfev": 0, "limit_events": 0}
@@ -380,8 +404,12 @@ def _simulate_compiled(system, c, x, t0, t_end, dt, events, rtol, atol, max_step
             x = _compiled_segment(system, c, tpts, x, rtol, atol, h0, max_step, stats, ts, xs, segs, bar,
                                   t0 if bar_t0 is None else bar_t0)
         except KeyboardInterrupt as exc:
-            raise Interrupted.of(exc, partial=_collect(c, ts, xs, segs) if ts else None) from None
-    res = _collect(c, ts, xs, segs)
+            raise Interrupted.of(exc, partial=_collect(c, ts, xs, segs, output_from) if ts else None) from None
+        except SolverError as exc:  # its partial: the rows from output_from on, as the result's
+            if exc.partial is not None and output_from is not None:
+                exc.partial = _collect(c, ts, xs, segs, output_from)
+            raise
+    res = _collect(c, ts, xs, segs, output_from)
     from ..kernels.tableaus import DEFAULT
     res.stats = {**stats, "method": f"{DEFAULT.upper()} (compiled)"}
     return res
@@ -419,12 +447,15 @@ def _compiled_range(system, c, P, tpts, x, rtol, atol, h0, max_step, stats, ts, 
     segment took so far, at most MAX_STEPS); appends to ts, xs, segs; returns (final state, used)."""
     from ..execution import check_interrupted
 
-    breaks = c.breakpoints(tpts[0], tpts[-1])
+    # steps end on every breakpoint; where a waveform only changes its slope (a pwl table's
+    # times) its value is continuous and the integrator needs no new evaluation there
+    breaks = c.breakpoints(tpts[0], tpts[-1], kinks=False)
+    kinks = sorted(set(c.breakpoints(tpts[0], tpts[-1])) - set(breaks))
     budget = PIECE_STEPS
     while True:
         check_interrupted()
-        X, st = system.integrate(tpts, x, P, rtol=rtol, atol=atol, breaks=breaks, h0=h0, hmax=max_step,
-                                 max_steps=min(budget, MAX_STEPS - used))
+        X, st = system.integrate(tpts, x, P, rtol=rtol, atol=atol, breaks=breaks, kinks=kinks, h0=h0,
+                                 hmax=max_step, max_steps=min(budget, MAX_STEPS - used))
         for key in stats:
             stats[key] += st[key]
         used += st["steps"]

@@ -624,15 +624,18 @@ def hermite_root(y0, d0, y1, d1):
 
 # inlined into integrate_batch, its one caller (see jacobian_into): one level less to compile
 @njit(cache=True, nogil=True, inline="always")
-def integrate(t_out, x0, P, lay, scales, lim_i, lim_b, lim_r, breaks, rtol, atol, h0, hmax, max_steps, tab, out):
+def integrate(t_out, x0, P, lay, scales, lim_i, lim_b, lim_r, breaks, bjump, rtol, atol, h0, hmax, max_steps, tab,
+              out):
     """Integrate from t_out[0] to t_out[-1], writing the states at every t_out into out (T, nx).
 
     Hard limits (lim_i, lim_b, lim_r): state lim_i[k] may not fall below lim_b[k]; at the
     crossing (located on the step's cubic Hermite interpolant) the state is put on the bound
     and state lim_r[k] (if >= 0) is reset to max(., 0); the next step starts from the size of
     the step that hit the bound (tab[4] = 1), not from the shortened one.  Steps end exactly on
-    ``breaks`` (discontinuities of sources), where f is re-evaluated; where f does not jump
-    (a slope-only kink, e.g. of a pwl table) the Jacobian is kept (tab[5] = 1).
+    ``breaks`` (discontinuities of sources, sorted), where f is re-evaluated unless
+    ``bjump[k]`` = 0: a slope-only kink (a pwl table's time), where the source's value and so
+    f are continuous, the step ends but f(t-) serves as f(t+) (one evaluation less per kink);
+    where f does not jump the Jacobian is kept (tab[5] = 1).
     ``tab``: the method (hemocircuit.kernels.tableaus.packed).
     Returns (status, t reached, steps, rejected steps, f evaluations, limit events);
     status 0 done, -1 step size too small, -2 step limit, -3 non-finite state or singular system.
@@ -846,7 +849,9 @@ def integrate(t_out, x0, P, lay, scales, lim_i, lim_b, lim_r, breaks, rtol, atol
                 # restart after the reset from the step that reached the bound: the shortened
                 # step (s_hit x hh, often tiny) says nothing about the dynamics after the reset
                 h = max(h, h_full * fac)
-            if at_break and tb < t_end:  # the source may jump here: continue from its right limit
+            if at_break and tb < t_end and bjump[ib] == 0.0:  # a kink: f is continuous here
+                ib += 1
+            elif at_break and tb < t_end:  # the source may jump here: continue from its right limit
                 ib += 1
                 nfev += 1
                 if not rhs_into(t, x, P, lay, work, fr):
@@ -883,15 +888,17 @@ def integrate(t_out, x0, P, lay, scales, lim_i, lim_b, lim_r, breaks, rtol, atol
 
 
 @njit(cache=True, nogil=True)
-def integrate_batch(t_out, X0, P, lay, scales, lim_i, lim_b, lim_r, breaks, rtol, atol, h0, hmax, max_steps, tab):
-    """integrate() for each member: t_out (B, T), X0 (B, nx), P (B, nP), hmax (B,) ->
+def integrate_batch(t_out, X0, P, lay, scales, lim_i, lim_b, lim_r, breaks, bjump, rtol, atol, h0, hmax, max_steps,
+                    tab):
+    """integrate() for each member: t_out (B, T), X0 (B, nx), P (B, nP), hmax (B,), breaks and
+    bjump (K,) (1 where a source may jump, 0 at a slope-only kink) ->
     (out (B, T, nx), stats (B, 6) as integrate's return values)."""
     B = X0.shape[0]
     out = np.empty((B, t_out.shape[1], X0.shape[1]))
     stats = np.zeros((B, 6))
     for m in range(B):
         status, t, steps, rej, nfev, nev = integrate(t_out[m], X0[m], P[m], lay, scales, lim_i, lim_b, lim_r,
-                                                     breaks, rtol, atol, h0, hmax[m], max_steps, tab, out[m])
+                                                     breaks, bjump, rtol, atol, h0, hmax[m], max_steps, tab, out[m])
         stats[m, 0] = status
         stats[m, 1] = t
         stats[m, 2] = steps

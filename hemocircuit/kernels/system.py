@@ -57,24 +57,27 @@ class CompiledSystem:
                                  self.scales, bool(local))
 
     def integrate(self, t_out, x0, P, rtol=1e-6, atol=None, breaks=(), h0=1e-3, hmax=np.inf,
-                  max_steps=10_000_000, method=None, **tab_options):
+                  max_steps=10_000_000, method=None, kinks=(), **tab_options):
         """States on the grid t_out (T,) from x0 at t_out[0] for one parameter row P (slots,).
-        ``method``: 'bdf' (engine_template.integrate_bdf, variable-order BDF) or a Rosenbrock
-        tableau of hemocircuit.kernels.tableaus (None: tableaus.DEFAULT); ``tab_options`` go to
-        the tableau's ``packed`` (the BDF method takes ``local_jacobian`` only).
+        Steps end on ``breaks`` (where a source may jump) and on ``kinks`` (where only a
+        source's slope jumps: its value, and so f, is continuous, so f is not re-evaluated).
+        ``method``: 'bdf' (engine_template.integrate_bdf, variable-order BDF; it restarts at
+        kinks as at breaks) or a Rosenbrock tableau of hemocircuit.kernels.tableaus (None:
+        tableaus.DEFAULT); ``tab_options`` go to the tableau's ``packed`` (the BDF method takes
+        ``local_jacobian`` only).
 
         Returns (X (T, nx), stats dict).  Rows after a failure are NaN; stats['status'] < 0
         says why (see STATUS)."""
         # one member of the batch entry point: a process compiles one integrator, not two
         X, st = self.integrate_batch(np.asarray(t_out, dtype=float)[None], np.asarray(x0, dtype=float)[None],
                                      np.asarray(P, dtype=float)[None], rtol=rtol, atol=atol, breaks=breaks, h0=h0,
-                                     hmax=hmax, max_steps=max_steps, method=method, **tab_options)
+                                     hmax=hmax, max_steps=max_steps, method=method, kinks=kinks, **tab_options)
         status, t, steps, rej, nfev, nev = (st[0, k] for k in range(6))
         return X[0], {"status": int(status), "message": STATUS[int(status)], "t": float(t), "steps": int(steps),
                       "rejected": int(rej), "nfev": int(nfev), "limit_events": int(nev)}
 
     def integrate_batch(self, t_out, X0, P, rtol=1e-6, atol=None, breaks=(), h0=1e-3, hmax=np.inf,
-                        max_steps=10_000_000, method=None, **tab_options):
+                        max_steps=10_000_000, method=None, kinks=(), **tab_options):
         """integrate() for every member: t_out (T,) or (B, T), X0 (B, nx), P (B, slots), hmax
         scalar or (B,).
         Returns (X (B, T, nx), stats (B, 6): status, t, steps, rejected, nfev, limit events)."""
@@ -85,16 +88,16 @@ class CompiledSystem:
         atol_v = (rtol * 1e-3 if atol is None else atol) * self.scales
         hmax = np.ascontiguousarray(np.broadcast_to(np.asarray(hmax, dtype=float), (B,)))
         method = method or tableaus.DEFAULT
+        brk, jump = merge_breaks(breaks, kinks)
         if method == tableaus.BDF:
             unknown = set(tab_options) - {"local_jacobian"}
             if unknown:
                 raise ValueError(f"options {sorted(unknown)} apply to the Rosenbrock methods, not to {method!r}")
             return self.mod.integrate_batch_bdf(t_out, X0, P, self.lay, self.scales, self.lim_i, self.lim_b,
-                                                self.lim_r, np.asarray(sorted(breaks), dtype=float), float(rtol),
-                                                atol_v, float(h0), hmax, int(max_steps),
-                                                bool(tab_options.get("local_jacobian", 1)))
+                                                self.lim_r, brk, float(rtol), atol_v, float(h0), hmax,
+                                                int(max_steps), bool(tab_options.get("local_jacobian", 1)))
         return self.mod.integrate_batch(t_out, X0, P, self.lay, self.scales, self.lim_i, self.lim_b, self.lim_r,
-                                        np.asarray(sorted(breaks), dtype=float), float(rtol), atol_v, float(h0),
+                                        brk, jump, float(rtol), atol_v, float(h0),
                                         hmax, int(max_steps),
                                         self.tableau(method, **tab_options))
 
@@ -102,3 +105,18 @@ class CompiledSystem:
         """The packed method for integrate_batch (hemocircuit.kernels.tableaus)."""
         opts = {"autonomous": int(self.layout.autonomous), **tab_options}
         return tableaus.packed(method, **opts)
+
+
+def merge_breaks(breaks, kinks=()):
+    """(times (K,), jump flags (K,)): ``breaks`` and ``kinks`` sorted into one array, flag 1
+    where a source may jump (a time in ``breaks``, whether or not also a kink), 0 at a kink."""
+    b = np.asarray(breaks, dtype=float).reshape(-1)
+    k = np.asarray(kinks, dtype=float).reshape(-1)
+    k = k[~np.isin(k, b)]
+    times = np.concatenate([b, k])
+    order = np.argsort(times, kind="stable")
+    jump = np.concatenate([np.ones(b.size), np.zeros(k.size)])
+    times, jump = times[order], jump[order]
+    keep = np.ones(times.size, bool)  # one entry per time
+    keep[1:] = times[1:] != times[:-1]
+    return np.ascontiguousarray(times[keep]), np.ascontiguousarray(jump[keep])
