@@ -139,3 +139,24 @@ def test_compile_option_checked():
     assert "HEMOCIRCUIT_COMPILE" in p.stderr and "Traceback" not in p.stderr
     with pytest.raises(hc.errors.SolverError, match="choose 'wait' or 'background'"):
         hc.load(os.path.join(TEST_NETLISTS, "base_rc.yaml")).simulate(1.0, compile="later")
+
+
+def test_handover_at_a_hard_limit(monkeypatch):
+    """In an oscillation every piece of the scipy path may end on a hard limit (the Ca floor
+    of vasomotion): the build's readiness is asked there too, and the compiled engine goes on
+    from the state put on the bound.  Pieces here run to the end of the segment, so the only
+    chances to switch are the floor events."""
+    from hemocircuit.analyses import transient
+
+    c = hc.load(os.path.join(NETLISTS, "vasomotion.yaml"))
+    x0 = operating_point(c).x.copy()
+    x0[c.state_names.index("art.lambda")] *= 1.05
+    ref = c.simulate(60.0, dt=0.1, x0=x0, engine="compiled", rtol=1e-8)
+    FakeBuild(monkeypatch, after=1)
+    monkeypatch.setattr(transient._Handover, "end_of", lambda self, cur, b, t_grid: b)
+    res = c.simulate(60.0, dt=0.1, x0=x0, rtol=1e-8, compile="background")
+    t_s = res.stats["switched_at"]
+    assert 0 < t_s < 60.0 and abs(t_s / 0.1 - round(t_s / 0.1)) > 1e-6  # at an event, off the grid
+    assert res.stats["limit_events"] >= 2 and np.min(res["art.Ca"]) >= c.hard_limits()[0][1] - 1e-15
+    on_grid = np.isin(np.round(res.t, 9), np.round(ref.t, 9))
+    assert np.max(np.abs(res["art.r"][on_grid] - ref["art.r"])) < 0.05  # um, on ~40 um swings

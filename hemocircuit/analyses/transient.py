@@ -315,12 +315,16 @@ def _scipy_segments(c, x, bounds, events, limits, one_segment, ts, xs, segs, han
                     ts.append(np.array([cur]))
                     xs.append(x[None, :])
                     segs.append(c)
-                    continue
+                    t_reached = cur
+                else:
+                    t_reached = end
                 if handover is not None:
-                    handover.after(end - cur, time.perf_counter() - started)
-                    if end < bounds[-1] and handover.ready():
-                        return k, end, x, c
-                cur = end
+                    # asked after every piece, also one that a hard limit ended (in an oscillation
+                    # every piece may end on one): the compiled engine goes on from that state
+                    handover.after(t_reached - (sol.t[0] if sol.t.size else t_reached), time.perf_counter() - started)
+                    if t_reached < bounds[-1] and handover.ready():
+                        return k, t_reached, x, c
+                cur = t_reached
     return None
 
 
