@@ -1294,7 +1294,8 @@ def integrate_bdf(t_out, x0, P, lay, scales, lim_i, lim_b, lim_r, breaks, rtol, 
 @njit(cache=True, nogil=True)
 def integrate_batch_bdf(t_out, X0, P, lay, scales, lim_i, lim_b, lim_r, breaks, rtol, atol, h0, hmax, max_steps,
                         local_jac):
-    """integrate_bdf() for each member, as integrate_batch."""
+    """integrate_bdf() for each member, as integrate_batch.  (A separate entry point, not a
+    method flag of integrate_batch: numba compiles, per process, only the integrator used.)"""
     B = X0.shape[0]
     out = np.empty((B, t_out.shape[1], X0.shape[1]))
     stats = np.zeros((B, 6))
