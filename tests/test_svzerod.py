@@ -302,3 +302,25 @@ def test_commands_read_their_json(tmp_path, capsys):
     assert a.keys() == b.keys() and all(np.array_equal(a[k], b[k]) for k in a)
     assert main(["op", path, "--quiet"]) == 0
     assert "P(INFLOW__branch0_seg0)" in capsys.readouterr().out
+
+
+def test_their_rows_beyond_our_run_are_a_failed_case_not_a_crash(tmp_path):
+    """Their result may hold more cycles than the case asks for (their cycle-to-cycle
+    criterion adds some): the runner reports the case as failed with the reason instead of
+    stopping with an IndexError."""
+    import json
+    import shutil
+
+    from hemocircuit.svzerod.conformance import run_case
+
+    (tmp_path / "cases").mkdir()
+    (tmp_path / "results").mkdir()
+    case = tmp_path / "cases" / "steadyFlow_R_RCR.json"
+    shutil.copy(os.path.join(SHARED, "cases", "steadyFlow_R_RCR.json"), case)
+    with open(os.path.join(SHARED, "converged", "result_steadyFlow_R_RCR.json")) as fh:
+        d = json.load(fh)
+    last = max(d["name"], key=int)
+    d["time"][last] = d["time"][last] + 50.0  # a row 50 s after the end of our run
+    (tmp_path / "results" / "result_steadyFlow_R_RCR.json").write_text(json.dumps(d))
+    r = run_case(str(case), against="results")
+    assert not r.ok and "beyond our output" in r.note

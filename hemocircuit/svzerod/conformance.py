@@ -168,6 +168,12 @@ def compare(model, res, keep, t_out, theirs):
             o, y = np.array([ours.mean()]), yy
         else:
             idx = np.rint(tt / (t_out[1] - t_out[0]) if t_out.size > 1 else 0).astype(int)
+            if idx.size and (idx.max() >= ours.size or idx.min() < 0):
+                extra = (" (use_cycle_to_cycle_error: their criterion ran more cycles than "
+                         "number_of_cardiac_cycles; not reproduced by this runner)"
+                         if model.sim.get("use_cycle_to_cycle_error") else "")
+                raise HemocircuitError(f"their result has rows of {name} at t = {np.nanmax(tt):g} s, beyond our "
+                                       f"output ({t_out[-1] if t_out.size else 0:g} s){extra}")
             o = ours[idx]
             y = yy
             if all_cycles:
@@ -199,7 +205,7 @@ def case_rtol(model):
     """Integrator tolerance appropriate to the comparison (errors relative to a variable's
     range): 1e-8 for the steady cases (compared at 1e-6; they start at the operating point),
     1e-5 for the simple pulsatile ones (compared at 1e-3: the integration error is then ~1e-6
-    of the range, ROS34PW2 being the default method there), 1e-7 with valves, chambers or the
+    of the range, with the engine's default method RODAS5P), 1e-7 with valves, chambers or the
     closed-loop heart (compared at 1e-2; 1e-9 stalls the heart's valves, and at 1e-6
     chamber_elastance_inductor stops at t = 10.4 s with "step size too small")."""
     if set(model.block_types) & VALVE_CHAMBER_TYPES:
