@@ -59,13 +59,17 @@ def test_once_per_process(tmp_path, monkeypatch):
     assert all(f.exists() for f in files)
 
 
-def test_key_covers_contents_and_every_component_file():
-    files = freshness.sources()
-    names = {f.name for f in files}
-    # a kernel file and the files its kernels call into
-    assert {"compiled.py", "activation.py", "linear_elastance_chamber.py", "engine_template.py"} <= names
-    assert freshness.key(files) == freshness.key(files)
-    assert len(freshness.key(files)) == 16
+def test_key_covers_contents_and_every_component_file(tmp_path):
+    names = {f.name for f in freshness.sources()}
+    # a kernel file, the files its kernels call into, and what the engine header reads
+    assert {"compiled.py", "activation.py", "linear_elastance_chamber.py", "engine_template.py",
+            "waveforms.py", "expressions.py", "codegen.py", "units.py", "batch_integrator.py"} <= names
+    a, b = tmp_path / "a.py", tmp_path / "b.py"
+    a.write_text("x = 1\n")
+    b.write_text("y = 2\n")
+    before = freshness.key([a, b])
+    b.write_text("y = 3\n")  # one character of one file
+    assert freshness.key([a, b]) != before
 
 
 def test_engine_name_changes_with_the_key(monkeypatch):

@@ -95,6 +95,10 @@ def _run_chunk_members(job):
     failed = np.zeros(B, bool)
     total_periods = np.zeros(B, int)
     block = opt["block_periods"]
+    # outputs over the periods analysed (the last two, or n_periods): the outputs of the earlier
+    # periods of a block are never used (their states are finite: the integrator stops on a
+    # non-finite state), and they cost as much as integrating
+    win = slice(-(max(2, opt["n_periods"]) * SAMPLES), None)
     while True:
         idx = np.nonzero(~settled & ~failed)[0]
         if idx.size == 0:
@@ -111,10 +115,6 @@ def _run_chunk_members(job):
                 advance()
                 continue
             tt = grid[j]
-            # outputs over the periods analysed (the last two, or n_periods): the outputs of the
-            # earlier periods of the block are never used (their states are finite: the
-            # integrator stops on a non-finite state), and they cost as much as integrating
-            win = slice(-(max(2, opt["n_periods"]) * SAMPLES), None)
             try:
                 Y, X_in, cols = _member_outputs(sub, j, tt[win], r.x[j][win], outputs, inp_node_col)
             except HemocircuitError as exc:  # this member only

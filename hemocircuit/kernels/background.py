@@ -85,7 +85,7 @@ def start(system, circuit, x0, t0: float, rtol: float) -> bool:
         return False
     if building(system):
         return True
-    job = _marker(system, "job").with_suffix(f".{os.getpid()}.pickle")
+    job = Path(system.mod.__file__).with_suffix(f".{os.getpid()}.job")
     log = Path(system.mod.__file__).with_suffix(".build.log")
     try:
         with open(job, "wb") as fh:

@@ -7,7 +7,9 @@ followed by ``engine_template.py``.  Numba compiles it on first use and caches t
 beside the module (or under ``$NUMBA_CACHE_DIR``), so every netlist made of the same types
 reuses it.  Compiling only the types used keeps a first run short (the dispatchers inline every
 kernel they name into the engine).  The module's name is ``hemocircuit_engine_<set>_<source>``:
-<set> hashes the kernels' names, <source> the template, the kernels' source files and the numba
+<set> hashes the kernels' names, <source> the kernel sources (kernels.freshness.key: the template,
+this package, the components package, units.py, the batch integrator), the kernels' own files (a
+plug-in's included) and the numba
 version, so an edit to any of them makes a new module instead of reusing stale machine code.
 
 Cache folder: ``$HEMOCIRCUIT_CACHE_DIR`` or ``~/.cache/hemocircuit`` (never inside the checkout).
@@ -29,11 +31,6 @@ from pathlib import Path
 from . import freshness
 
 _TEMPLATE = Path(__file__).with_name("engine_template.py")
-_HERE = Path(__file__).parent
-# sources whose constants are frozen into the compiled code (units: the mmHg/Pa factors)
-_SUPPORT = (_HERE / "waveforms.py", _HERE / "expressions.py", _HERE.parent / "units.py",
-            _HERE.parent / "batch_integrator.py",  # the Rosenbrock tableau
-            Path(__file__))  # and this file: it writes the header
 _loaded: dict[str, object] = {}
 #: days without a load after which another source version of an engine is deleted
 STALE_DAYS = 7
@@ -91,13 +88,12 @@ def _fingerprint(kernels) -> tuple[str, str]:
     names = [name for ker in kernels for name in kernel_names(ker)]
     h = hashlib.sha256()
     h.update(numba.__version__.encode())
-    h.update(_TEMPLATE.read_bytes())
-    for path in _SUPPORT:
-        h.update(path.read_bytes())
+    # every source compiled code is built from: the template, this package (it writes the
+    # header), waveforms, expressions, units, the tableaus and the components package
+    h.update(freshness.key().encode())
     files = {inspect.getsourcefile(sys.modules[name.split(":")[0]]) for name in names}
-    for f in sorted(files):  # the kernels' own source: an edit there recompiles
+    for f in sorted(files):  # the kernels' own files: a plug-in's lie outside that key
         h.update(Path(f).read_bytes())
-    h.update(freshness.key().encode())  # and an edit of any file they call into (freshness)
     return hashlib.sha256(";".join(names).encode()).hexdigest()[:12], h.hexdigest()[:12]
 
 

@@ -1258,12 +1258,11 @@ def integrate_bdf(t_out, x0, P, lay, scales, lim_i, lim_b, lim_r, breaks, rtol, 
         ep = np.inf
         s_m = 0.0
         s_p = 0.0
-        for i in range(nx):
-            sc = atol[i] + rtol * abs(x[i])
+        for i in range(nx):  # scale: that of the step's error test (atol + rtol |y_new|)
             if order > 1:
-                s_m += (ecst[order - 1] * D[order, i] / sc) ** 2
+                s_m += (ecst[order - 1] * D[order, i] / scale[i]) ** 2
             if order < BDF_MAX_ORDER:
-                s_p += (ecst[order + 1] * D[order + 2, i] / sc) ** 2
+                s_p += (ecst[order + 1] * D[order + 2, i] / scale[i]) ** 2
         if order > 1:
             em = np.sqrt(s_m / nx)
         if order < BDF_MAX_ORDER:

@@ -136,8 +136,6 @@ BDF = "bdf"
 #: reference at rtol 1e-6 (13 % of the amplitude), RODAS5P's 6.8e-4 at 1e-5.  So BDF is used
 #: where it is as accurate: the forced runs of ``freq`` (docs/performance.md).
 DEFAULT = "rodas5p"
-#: every method name the engine takes
-ALL = (BDF,) + tuple(METHODS)
 
 
 def classical(name):
