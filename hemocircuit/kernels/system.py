@@ -32,6 +32,21 @@ class CompiledSystem:
 
     @classmethod
     def of(cls, circuit) -> "CompiledSystem | None":
+        """The compiled system of ``circuit``'s structure and waveforms (its values are the
+        parameter matrix, :meth:`params`).  Kept per structure for the waveforms it was built
+        with: every integrate call of a batch (each block of a frequency response, each chunk)
+        asks for it, and building the layout costs ~1 ms."""
+        ps = circuit.parameters
+        waves = tuple(ps.group_waves(k) for k in range(len(circuit.groups)))
+        key = ("compiled_system",) + tuple(id(w) for w in waves)
+        # the entry holds the waveform tuples themselves: an id is only compared while its object lives
+        held, system = circuit.structure.cached(key, lambda: (waves, cls._build(circuit)))
+        if any(a is not b for a, b in zip(held, waves)):  # pragma: no cover - ids reused: build anew
+            return cls._build(circuit)
+        return system
+
+    @classmethod
+    def _build(cls, circuit) -> "CompiledSystem | None":
         layout = build_layout(circuit)
         if layout is None:
             return None
