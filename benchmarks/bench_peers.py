@@ -534,6 +534,26 @@ def bench_envelope(a, hc_kw):
         members.append(m)
     res.update(members_hc_rr=members, max_rel_diff=worst, oscillation_verdicts_differ=verdicts_differ)
     log(f"  max rel diff hc vs rr: {worst}; verdicts differ: {verdicts_differ}")
+    if a.envelope_ref_rtol:
+        # both tools against one untimed reference: equal rtol is not equal accuracy by itself
+        ref = _envelope_rows(envelope(c, ("Pa.value", pas), [("art.zeta", zetas)], outputs=["art.r", "Q(Rla)"],
+                                      t_end=t_end, dt=dt, workers=a.workers, **{**kw, "rtol": a.envelope_ref_rtol}))
+        acc = {"reference": f"hemocircuit envelope at rtol {a.envelope_ref_rtol:g}"}
+        for tool, rws in (("hemocircuit", rows), ("roadrunner", rr_rows)):
+            err, differ = {k: 0.0 for k in keys}, []
+            for r in rws:
+                q = next((x for x in ref if x["Pa.value"] == r["Pa.value"] and x["art.zeta"] == r["art.zeta"]), None)
+                if q is None or "error" in r or "error" in q:
+                    continue
+                if r["oscillating"] != q["oscillating"]:
+                    differ.append((r["Pa.value"], r["art.zeta"]))
+                    continue
+                for k in keys:
+                    if np.isfinite(r[k]) and np.isfinite(q[k]):
+                        err[k] = max(err[k], rel(r[k], q[k]))
+            acc[tool] = {"max_rel_err": err, "verdicts_differ": differ}
+        res["accuracy_vs_reference"] = acc
+        log(f"  against {acc['reference']}: hemocircuit {acc['hemocircuit']}, roadrunner {acc['roadrunner']}")
     return res
 
 
@@ -836,6 +856,11 @@ def table(results):
         acc = (f"max rel diff r min/max/mean {d['art.r min']:.1e}/{d['art.r max']:.1e}/{d['art.r mean']:.1e}, "
                f"period {d['period [s]']:.1e}; oscillation verdicts differ at (Pa, zeta) "
                f"{v['oscillation_verdicts_differ'] or 'none'}")
+        ref = v.get("accuracy_vs_reference")
+        if ref:
+            acc += "; vs ref r max / period: " + ", ".join(
+                f"{t} {ref[t]['max_rel_err']['art.r max']:.1e} / {ref[t]['max_rel_err']['period [s]']:.1e}"
+                for t in ("hemocircuit", "roadrunner"))
         line(f"envelope 5 Pa x 2 zeta (hc {v['workers']} workers)", v["rtol"], v["roadrunner_wall_s"],
              v["hemocircuit_wall_s"], v["ratio_hc_over_rr"], v.get("cpu_ratio_hc_over_rr"), acc)
     v = results.get("freq")
@@ -926,6 +951,9 @@ def main(argv=None):
                     help="time the batches as the first call of this process (numba import and the loading of "
                          "the compiled integrator included; roadrunner's load stays excluded); default: after an "
                          "untimed warm-up call on another circuit (see warm_up)")
+    ap.add_argument("--envelope-ref-rtol", type=float, default=0.0,
+                    help="envelope: rtol of an untimed hemocircuit reference both tools' statistics are measured "
+                         "against (e.g. 1e-9, ~30 s more; 0: skip)")
     ap.add_argument("--freq-ref-rtol", type=float, default=1e-11,
                     help="freq: rtol of the untimed roadrunner reference both tools' errors are measured "
                          "against (0: skip)")
