@@ -66,10 +66,11 @@ class CompiledSystem:
 
     def jacobian(self, t, x, P, local=True):
         """State Jacobian d(dx/dt)/dx (nx, nx) at (t, x) for one parameter row P (slots,):
-        element-local differences composed through the nodal solve (``local``, where they
-        apply) or one whole right-hand side per state -- the integrator's two ways."""
+        element-local, composed through the nodal solve (``local`` True or 1: with the kernels'
+        analytic partials where they have them; 2: element-local differences only; where it
+        applies) or (False / 0) one whole right-hand side per state -- the integrator's ways."""
         return self.mod.jacobian(float(t), np.asarray(x, dtype=float), np.asarray(P, dtype=float), self.lay,
-                                 self.scales, bool(local))
+                                 self.scales, int(local))
 
     def integrate(self, t_out, x0, P, rtol=1e-6, atol=None, breaks=(), h0=1e-3, hmax=np.inf,
                   max_steps=10_000_000, method=None, kinks=(), **tab_options):
@@ -110,7 +111,7 @@ class CompiledSystem:
                 raise ValueError(f"options {sorted(unknown)} apply to the Rosenbrock methods, not to {method!r}")
             return self.mod.integrate_batch_bdf(t_out, X0, P, self.lay, self.scales, self.lim_i, self.lim_b,
                                                 self.lim_r, brk, float(rtol), atol_v, float(h0), hmax,
-                                                int(max_steps), bool(tab_options.get("local_jacobian", 1)))
+                                                int(max_steps), int(tab_options.get("local_jacobian", 1)))
         return self.mod.integrate_batch(t_out, X0, P, self.lay, self.scales, self.lim_i, self.lim_b, self.lim_r,
                                         brk, jump, float(rtol), atol_v, float(h0),
                                         hmax, int(max_steps),
