@@ -818,6 +818,8 @@ def integrate(t_out, x0, P, lay, scales, lim_i, lim_b, lim_r, breaks, bjump, rto
             en = max(enorm, 1e-10)
             fac = 0.9 * en ** (-0.7 / q) * err_prev ** (0.4 / q)
             fac = min(5.0, max(0.2, fac))
+            if nrej_run > 0:  # just after a rejection: no growth (Hairer & Wanner's facmax = 1)
+                fac = min(fac, 1.0)
             err_prev = max(en, 1e-4)
             tn = tb if at_break else t + hh
             nfev += 1
