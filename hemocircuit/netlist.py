@@ -155,15 +155,20 @@ def _restore_refs(value, path, depth=0, memo=None, lim=None):
     return value
 
 
-def read_yaml_file(path, what="netlist"):
-    """Parse a YAML file (netlist or protocol) within the input limits (hemocircuit.limits),
-    rejecting repeated keys; ``${name}`` may stand unquoted in flow mappings.  Errors quote at
-    most a short excerpt of the file."""
+def _check_input_file(path, what):
+    """A readable file within the input size limit, or a NetlistError saying what is wrong."""
     if not os.path.exists(path):
         raise NetlistError(f"{what} file not found: {path}")
     if os.path.isdir(path):
         raise NetlistError(f"{what} file {path} is a folder")
     limits.check_file_size(path, what)
+
+
+def read_yaml_file(path, what="netlist"):
+    """Parse a YAML file (netlist or protocol) within the input limits (hemocircuit.limits),
+    rejecting repeated keys; ``${name}`` may stand unquoted in flow mappings.  Errors quote at
+    most a short excerpt of the file."""
+    _check_input_file(path, what)
     try:
         with open(path, encoding="utf-8") as fh:
             text = _REF_TEXT.sub(lambda m: "$(" + m.group(1) + ")", fh.read())
@@ -193,11 +198,7 @@ def read_json_file(path, what="netlist"):
     where a JSON number such as 9.0219259e7 (no sign in the exponent) is a string."""
     import json
 
-    if not os.path.exists(path):
-        raise NetlistError(f"{what} file not found: {path}")
-    if os.path.isdir(path):
-        raise NetlistError(f"{what} file {path} is a folder")
-    limits.check_file_size(path, what)
+    _check_input_file(path, what)
     try:
         with open(path, encoding="utf-8") as fh:
             return json.load(fh)

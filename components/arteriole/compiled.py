@@ -127,15 +127,19 @@ def _rates(Ca, Cw, p, passive):
 
 
 @_jit
-def _quasi_steady(a, b, p):
-    # eq 4stateSS with eq 4stateCons (closed form, kinetics.quasi_steady), a = K1 = K6, b = K2 = K5
+def _qs_numerators(a, b, p):
+    # eq 4stateSS with eq 4stateCons (closed form, kinetics.quasi_steady), a = K1 = K6, b = K2 = K5:
+    # the fractions' numerators (M, Mp, AMp, AM)
     k3 = p[K3]
     k4 = p[K4]
     k7 = p[K7]
-    M = b * (a * k4 + k3 * k7 + b * k7 + k4 * k7)
-    Mp = a * (a * k4 + b * k7 + k4 * k7)
-    AMp = a * k3 * (a + k7)
-    AM = a * b * k3
+    return (b * (a * k4 + k3 * k7 + b * k7 + k4 * k7), a * (a * k4 + b * k7 + k4 * k7), a * k3 * (a + k7),
+            a * b * k3)
+
+
+@_jit
+def _quasi_steady(a, b, p):
+    M, Mp, AMp, AM = _qs_numerators(a, b, p)
     s = M + Mp + AMp + AM
     return M / s, Mp / s, AMp / s, AM / s
 
@@ -167,6 +171,29 @@ def _pressures(u, iopt):
     if iopt[OPT_PIM_REF] != 0:
         P_im = P_im - u[2]
     return P_im * PA_PER_MMHG, (u[0] - u[1]) * PA_PER_MMHG
+
+
+@_jit
+def _inputs(p, x, u, iopt):
+    """(j, Ca, Cw, lambda, P_im [Pa], dP [Pa], h_w, r_dw, s_w, k_tau) of derivs and derivs_jac:
+    j the index of Cw in x; sec. dynfitting: no_speed scales h_w, r_dw, s_w, k_tau
+    (parameters.effective)."""
+    j = 2 if iopt[OPT_CA_ORDER] == 2 else 1
+    P, dP = _pressures(u, iopt)
+    ns = p[NO_SPEED]
+    return j, x[0], x[j], x[j + 1], P, dP, p[H_W] * ns, p[R_DW] * ns, p[S_W] * ns, p[K_TAU] * ns
+
+
+@_jit
+def _kinetics(K1, K2, M, Mp, AMp, AM, p, dx, i):
+    # eq 4state, K5 = K2, K6 = K1: d(M, Mp, AMp, AM)/dt into dx[i:i + 4]
+    k3 = p[K3]
+    k4 = p[K4]
+    k7 = p[K7]
+    dx[i] = -K1 * M + K2 * Mp + k7 * AM
+    dx[i + 1] = K1 * M - (K2 + k3) * Mp + k4 * AMp
+    dx[i + 2] = k3 * Mp - (k4 + K2) * AMp + K1 * AM
+    dx[i + 3] = K2 * AMp - (K1 + k7) * AM
 
 
 # --- the contract -------------------------------------------------------------------------
@@ -217,17 +244,7 @@ def derivs(p, x, u, t, iopt, dx):
     ca_order = iopt[OPT_CA_ORDER]
     dynamic = iopt[OPT_DYNAMIC] != 0
     passive = iopt[OPT_PASSIVE] != 0
-    j = 2 if ca_order == 2 else 1
-    Ca = x[0]
-    Cw = x[j]
-    lam = x[j + 1]
-    P, dP = _pressures(u, iopt)
-    # sec. dynfitting: no_speed scales h_w, r_dw, s_w, k_tau (parameters.effective)
-    ns = p[NO_SPEED]
-    h_w = p[H_W] * ns
-    r_dw = p[R_DW] * ns
-    s_w = p[S_W] * ns
-    k_tau = p[K_TAU] * ns
+    j, Ca, Cw, lam, P, dP, h_w, r_dw, s_w, k_tau = _inputs(p, x, u, iopt)
 
     r = _l2r(lam, p)                                            # eq l2r [m]
     Q = _PI * r ** 4.0 * dP / (8.0 * p[MU_B] * p[L_VES])        # eq Poiseuille, one vessel [m^3/s]
@@ -280,14 +297,7 @@ def derivs(p, x, u, t, iopt, dx):
     dx[j] = dCw
     dx[j + 1] = lam_dot
     if dynamic:
-        # eq 4state, K5 = K2, K6 = K1
-        k3 = p[K3]
-        k4 = p[K4]
-        k7 = p[K7]
-        dx[j + 2] = -K1 * M + K2 * Mp + k7 * AM
-        dx[j + 3] = K1 * M - (K2 + k3) * Mp + k4 * AMp
-        dx[j + 4] = k3 * Mp - (k4 + K2) * AMp + K1 * AM
-        dx[j + 5] = K2 * AMp - (K1 + k7) * AM
+        _kinetics(K1, K2, M, Mp, AMp, AM, p, dx, j + 2)
 
 
 @_jit
@@ -356,10 +366,7 @@ def _quasi_steady_d(a, b, p):
     k3 = p[K3]
     k4 = p[K4]
     k7 = p[K7]
-    M = b * (a * k4 + k3 * k7 + b * k7 + k4 * k7)
-    Mp = a * (a * k4 + b * k7 + k4 * k7)
-    AMp = a * k3 * (a + k7)
-    AM = a * b * k3
+    M, Mp, AMp, AM = _qs_numerators(a, b, p)
     s = M + Mp + AMp + AM
     dM_a, dM_b = b * k4, a * k4 + k3 * k7 + 2.0 * b * k7 + k4 * k7
     dMp_a, dMp_b = 2.0 * a * k4 + b * k7 + k4 * k7, a * k7
@@ -394,15 +401,7 @@ def derivs_jac(p, x, u, t, iopt, dx, Jx, Ju):
             Jx[i, k] = 0.0
         for k in range(Lu):
             Ju[i, k] = 0.0
-    Ca = x[0]
-    Cw = x[j]
-    lam = x[j + 1]
-    P, dP = _pressures(u, iopt)
-    ns = p[NO_SPEED]
-    h_w = p[H_W] * ns
-    r_dw = p[R_DW] * ns
-    s_w = p[S_W] * ns
-    k_tau = p[K_TAU] * ns
+    _, Ca, Cw, lam, P, dP, h_w, r_dw, s_w, k_tau = _inputs(p, x, u, iopt)
     kr = 0.5 * p[L0] * p[N_C] / _PI                             # dr/dlambda (eq l2r)
     r = _l2r(lam, p)
     c_q = _PI / (8.0 * p[MU_B] * p[L_VES])
@@ -528,10 +527,7 @@ def derivs_jac(p, x, u, t, iopt, dx, Jx, Ju):
         k3 = p[K3]
         k4 = p[K4]
         k7 = p[K7]
-        dx[j + 2] = -K1 * M + K2 * Mp + k7 * AM
-        dx[j + 3] = K1 * M - (K2 + k3) * Mp + k4 * AMp
-        dx[j + 4] = k3 * Mp - (k4 + K2) * AMp + K1 * AM
-        dx[j + 5] = K2 * AMp - (K1 + k7) * AM
+        _kinetics(K1, K2, M, Mp, AMp, AM, p, dx, j + 2)
         # linear in the kinetic states (eq 4state) ...
         Jx[j + 2, j + 2], Jx[j + 2, j + 3], Jx[j + 2, j + 5] = -K1, K2, k7
         Jx[j + 3, j + 2], Jx[j + 3, j + 3], Jx[j + 3, j + 4] = K1, -(K2 + k3), k4
