@@ -401,3 +401,20 @@ def test_op_does_not_import_numba():
     out = subprocess.run([sys.executable, "-c", code, os.path.join(NETLISTS, "payne06.yaml")],
                          capture_output=True, text=True, check=True).stdout
     assert out.strip().splitlines()[-1] == "False", out
+
+
+def test_compiled_system_is_kept_per_structure_and_type_setting(monkeypatch):
+    """Every batch integrate call asks for the compiled system: it is built once per structure
+    (new values, subsets and batches share it; only the parameter matrix differs) and follows
+    HEMOCIRCUIT_ENGINE_TYPES."""
+    from hemocircuit.kernels.system import CompiledSystem
+
+    monkeypatch.setenv("HEMOCIRCUIT_ENGINE_TYPES", "used")
+    c = hc.load(os.path.join(NETLISTS, "payne06.yaml"))
+    s = CompiledSystem.of(c)
+    bc = c.batch(3).with_values({"Pa.value": np.array([60.0, 80.0, 100.0])})
+    assert CompiledSystem.of(bc) is s and CompiledSystem.of(bc.subset([0, 2])) is s
+    np.testing.assert_array_equal(s.params(bc)[:, s.layout.slots[("Pa", "value")]], [60.0, 80.0, 100.0])
+    monkeypatch.setenv("HEMOCIRCUIT_ENGINE_TYPES", "all")
+    s_all = CompiledSystem.of(c)
+    assert s_all is not s and len(s_all.layout.kernels) > len(s.layout.kernels)

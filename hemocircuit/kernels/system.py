@@ -3,10 +3,12 @@ integrator, all in numba (see engine_template).  Python is entered once per call
 step: a 1000 s run is one call."""
 from __future__ import annotations
 
+import os
+
 import numpy as np
 
 from .codegen import engine_module
-from .layout import build_layout, param_matrix
+from .layout import ENGINE_TYPES_VAR, build_layout, param_matrix
 from . import tableaus
 
 STATUS = {0: "done", -1: "step size too small", -2: "step limit reached",
@@ -38,7 +40,8 @@ class CompiledSystem:
         asks for it, and building the layout costs ~1 ms."""
         ps = circuit.parameters
         waves = tuple(ps.group_waves(k) for k in range(len(circuit.groups)))
-        key = ("compiled_system",) + tuple(id(w) for w in waves)
+        # the engine's type set follows $HEMOCIRCUIT_ENGINE_TYPES (layout.engine_kernels)
+        key = ("compiled_system", os.environ.get(ENGINE_TYPES_VAR, "used")) + tuple(id(w) for w in waves)
         # the entry holds the waveform tuples themselves: an id is only compared while its object lives
         held, system = circuit.structure.cached(key, lambda: (waves, cls._build(circuit)))
         if any(a is not b for a, b in zip(held, waves)):  # pragma: no cover - ids reused: build anew
