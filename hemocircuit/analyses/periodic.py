@@ -220,10 +220,18 @@ def _periodic(args, c):
     """The orbit (converged or not) and the output that found its period."""
     from ..outputs import default_outputs, drive_of, input_element
 
+    if args.forced == "":
+        # without --output or declared outputs: the quantities the cycle criterion watches
+        # (an svZeroDSolver model's vessel caps), a pressure first
+        interest = default_outputs(c, "periodic", required=False)
+        orb = _forced_by_period(args, c, args.output)
+        watched = list(orb.metadata["measures"].get("cycle_quantities") or [])
+        interest = interest or sorted(watched, key=lambda k: not k.startswith("P("))
+        if args.output is None and not interest:
+            default_outputs(c, "periodic", required=True)  # the error naming the netlist
+        return orb, args.output or interest[0], interest
     interest = default_outputs(c, "periodic", required=args.output is None)
     output = args.output or interest[0]
-    if args.forced == "":
-        return _forced_by_period(args, c, output), output, interest
     if args.forced:
         src = input_element(c, args.forced)
         comp, drive = drive_of(c, src)
