@@ -93,9 +93,9 @@ def shoot(circuit, x_guess, T_guess, forced=False, rtol=1e-9, tol=1e-8, max_iter
     A Newton update that puts a state below its hard limit (a closed valve's flow below 0) is
     projected onto the limit: no state of the system lies below it, and from there the
     integration stops at t = 0 (before: "step size too small").  Without convergence the orbit
-    is the iterate of smallest residual, not the last one: where the flow map is noisy (hard-limit
-    events located on the step's interpolant, closedLoopHeart_singleVessel) Newton's iteration
-    wanders at the noise level and its last iterate may be far from its best."""
+    is the iterate of smallest residual, not the last one: where Newton's iteration wanders
+    (closedLoopHeart_singleVessel: residuals between 1e-4 and 1e-8, cause not found,
+    docs/svzerod.md "Limitations") its last iterate may be far from its best."""
     from ..progress import bar
     with bar(max_iter, "shooting", unit="iteration", progress=progress) as b:
         return _shoot(circuit, x_guess, T_guess, forced, rtol, tol, max_iter, rel_step, b)
