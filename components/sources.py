@@ -29,8 +29,8 @@ _DRIVE = Drive(value="value", amplitude="amplitude", frequency="frequency", phas
 
 def _sine_breakpoints(p, t0, t1):
     """Sine starts in (t0, t1) of the elements whose sine term is on (amplitude != 0)."""
-    start = np.asarray(p["start"], dtype=float)
-    amp = np.broadcast_to(p["amplitude"], start.shape)
+    # either may vary over a batch alone (a sweep of the amplitude with one start, or of the start)
+    start, amp = np.broadcast_arrays(np.asarray(p["start"], dtype=float), np.asarray(p["amplitude"], dtype=float))
     return sorted({float(s) for s, a in zip(start.reshape(-1), amp.reshape(-1)) if a != 0 and t0 < s < t1})
 
 

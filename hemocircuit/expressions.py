@@ -87,6 +87,15 @@ class Reference:
     unit: str
     kind: str  # 'param', 'observable' or 'constant'
     constant: float = 0.0  # SI value when kind == 'constant'
+    base_unit: str = ""  # its SI base unit (pint's spelling)
+
+    @property
+    def pint(self):
+        """A constant as a pint quantity in SI base units (the load-time dimension check).
+        Made when asked rather than stored: a stored pint quantity travels with every circuit
+        sent to a worker process, whose first unpickling then builds pint's application
+        registry (0.5-1.2 s per worker; measured on the vasomotion circuit)."""
+        return Q_(self.constant, self.base_unit)
 
 
 class Expression:
@@ -181,8 +190,7 @@ def constant_reference(name, raw, where) -> Reference:
     try:
         q = parse_with_unit(raw)
         base = q.to_base_units()
-        ref = Reference(None, name, str(q.units), "constant", float(base.magnitude))
+        ref = Reference(None, name, str(q.units), "constant", float(base.magnitude), str(base.units))
     except Exception as exc:
         raise NetlistError(f"parameter {name}: {exc}", **where) from None
-    ref.pint = base
     return ref

@@ -188,13 +188,35 @@ def read_yaml_file(path, what="netlist"):
     return data
 
 
+def read_json_file(path, what="netlist"):
+    """Parse a JSON file within the input size limit.  Not through YAML: PyYAML reads YAML 1.1,
+    where a JSON number such as 9.0219259e7 (no sign in the exponent) is a string."""
+    import json
+
+    if not os.path.exists(path):
+        raise NetlistError(f"{what} file not found: {path}")
+    if os.path.isdir(path):
+        raise NetlistError(f"{what} file {path} is a folder")
+    limits.check_file_size(path, what)
+    try:
+        with open(path, encoding="utf-8") as fh:
+            return json.load(fh)
+    except json.JSONDecodeError as exc:
+        raise NetlistError(f"not valid JSON: {exc}", file=path) from None
+    except (UnicodeDecodeError, OSError) as exc:
+        raise NetlistError(f"cannot read ({type(exc).__name__}): not a UTF-8 text file?", file=path) from None
+    except RecursionError:
+        raise NetlistError("the JSON is too deeply nested to read", file=path) from None
+
+
 def _read_yaml(path):
-    data = read_yaml_file(path)
     if str(path).lower().endswith(".json"):
+        data = read_json_file(path)
         from .svzerod.importer import is_svzerod_model, netlist_of
 
         if is_svzerod_model(data):  # an svZeroDSolver model: read through the importer
             return netlist_of(data, path)
+    data = read_yaml_file(path)  # a netlist (JSON is YAML; its ${name} references resolved)
     if not isinstance(data, dict):
         raise NetlistError("a netlist is a YAML mapping with at least 'elements' (or 'extends')", file=path)
     unknown = sorted(set(map(str, data)) - TOP_KEYS)

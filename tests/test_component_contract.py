@@ -262,6 +262,8 @@ def test_one_batched_parameter_broadcasts(name, netlist_samples):
             np.testing.assert_array_equal(np.broadcast_to(b1, (1, E, L))[0], b[-1], err_msg=where)
             np.testing.assert_array_equal(np.broadcast_to(comp.derivatives(last, xb[-1:], ub[-1:], 0.0, None),
                                                           (1, E, S))[0], dx[-1], err_msg=where)
+            # breakpoints of the batch: those of every member (here: of the last one's values)
+            assert set(comp.breakpoints(last, 0.0, 1e12)) <= set(comp.breakpoints(p, 0.0, 1e12)), where
 
 
 @pytest.mark.parametrize("name", [n for n in NAMES if TYPES[n].drive is not None and TYPES[n].drive.has_sine])

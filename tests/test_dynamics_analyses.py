@@ -299,6 +299,49 @@ def test_failing_member_recorded_others_complete_in_one_chunk(artc):
     _check_failure_rows(rows)
 
 
+def test_block_outputs_equal_member_by_member_outputs(artc):
+    """freq evaluates a block's outputs for all its members in one stacked call (member-major
+    rows, each member's parameters repeated): every column equals the member's own
+    evaluation, with members whose parameters and times differ."""
+    from hemocircuit.analyses.freq import _block_outputs, _member_columns
+
+    bc = artc.batch(3).with_values({"Pa.value": np.array([60.0, 80.0, 100.0]),
+                                    "Pa.amplitude": np.array([0.0, 8.0, 10.0]),
+                                    "Pa.frequency": np.array([0.1, 0.2, 0.5])})
+    X0 = np.asarray(operating_point(bc).x, float)
+    W = 5
+    T = np.array([np.linspace(0.0, 2.0, W), np.linspace(1.0, 3.0, W), np.linspace(0.3, 0.9, W)])
+    X = np.repeat(X0[:, None, :], W, axis=1) * (1.0 + 1e-3 * np.arange(W))[None, :, None]
+    js = [0, 2]  # a subset, as when member 1 failed
+    cols = _block_outputs(bc, js, T[js], X[js])
+    for i, j in enumerate(js):
+        own = _member_columns(bc, j, T[j], X[j])
+        assert set(own) == set(cols)
+        for name, v in own.items():
+            np.testing.assert_array_equal(cols[name][i], np.broadcast_to(v, (W,)), err_msg=name)
+    # the members differ (Pa 60 and 100 mmHg): a mix-up of their rows would show
+    assert np.all(cols[Q1][1] > 1.2 * cols[Q1][0])
+
+
+def test_freq_member_by_member_fallback_gives_the_same_rows(artc, monkeypatch):
+    """When a block's stacked output evaluation raises (some member's outputs cannot be
+    evaluated), each member is evaluated alone: the rows are those of the stacked path."""
+    import hemocircuit.analyses.freq as freq
+    from hemocircuit.errors import HemocircuitError
+
+    kw = dict(outputs=[Q1, Q2], grid=[("Pa.value", [70.0, 90.0])], rtol=1e-6, scheduler="serial")
+    stacked = frequency_response(artc, [0.05, 0.5], **kw)
+
+    def refuse(*a, **k):
+        raise HemocircuitError("not in one block")
+
+    monkeypatch.setattr(freq, "_block_outputs", refuse)
+    alone = frequency_response(artc, [0.05, 0.5], **kw)
+    for key in stacked.keys():
+        if key != "error":
+            np.testing.assert_array_equal(np.asarray(stacked[key]), np.asarray(alone[key]), err_msg=key)
+
+
 _WARMED = []
 
 

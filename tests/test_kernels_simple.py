@@ -561,6 +561,27 @@ def test_expression_after_pickling_and_concatenation():
                     == kx.eval_expr(code, c0[j], consts, k0[j], P, O)) or np.isnan(ref)
 
 
+def test_circuits_with_expression_constants_pickle_without_pint():
+    """A circuit sent to a worker process carries no pint object: the first pint quantity a
+    process unpickles builds pint's application registry (measured 1.56 s per worker for the
+    vasomotion circuit, whose inertia expression reads the constant rho_b).  The unpickled
+    circuit evaluates as the original, and the load-time dimension check still has the
+    constant as a quantity."""
+    import hemocircuit as hc
+
+    c = hc.load(ROOT / "netlists" / "vasomotion.yaml")
+    ref = constant_reference("rho_b", "1060 kg/m^3", WHERE)
+    assert ref.pint.to("g/cm^3").magnitude == pytest.approx(1.06, rel=1e-12)
+    blob = pickle.dumps(c.batch(2))
+    assert b"pint" not in blob
+    c2 = pickle.loads(blob)
+    from hemocircuit.analyses.op import operating_point
+    x = np.tile(np.asarray(operating_point(c).x, float) * 1.01, (2, 1))  # off the equilibrium
+    f = c.batch(2).rhs(0.0, x)
+    assert np.all(np.isfinite(f)) and np.any(f != 0)
+    np.testing.assert_array_equal(c2.rhs(0.0, x), f)
+
+
 def test_expression_stack_limit():
     deep = "= " + "(a.n + " * kx.MAX_STACK + "a.n" + ")" * kx.MAX_STACK
     with pytest.raises(kx.ExpressionTooDeep, match="stack"):

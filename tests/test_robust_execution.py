@@ -316,6 +316,11 @@ def test_sigterm_during_a_long_tran_writes_the_partial_series(tmp_path):
     the series computed so far to run.partial.csv and exits 143."""
     (tmp_path / "rc.yaml").write_text(RC)
     out = tmp_path / "run.csv"
+    # the compiled engine first (with empty caches its build takes about a minute, longer than
+    # the wait below): a short run of the same netlist compiles it, or finds it built
+    warm = _cli(["tran", "rc.yaml", "--t-end", "0.001", "--compile", "wait"], tmp_path)
+    _, err = warm.communicate(timeout=600)
+    assert warm.returncode == 0, err
     p = _cli(["tran", "rc.yaml", "--set", "Ps.amplitude=10mmHg", "--set", "Ps.frequency=2000Hz",
               "--t-end", "1000", "--dt", "0.5", "--out", str(out)], tmp_path)
     time.sleep(8.0)  # start-up (imports, the compiled engine from its cache) and a few pieces

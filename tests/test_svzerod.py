@@ -304,6 +304,19 @@ def test_commands_read_their_json(tmp_path, capsys):
     assert "P(INFLOW__branch0_seg0)" in capsys.readouterr().out
 
 
+@have_cases
+def test_their_json_numbers_are_numbers_when_loaded_as_a_netlist():
+    """A .json model is read as JSON: YAML 1.1 (PyYAML) would take 9.0219259e7 (no sign in
+    the exponent, closed_loop_two_hill's R_poiseuille of AR_SYS) for a string, and the
+    importer refused the file.  Loaded as a netlist it is the importer's circuit."""
+    from hemocircuit.circuit import load
+
+    path = os.path.join(SHARED, "cases", "closed_loop_two_hill.json")
+    a = load(path)
+    b = load_svzerod(path, units="SI")  # their Regazzoni model is in SI
+    assert a.parameters.values["AR_SYS.R_poiseuille"][0] == b.parameters.values["AR_SYS.R_poiseuille"][0] > 0
+
+
 def test_their_rows_beyond_our_run_are_a_failed_case_not_a_crash(tmp_path):
     """Their result may hold more cycles than the case asks for (their cycle-to-cycle
     criterion adds some): the runner reports the case as failed with the reason instead of

@@ -317,3 +317,249 @@ def observables(ca_order: int) -> tuple:
     """Names written by ``observe`` for this ca_order (the state-only observables of the element)."""
     names = ("r", "lambda", "Ca") + (("dCa",) if ca_order == 2 else ()) + ("Cw", "R", "V", "Cb_inf", "k_NO")
     return names
+
+
+# --- analytic partial derivatives (the engine's element-local Jacobian) -------------------
+@_jit
+def _sigmoid_5_95_d(x, x_L, x_U, y_L, y_U):
+    """(y, dy/dx) of _sigmoid_5_95 (same operations for y)."""
+    z_half = 0.5 * (x_L + x_U)
+    k_z = (x_L - x_U) / (2.0 * LN_95)
+    s = 1.0 / (1.0 + math.exp(-((x - z_half) / k_z)))
+    return y_L + (y_U - y_L) * s, (y_U - y_L) * s * (1.0 - s) / k_z
+
+
+@_jit
+def _rates_d(Ca, Cw, p):
+    """(K1, K2, dK1/dCa, dK2/dCa, dK2/dCw) of _rates (not passive)."""
+    y, dy = _sigmoid_5_95_d(Cw, p[NO_L], p[NO_U], p[PCGMP_L], p[PCGMP_U])
+    cG = math.exp(LN10 * y)
+    dcG = cG * LN10 * dy
+    floor = Ca < CA_FLOOR
+    Cac = CA_FLOOR if floor else Ca
+    z1 = (p[K_CA1] / Cac) ** p[N_CA1]
+    K1 = 1.0 / (1.0 + z1)
+    z2 = (Cac / p[K_CA2]) ** p[N_CA2]
+    ci = 1.0 / (1.0 + z2)
+    dK1 = 0.0 if floor else K1 * K1 * p[N_CA1] * z1 / Cac
+    dci = 0.0 if floor else -ci * ci * p[N_CA2] * z2 / Cac
+    cg = 0.0 if cG < 0.0 else cG
+    z3 = (p[K_CGMP] / cg) ** p[N_CGMP]
+    act = 1.0 / (1.0 + z3)
+    dact = act * act * p[N_CGMP] * z3 / cg if cg > 0.0 else 0.0
+    return K1, 0.55 + 2.0 * act * ci, dK1, 2.0 * act * dci, 2.0 * ci * dact * dcG
+
+
+@_jit
+def _quasi_steady_d(a, b, p):
+    """(AMp, AM, dAMp/da, dAMp/db, dAM/da, dAM/db) of _quasi_steady (fractions N_i / s)."""
+    k3 = p[K3]
+    k4 = p[K4]
+    k7 = p[K7]
+    M = b * (a * k4 + k3 * k7 + b * k7 + k4 * k7)
+    Mp = a * (a * k4 + b * k7 + k4 * k7)
+    AMp = a * k3 * (a + k7)
+    AM = a * b * k3
+    s = M + Mp + AMp + AM
+    dM_a, dM_b = b * k4, a * k4 + k3 * k7 + 2.0 * b * k7 + k4 * k7
+    dMp_a, dMp_b = 2.0 * a * k4 + b * k7 + k4 * k7, a * k7
+    dAMp_a, dAMp_b = k3 * (2.0 * a + k7), 0.0
+    dAM_a, dAM_b = b * k3, a * k3
+    ds_a = dM_a + dMp_a + dAMp_a + dAM_a
+    ds_b = dM_b + dMp_b + dAMp_b + dAM_b
+    fAMp, fAM = AMp / s, AM / s
+    return (fAMp, fAM, (dAMp_a - fAMp * ds_a) / s, (dAMp_b - fAMp * ds_b) / s,
+            (dAM_a - fAM * ds_a) / s, (dAM_b - fAM * ds_b) / s)
+
+
+@_jit
+def derivs_jac(p, x, u, t, iopt, dx, Jx, Ju):
+    """dx/dt as ``derivs`` and its partial derivatives, Jx[i, k] = d dx_i / d x_k (S, S) and
+    Ju[i, k] = d dx_i / d u_k (S, L, u in mmHg), by the chain rule through the same equations
+    (eqs l2r, Poiseuille, NOcGMP, phos, dephos, 4stateSS / 4state, ssCa, FaNew, passiveNew,
+    dNOdt, dCadt / dCadt2).  Returns 1, or 0 for a passive arteriole (the engine then
+    differences ``derivs``).  At the clips (Ca at CA_FLOOR, the passive-force exponent cap,
+    Q = 0) it gives the one-sided derivative of the branch taken."""
+    ca_order = iopt[OPT_CA_ORDER]
+    dynamic = iopt[OPT_DYNAMIC] != 0
+    if iopt[OPT_PASSIVE] != 0:
+        return 0
+    S = 8 if dynamic else 4
+    if ca_order != 2:
+        S -= 1
+    j = 2 if ca_order == 2 else 1
+    Lu = 4 if iopt[OPT_VOLUME_FLOW] != 0 else 3
+    for i in range(S):
+        for k in range(S):
+            Jx[i, k] = 0.0
+        for k in range(Lu):
+            Ju[i, k] = 0.0
+    Ca = x[0]
+    Cw = x[j]
+    lam = x[j + 1]
+    P, dP = _pressures(u, iopt)
+    ns = p[NO_SPEED]
+    h_w = p[H_W] * ns
+    r_dw = p[R_DW] * ns
+    s_w = p[S_W] * ns
+    k_tau = p[K_TAU] * ns
+    kr = 0.5 * p[L0] * p[N_C] / _PI                             # dr/dlambda (eq l2r)
+    r = _l2r(lam, p)
+    c_q = _PI / (8.0 * p[MU_B] * p[L_VES])
+    Q = _PI * r ** 4.0 * dP / (8.0 * p[MU_B] * p[L_VES])
+    dQ_r = 4.0 * c_q * r ** 3.0 * dP
+    dQ_dP = c_q * r ** 4.0
+    tau = (abs(dP) / p[DP0]) * (r / p[R0])
+    dtau_r = (abs(dP) / p[DP0]) / p[R0]
+    sgn_dP = 1.0 if dP > 0.0 else (-1.0 if dP < 0.0 else 0.0)
+    dtau_dP = sgn_dP / p[DP0] * (r / p[R0])
+
+    K1, K2, dK1_Ca, dK2_Ca, dK2_Cw = _rates_d(Ca, Cw, p)
+    if dynamic:
+        M = x[j + 2]
+        Mp = x[j + 3]
+        AMp = x[j + 4]
+        AM = x[j + 5]
+        # d(AMp, AM)/d(Ca, Cw) = 0: they are states
+        dAMp_Ca = dAMp_Cw = dAM_Ca = dAM_Cw = 0.0
+    else:
+        AMp, AM, dAMp_a, dAMp_b, dAM_a, dAM_b = _quasi_steady_d(K1, K2, p)
+        dAMp_Ca = dAMp_a * dK1_Ca + dAMp_b * dK2_Ca
+        dAMp_Cw = dAMp_b * dK2_Cw
+        dAM_Ca = dAM_a * dK1_Ca + dAM_b * dK2_Ca
+        dAM_Cw = dAM_b * dK2_Cw
+
+    # Ca_bar(sigma), sigma = P r / t_w
+    sigma = P * r / p[T_W]
+    ys, dys = _sigmoid_5_95_d(sigma, p[SIGMA_L], p[SIGMA_U], p[PCA_L], p[PCA_U])
+    Cab = math.exp(LN10 * ys)
+    dCab_sigma = Cab * LN10 * dys
+    dCab_lam = dCab_sigma * P / p[T_W] * kr
+    dCab_P = dCab_sigma * r / p[T_W]
+
+    # lambda_dot = N / D (eq FaNew with eqs FT, FMFP, passiveNew); a + b P as _dlam_affine
+    d = lam - p[LAMBDA_OPT]
+    G = math.exp(-d * d / (2.0 * p[ETA]))
+    dG = -G * d / p[ETA]
+    lm = 0.0 if lam < 0.0 else lam
+    z = p[Q2] * (lm ** p[Q3] - 1.0)
+    capped = z > _MAX_EXP
+    z = _MAX_EXP if capped else z
+    Fp = p[Q1] * math.expm1(z)
+    dFp = 0.0 if (capped or lam <= 0.0) else p[Q1] * math.exp(z) * p[Q2] * p[Q3] * lm ** (p[Q3] - 1.0)
+    f1v = p[F1] * p[V_XB]
+    Fa = f1v * AMp * G
+    D = p[L0] * (G * (p[F1] * AMp + p[F2] * AM) + FRICTION_FLOOR)
+    a_l = -(Fp + Fa) / D
+    b_l = p[W_C] * r / D
+    lam_dot = a_l + b_l * P
+    dN_lam = -(dFp + f1v * AMp * dG) + p[W_C] * kr * P
+    dD_lam = p[L0] * dG * (p[F1] * AMp + p[F2] * AM)
+    dN_AMp = -f1v * G
+    dD_AMp = p[L0] * G * p[F1]
+    dD_AM = p[L0] * G * p[F2]
+    dld_lam = (dN_lam - lam_dot * dD_lam) / D
+    dld_AMp = (dN_AMp - lam_dot * dD_AMp) / D
+    dld_AM = -lam_dot * dD_AM / D
+    dld_P = b_l
+
+    # eq dNOdt with eqs cbbar, cbbarpsi, psi
+    Aw = _PI * ((p[R0] + p[T_W]) ** 2.0 - p[R0] ** 2.0)
+    kk = h_w + p[R_DB] * (_PI * r * r)
+    dkk_r = p[R_DB] * 2.0 * _PI * r
+    aq = abs(Q)
+    sgn_Q = 1.0 if Q > 0.0 else (-1.0 if Q < 0.0 else 0.0)
+    if aq > 0.0:
+        xt = kk * p[L_VES] / aq
+        dxt_r = dkk_r * p[L_VES] / aq
+        dxt_aq = -xt / aq
+    else:
+        xt = _INF
+        dxt_r = 0.0
+        dxt_aq = 0.0
+    if xt < _PSI_SERIES_X:
+        psi = xt * (1 / 2 - xt * (1 / 6 - xt * (1 / 24 - xt * (1 / 120 - xt / 720))))
+        dpsi = 1 / 2 - xt * (1 / 3 - xt * (1 / 8 - xt * (1 / 30 - xt / 144)))
+    elif xt < _INF:
+        em = -math.expm1(-xt)
+        psi = 1.0 - em / xt
+        dpsi = em / (xt * xt) - math.exp(-xt) / xt
+    else:
+        psi = 1.0
+        dpsi = 0.0
+    cbi = _cb_inf(Cw, r, h_w, p)
+    dcbi_Cw = h_w / p[GAMMA_WB] / kk
+    dcbi_r = -cbi / kk * dkk_r
+    cbm = (cbi - p[C_IN]) * psi + p[C_IN]
+    dcbm_Cw = dcbi_Cw * psi
+    dcbm_r = dcbi_r * psi + (cbi - p[C_IN]) * dpsi * (dxt_r + dxt_aq * sgn_Q * dQ_r)
+    dcbm_dP = (cbi - p[C_IN]) * dpsi * dxt_aq * sgn_Q * dQ_dP
+    dCw = (-(h_w / Aw) * (Cw / p[GAMMA_WB] - cbm) - r_dw * Cw + s_w + k_tau * tau / Aw)
+    dCwd_Cw = -(h_w / Aw) * (1.0 / p[GAMMA_WB] - dcbm_Cw) - r_dw
+    dCwd_lam = ((h_w / Aw) * dcbm_r + k_tau * dtau_r / Aw) * kr
+    dCwd_dP = (h_w / Aw) * dcbm_dP + k_tau * dtau_dP / Aw
+
+    cl = j + 1  # column of lambda
+    if ca_order == 2:
+        dCa = x[1]
+        w = p[OMEGA_N]
+        dx[0] = dCa
+        dx[1] = w * w * (Cab - Ca) - 2.0 * p[ZETA] * w * dCa
+        Jx[0, 1] = 1.0
+        Jx[1, 0] = -w * w
+        Jx[1, 1] = -2.0 * p[ZETA] * w
+        Jx[1, cl] = w * w * dCab_lam
+        ca_P = w * w * dCab_P
+        ca_row = 1
+    else:
+        dx[0] = (Cab - Ca) / p[TAU_CA]
+        Jx[0, 0] = -1.0 / p[TAU_CA]
+        Jx[0, cl] = dCab_lam / p[TAU_CA]
+        ca_P = dCab_P / p[TAU_CA]
+        ca_row = 0
+    dx[j] = dCw
+    Jx[j, j] = dCwd_Cw
+    Jx[j, cl] = dCwd_lam
+    dx[cl] = lam_dot
+    Jx[cl, cl] = dld_lam
+    if dynamic:
+        Jx[cl, j + 4] = dld_AMp
+        Jx[cl, j + 5] = dld_AM
+        k3 = p[K3]
+        k4 = p[K4]
+        k7 = p[K7]
+        dx[j + 2] = -K1 * M + K2 * Mp + k7 * AM
+        dx[j + 3] = K1 * M - (K2 + k3) * Mp + k4 * AMp
+        dx[j + 4] = k3 * Mp - (k4 + K2) * AMp + K1 * AM
+        dx[j + 5] = K2 * AMp - (K1 + k7) * AM
+        # linear in the kinetic states (eq 4state) ...
+        Jx[j + 2, j + 2], Jx[j + 2, j + 3], Jx[j + 2, j + 5] = -K1, K2, k7
+        Jx[j + 3, j + 2], Jx[j + 3, j + 3], Jx[j + 3, j + 4] = K1, -(K2 + k3), k4
+        Jx[j + 4, j + 3], Jx[j + 4, j + 4], Jx[j + 4, j + 5] = k3, -(k4 + K2), K1
+        Jx[j + 5, j + 4], Jx[j + 5, j + 5] = K2, -(K1 + k7)
+        # ... with rate constants K1(Ca), K2(Ca, Cw)
+        Jx[j + 2, 0] = -M * dK1_Ca + Mp * dK2_Ca
+        Jx[j + 3, 0] = M * dK1_Ca - Mp * dK2_Ca
+        Jx[j + 4, 0] = -AMp * dK2_Ca + AM * dK1_Ca
+        Jx[j + 5, 0] = AMp * dK2_Ca - AM * dK1_Ca
+        Jx[j + 2, j] = Mp * dK2_Cw
+        Jx[j + 3, j] = -Mp * dK2_Cw
+        Jx[j + 4, j] = -AMp * dK2_Cw
+        Jx[j + 5, j] = AMp * dK2_Cw
+    else:
+        Jx[cl, 0] = dld_AMp * dAMp_Ca + dld_AM * dAM_Ca
+        Jx[cl, j] = dld_AMp * dAMp_Cw + dld_AM * dAM_Cw
+    # local unknowns (mmHg): P = (u0 + u1)/2 [- u2], dP = u0 - u1, both in Pa (eqs Pab2Pim, Pab2DP)
+    pim_ref = iopt[OPT_PIM_REF] != 0
+    for row in range(3):
+        if row == 0:
+            i, gP, gD = ca_row, ca_P, 0.0
+        elif row == 1:
+            i, gP, gD = j, 0.0, dCwd_dP
+        else:
+            i, gP, gD = cl, dld_P, 0.0
+        Ju[i, 0] = PA_PER_MMHG * (0.5 * gP + gD)
+        Ju[i, 1] = PA_PER_MMHG * (0.5 * gP - gD)
+        if pim_ref:
+            Ju[i, 2] = -PA_PER_MMHG * gP
+    return 1

@@ -210,7 +210,8 @@ class Arteriole(Component):
 
         from . import compiled
         return Kernel(stamp=compiled.stamp, derivs=compiled.derivs, observe=compiled.observe,
-                      observables=tuple(o.name for o in self.observables() if o.state_only))
+                      observables=tuple(o.name for o in self.observables() if o.state_only),
+                      derivs_jac=compiled.derivs_jac)
 
     def kernel_options(self):
         """[ca_order (1|2), kinetics dynamic (0|1), passive (0|1), volume_flow (0|1),

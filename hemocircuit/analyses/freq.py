@@ -50,10 +50,21 @@ def _dft(y, n_per, k):
     return 2.0 / n * np.sum(y * ph, axis=-1)
 
 
-def _member_outputs(bc, k, t, X, outputs, inp_col):
-    m = bc.subset([k])  # a view of member k (member() deep-copies the circuit: ~10 ms a call)
-    cols = m.outputs(t, X)
-    return np.array([cols[o] for o in outputs]), cols[inp_col], cols
+def _block_outputs(sub, js, T, X):
+    """Output columns of members ``js`` of the batch ``sub`` over their rows T (k, W) and
+    states X (k, W, nx), in one stacked evaluation (member-major rows: Circuit.outputs repeats
+    each member's parameters W times): {column: (k, W)}.  One call per block instead of one
+    per member saves the ~1 ms fixed cost of an evaluation per member and block.  Raises what
+    Circuit.outputs raises (the caller then evaluates member by member to say which failed)."""
+    k, W = T.shape
+    m = sub.subset(js)  # a view (member() deep-copies the circuit: ~10 ms a call)
+    cols = m.outputs(T.reshape(-1), X.reshape(k * W, -1))
+    return {name: np.broadcast_to(v, (k * W,)).reshape(k, W) for name, v in cols.items()}
+
+
+def _member_columns(sub, j, t, X):
+    """Output columns of member j alone: {column: (W,)}."""
+    return sub.subset([j]).outputs(t, X)
 
 
 def _run_chunk(job):
@@ -108,6 +119,15 @@ def _run_chunk_members(job):
         grid = t[idx, None] + period[idx, None] * np.arange(n_pts + 1)[None, :] / SAMPLES
         # at most 1/32 period per step: the forcing and the output grid stay resolved
         r = integrate(sub, x[idx], grid, rtol=opt["rtol"], atol=opt["rtol"], h_max=period[idx] / 32, method=METHOD)
+        js = [j for j in range(idx.size) if r.ok[j]]
+        pos = {j: i for i, j in enumerate(js)}
+        block_cols, block_findings = None, []
+        if js:
+            try:
+                block_cols = _block_outputs(sub, js, grid[js][:, win], r.x[js][:, win])
+                block_findings = plausibility.check(bc, {n: v.reshape(-1) for n, v in block_cols.items()})
+            except HemocircuitError:  # some member's outputs cannot be evaluated: each on its own below
+                block_cols = None
         for j, m in enumerate(idx):
             if not r.ok[j]:
                 failed[m] = True
@@ -115,14 +135,19 @@ def _run_chunk_members(job):
                 advance()
                 continue
             tt = grid[j]
-            try:
-                Y, X_in, cols = _member_outputs(sub, j, tt[win], r.x[j][win], outputs, inp_node_col)
-            except HemocircuitError as exc:  # this member only
-                failed[m] = True
-                res[m] = {"error": str(exc)}
-                advance()
-                continue
-            findings = plausibility.check(bc, cols)
+            if block_cols is not None:
+                cols = {n: v[pos[j]] for n, v in block_cols.items()}
+            else:
+                try:
+                    cols = _member_columns(sub, j, tt[win], r.x[j][win])
+                except HemocircuitError as exc:  # this member only
+                    failed[m] = True
+                    res[m] = {"error": str(exc)}
+                    advance()
+                    continue
+            Y, X_in = np.array([cols[o] for o in outputs]), cols[inp_node_col]
+            # the block's findings, when there are any, are this member's own
+            findings = plausibility.check(bc, cols) if block_cols is None or block_findings else []
             if plausibility.errors(findings):
                 failed[m] = True
                 res[m] = {"error": "; ".join(map(str, plausibility.errors(findings)))}

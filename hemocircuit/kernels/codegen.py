@@ -57,6 +57,9 @@ def _header(kernels) -> str:
         for role in ("stamp", "derivs", "observe"):
             mod, name = _ref(getattr(ker, role))
             lines.append(f"from {mod} import {name} as _{role}{k}")
+        if ker.derivs_jac is not None:
+            mod, name = _ref(ker.derivs_jac)
+            lines.append(f"from {mod} import {name} as _derivs_jac{k}")
     lines += ["", "", "def njit(internal=False, **kw):",
               "    # numpy error model: a division by zero gives inf/nan, never raises.  internal: called",
               "    # only from compiled code, so numba builds no Python or C entry wrapper for it",
@@ -73,12 +76,21 @@ def _header(kernels) -> str:
             lines.append(f"        _{role}{k}({args})")
         if not kernels:
             lines.append("    pass")
+    # analytic partials where a type has them (1), else 0: the engine differences derivs
+    args = "p, x, u, t, iopt, dx, Jx, Ju"
+    lines += ["", "@njit(cache=True, nogil=True, internal=True)", f"def elem_derivs_jac(k, {args}):"]
+    for k, ker in enumerate(kernels):
+        if ker.derivs_jac is not None:
+            lines.append(f"    if k == {k}:")
+            lines.append(f"        return _derivs_jac{k}({args})")
+    lines.append("    return 0")
     return "\n".join(lines) + "\n\n\n"
 
 
 def kernel_names(kernel) -> list[str]:
-    """'module:qualname' of a Kernel's three functions."""
-    return [":".join(_ref(getattr(kernel, role))) for role in ("stamp", "derivs", "observe")]
+    """'module:qualname' of a Kernel's functions (three, and derivs_jac when it has one)."""
+    roles = ("stamp", "derivs", "observe") + (("derivs_jac",) if kernel.derivs_jac is not None else ())
+    return [":".join(_ref(getattr(kernel, role))) for role in roles]
 
 
 def _fingerprint(kernels) -> tuple[str, str]:
@@ -122,7 +134,7 @@ _keys: dict = {}
 
 def engine_module(kernels):
     """The compiled engine module for these Kernel objects (ordered: index = type code)."""
-    ident = tuple(id(f) for k in kernels for f in (k.stamp, k.derivs, k.observe))
+    ident = tuple(id(f) for k in kernels for f in (k.stamp, k.derivs, k.observe, k.derivs_jac))
     key = _keys.get(ident)
     if key is None:  # hashing the sources costs ~0.6 ms: once per process and kernel list
         key = _keys[ident] = _fingerprint(kernels)

@@ -352,7 +352,9 @@ def make_jac_work(lay):
     5 dD/du (nx, n+1), 6 one column dR/dx_j, 7 base derivatives, 8 stored local matrices
     (at the eu offsets, Lm columns), 9 stored local right-hand sides, 10 1 if the element has
     an expression parameter, 11 1 if expressions read the element's observables (both depend
-    on the layout only)."""
+    on the layout only), 12 1 if the element's partials came from its kernel's derivs_jac at
+    this call, 13 those partials d dx/d x_own (at the ex offsets, Sm columns), 14-15 scratch
+    (Sm, Sm) and (Sm, Lm) for one element's Jx, Ju."""
     (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st) = lay
     Lm = 1
     for e in range(et.shape[0]):
@@ -367,13 +369,17 @@ def make_jac_work(lay):
     if xs.shape[0] > 0:
         for k in range(oe.shape[0]):
             observed[oe[k]] = 1
+    Sm = 1
+    for e in range(et.shape[0]):
+        Sm = max(Sm, S[e])
     return (np.zeros(max(ep[-1], 1)), np.zeros((n + 1, n + 1)), np.zeros(n + 1, dtype=np.int64), np.zeros(n + 1),
             np.zeros(nu), np.zeros((max(nx, 1), n + 1)), np.zeros(n + 1), np.zeros(max(nx, 1)),
-            np.zeros((nu, Lm)), np.zeros(nu), hasx, observed)
+            np.zeros((nu, Lm)), np.zeros(nu), hasx, observed, np.zeros(et.shape[0], dtype=np.int64),
+            np.zeros((max(nx, 1), Sm)), np.zeros((Sm, Sm)), np.zeros((Sm, Lm)))
 
 
 @njit(cache=True, nogil=True, _nrt=False)
-def local_jacobian_into(t, x, P, lay, work, jw, scales, J, xt):
+def local_jacobian_into(t, x, P, lay, work, jw, scales, J, xt, analytic):
     """State Jacobian J (nx, nx) at (t, x) from element-local differences composed through the
     nodal solve (as svZeroDSolver composes its blocks' derivatives), without a whole
     right-hand side per column.  With f = D(x, u), R(x, u) = A(x) u - b(x) = 0 the nodal
@@ -381,13 +387,15 @@ def local_jacobian_into(t, x, P, lay, work, jw, scales, J, xt):
     gives its columns of dR/dx, dD/dx (its own states; the elements with expression parameters
     also those of the states their expressions read) and dD/du (its local unknowns) by forward
     differences of its own stamp and derivs, same step rule as jacobian_into (FD_REL; FD_REL
-    max(|u|, 1) for an unknown in mmHg or mL/s).
+    max(|u|, 1) for an unknown in mmHg or mL/s) -- or, with ``analytic``, dD/dx of its own
+    states and dD/du from its kernel's derivs_jac where it has one (and no expression moves
+    its parameters with the states): one call instead of one derivs per state and unknown.
     Returns 0, or -1 when it does not apply (an element nonlinear in the pressures, a singular
     nodal matrix): the caller then differences whole right-hand sides."""
     (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st) = lay
     if nonlin != 0:
         return -1
-    Pb, A, piv, ub, rb, M, col, Db, Ab, bb, hasx, obs = jw
+    Pb, A, piv, ub, rb, M, col, Db, Ab, bb, hasx, obs, an, Jxs, Jxl, Jul = jw
     u, Al, bl, ul, pl, xl, il, dl, A0, b0 = (work[4], work[5], work[6], work[7], work[9], work[10], work[11],
                                              work[12], work[14], work[15])
     E = et.shape[0]
@@ -427,11 +435,27 @@ def local_jacobian_into(t, x, P, lay, work, jw, scales, J, xt):
             for k in range(L[e]):
                 acc += Ab[eu[e] + i, k] * ub[ui[eu[e] + k]]
             rb[eu[e] + i] = acc
+        an[e] = 0
         if S[e] == 0:
             continue
         for i in range(L[e]):
             ul[i] = ub[ui[eu[e] + i]]
         load_element(e, x, Pb, ep, ex, eo, io, pl, xl, il)
+        # the kernel's own partials where it has them (and no expression moves its parameters
+        # with the states): one evaluation instead of one per state and local unknown
+        if analytic and hasx[e] == 0 and elem_derivs_jac(et[e], pl, xl, ul, t, il, dl, Jxl, Jul) == 1:
+            an[e] = 1
+            for i in range(S[e]):
+                Db[ex[e] + i] = dl[i]
+                for k in range(S[e]):
+                    Jxs[ex[e] + i, k] = Jxl[i, k]
+            for k in range(L[e]):
+                g = ui[eu[e] + k]
+                if g >= n:
+                    continue
+                for i in range(S[e]):
+                    M[ex[e] + i, g] += Jul[i, k]
+            continue
         elem_derivs(et[e], pl, xl, ul, t, il, dl)
         for i in range(S[e]):
             Db[ex[e] + i] = dl[i]
@@ -472,7 +496,10 @@ def local_jacobian_into(t, x, P, lay, work, jw, scales, J, xt):
                         for k in range(L[e]):
                             acc += Al[i, k] * ub[ui[eu[e] + k]]
                         col[r] += (acc - rb[eu[e] + i]) / hj
-                if S[e] > 0:
+                if S[e] > 0 and e == e0 and an[e] == 1:  # its own state: the kernel's partials
+                    for i in range(S[e]):
+                        J[ex[e] + i, j] += Jxs[ex[e] + i, j - ex[e0]]
+                elif S[e] > 0:
                     for i in range(L[e]):
                         ul[i] = ub[ui[eu[e] + i]]
                     load_element(e, xt, Pt, ep, ex, eo, io, pl, xl, il)
@@ -494,14 +521,15 @@ def local_jacobian_into(t, x, P, lay, work, jw, scales, J, xt):
 @njit(cache=True, nogil=True, inline="always")
 def jacobian_into(t, x, f0, P, lay, work, jw, scales, J, ft, xt, ftmp, autonomous, local):
     """Jacobian J (nx, nx) and df/dt ft (nx,) at (t, x) with f0 = f(t, x): element-local
-    (local_jacobian_into) when ``local`` and it applies, otherwise forward differences of
+    (local_jacobian_into; ``local`` 1: with the kernels' analytic partials where they have
+    them, 2: differences only) when ``local`` and it applies, otherwise forward differences of
     whole right-hand sides; ft by a forward difference in t (ft = 0 without an evaluation
     when the circuit is autonomous).
     Returns the number of right-hand-side evaluations, or -1 if one failed (singular nodal
     system)."""
     nx = x.shape[0]
     nev = 0
-    if not local or local_jacobian_into(t, x, P, lay, work, jw, scales, J, xt) < 0:
+    if local == 0 or local_jacobian_into(t, x, P, lay, work, jw, scales, J, xt, local == 1) < 0:
         for i in range(nx):
             xt[i] = x[i]
         for j in range(nx):
@@ -527,7 +555,8 @@ def jacobian_into(t, x, f0, P, lay, work, jw, scales, J, ft, xt, ftmp, autonomou
 @njit(cache=True, nogil=True)
 def jacobian(t, x, P, lay, scales, local):
     """State Jacobian (nx, nx) at (t, x) (allocating; for tests and single calls): element-local
-    if ``local`` (and it applies), else whole right-hand sides differenced."""
+    if ``local`` (1: with the kernels' analytic partials, 2: differences only; where it
+    applies), else (0) whole right-hand sides differenced."""
     nx = x.shape[0]
     work = make_work(lay)
     jw = make_jac_work(lay)
@@ -649,7 +678,7 @@ def integrate(t_out, x0, P, lay, scales, lim_i, lim_b, lim_r, breaks, bjump, rto
     ev_restart = tab[4] != 0.0
     soft_kinks = tab[5] != 0.0
     autonomous = tab[6] != 0.0  # no waveform or time-dependent element: df/dt = 0
-    local_jac = tab[7] != 0.0  # element-local Jacobian (local_jacobian_into) where it applies
+    local_jac = int(tab[7])  # element-local Jacobian (local_jacobian_into) where it applies: 1 analytic parts, 2 FD
     oA = 8  # offsets of A, G (ns x ns, row major), b, e, c, d, reuse (ns) in tab
     oG = oA + ns * ns
     oB = oG + ns * ns
@@ -789,6 +818,8 @@ def integrate(t_out, x0, P, lay, scales, lim_i, lim_b, lim_r, breaks, bjump, rto
             en = max(enorm, 1e-10)
             fac = 0.9 * en ** (-0.7 / q) * err_prev ** (0.4 / q)
             fac = min(5.0, max(0.2, fac))
+            if nrej_run > 0:  # just after a rejection: no growth (Hairer & Wanner's facmax = 1)
+                fac = min(fac, 1.0)
             err_prev = max(en, 1e-4)
             tn = tb if at_break else t + hh
             nfev += 1

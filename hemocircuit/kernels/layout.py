@@ -170,7 +170,16 @@ def param_matrix(circuit, layout: Layout) -> np.ndarray:
     P = np.zeros((circuit.B, layout.n_params))
     for g in circuit.groups:
         for name, arr in g.p.items():
-            a = np.broadcast_to(arr, (circuit.B, g.E))
-            for i, eid in enumerate(g.ids):
-                P[:, layout.slots[(eid, name)]] = a[:, i]
+            P[:, _columns(layout, g.ids, name)] = arr  # (1 or B, E) into the group's E columns
     return np.nan_to_num(P, nan=0.0)  # expression slots are filled at run time
+
+
+def _columns(layout: Layout, ids, name) -> np.ndarray:
+    """Columns of P of parameter ``name`` of elements ``ids`` (kept on the layout: a batch
+    integration asks for the matrix at every call, ~60 columns for the vasomotion circuit)."""
+    cache = layout.__dict__.setdefault("_columns", {})
+    key = (tuple(ids), name)
+    cols = cache.get(key)
+    if cols is None:
+        cols = cache[key] = np.array([layout.slots[(eid, name)] for eid in ids], dtype=np.int64)
+    return cols

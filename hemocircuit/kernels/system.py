@@ -32,6 +32,21 @@ class CompiledSystem:
 
     @classmethod
     def of(cls, circuit) -> "CompiledSystem | None":
+        """The compiled system of ``circuit``'s structure and waveforms (its values are the
+        parameter matrix, :meth:`params`).  Kept per structure for the waveforms it was built
+        with: every integrate call of a batch (each block of a frequency response, each chunk)
+        asks for it, and building the layout costs ~1 ms."""
+        ps = circuit.parameters
+        waves = tuple(ps.group_waves(k) for k in range(len(circuit.groups)))
+        key = ("compiled_system",) + tuple(id(w) for w in waves)
+        # the entry holds the waveform tuples themselves: an id is only compared while its object lives
+        held, system = circuit.structure.cached(key, lambda: (waves, cls._build(circuit)))
+        if any(a is not b for a, b in zip(held, waves)):  # pragma: no cover - ids reused: build anew
+            return cls._build(circuit)
+        return system
+
+    @classmethod
+    def _build(cls, circuit) -> "CompiledSystem | None":
         layout = build_layout(circuit)
         if layout is None:
             return None
@@ -51,10 +66,11 @@ class CompiledSystem:
 
     def jacobian(self, t, x, P, local=True):
         """State Jacobian d(dx/dt)/dx (nx, nx) at (t, x) for one parameter row P (slots,):
-        element-local differences composed through the nodal solve (``local``, where they
-        apply) or one whole right-hand side per state -- the integrator's two ways."""
+        element-local, composed through the nodal solve (``local`` True or 1: with the kernels'
+        analytic partials where they have them; 2: element-local differences only; where it
+        applies) or (False / 0) one whole right-hand side per state -- the integrator's ways."""
         return self.mod.jacobian(float(t), np.asarray(x, dtype=float), np.asarray(P, dtype=float), self.lay,
-                                 self.scales, bool(local))
+                                 self.scales, int(local))
 
     def integrate(self, t_out, x0, P, rtol=1e-6, atol=None, breaks=(), h0=1e-3, hmax=np.inf,
                   max_steps=10_000_000, method=None, kinks=(), **tab_options):
@@ -95,7 +111,7 @@ class CompiledSystem:
                 raise ValueError(f"options {sorted(unknown)} apply to the Rosenbrock methods, not to {method!r}")
             return self.mod.integrate_batch_bdf(t_out, X0, P, self.lay, self.scales, self.lim_i, self.lim_b,
                                                 self.lim_r, brk, float(rtol), atol_v, float(h0), hmax,
-                                                int(max_steps), bool(tab_options.get("local_jacobian", 1)))
+                                                int(max_steps), int(tab_options.get("local_jacobian", 1)))
         return self.mod.integrate_batch(t_out, X0, P, self.lay, self.scales, self.lim_i, self.lim_b, self.lim_r,
                                         brk, jump, float(rtol), atol_v, float(h0),
                                         hmax, int(max_steps),

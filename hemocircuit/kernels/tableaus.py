@@ -149,9 +149,10 @@ def packed(name="rodas5p", jac_reuse=None, event_restart=1, soft_kinks=1, autono
            local_jacobian=1) -> np.ndarray:
     """The float64 array the engine reads (see the module docstring).  ``autonomous``: the
     circuit has no waveform and no time-dependent element, so df/dt = 0 is not evaluated.
-    ``local_jacobian``: the state Jacobian from element-local differences composed through
-    the nodal solve (engine_template.local_jacobian_into) where it applies, instead of one
-    whole right-hand side per state.  (Built once per set of arguments and copied: packing
+    ``local_jacobian``: the state Jacobian element by element, composed through the nodal
+    solve (engine_template.local_jacobian_into) where it applies: 1 with the kernels' analytic
+    partials where they have them (Kernel.derivs_jac), 2 by element-local differences only;
+    0: one whole right-hand side differenced per state.  (Built once per set of arguments and copied: packing
     costs ~0.5 ms, a third of a short run's Python time.)"""
     jr = JAC_REUSE.get(name) if jac_reuse is None else int(jac_reuse)
     return _packed(name, jr, float(event_restart), float(soft_kinks), float(autonomous),
