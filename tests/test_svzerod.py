@@ -337,3 +337,30 @@ def test_their_rows_beyond_our_run_are_a_failed_case_not_a_crash(tmp_path):
     (tmp_path / "results" / "result_steadyFlow_R_RCR.json").write_text(json.dumps(d))
     r = run_case(str(case), against="results")
     assert not r.ok and "beyond our output" in r.note
+
+
+@have_cases
+def test_heart_valves_close_without_creeping():
+    """closedLoopHeart_singleVessel's 10 cycles at the conformance tolerance (rtol 1e-7): with
+    their valve switch v(Q <= 0) inside the right-hand side, the steps crept below Q_RA ~1e-7
+    mL/s near t = 6.0195 s (300 000 steps reached t = 6.019459 s); with the open valve continued
+    below the bound, each valve closure is a hard-limit event (5 per cycle at most: one per
+    valve and the aortic valve's reopening transient) and the run takes < 10 000 steps.  On
+    the way every valve flow stays >= 0, a closed valve holds exactly 0, and the blood volume
+    (a conservation law) keeps its initial total."""
+    from hemocircuit.ic import apply_ic
+    from hemocircuit.kernels.system import CompiledSystem
+
+    path = os.path.join(SHARED, "cases", "closedLoopHeart_singleVessel.json")
+    m = import_svzerod(path)
+    c = load_svzerod(path)
+    x0 = apply_ic(c, np.zeros(c.nx), m.initial)
+    system = CompiledSystem.of(c)
+    t = np.linspace(0.0, m.n_cycles * m.period, 2001)
+    X, st = system.integrate(t, x0, system.params(c)[0], rtol=1e-7, max_steps=100_000)
+    assert st["status"] == 0 and st["steps"] < 10_000, st
+    assert 4 * m.n_cycles <= st["limit_events"] <= 6 * m.n_cycles, st
+    q = X[:, [c.state_names.index(f"CLH.{k}") for k in ("Q_RA", "Q_RV", "Q_LA", "Q_LV")]]
+    assert q.min() >= 0.0 and (q == 0.0).mean() > 0.3  # each valve closed for part of the cycle
+    tot = c.law_volumes(X)[0]
+    assert np.ptp(tot) < 1e-6 * abs(tot[0])

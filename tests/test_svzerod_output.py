@@ -220,6 +220,16 @@ def test_periodic_forced_on_their_rcr_case(tmp_path, capsys):
 
 
 @have_cases
+def test_periodic_forced_without_an_output_reports_their_caps(capsys):
+    """``periodic MODEL.json --forced`` with no --output (their JSON declares none): the
+    summary line is of the first quantity the cycle criterion watches, a cap pressure; before,
+    the command stopped with "no outputs given"."""
+    assert main(["periodic", _case("pulsatileFlow_R_RCR"), "--forced", "--quiet"]) == 0
+    text = capsys.readouterr().out
+    assert "P(branch0_seg0__OUT) [mmHg]: min" in text and "cycle-to-cycle criterion" in text
+
+
+@have_cases
 def test_their_multiplier_without_change():
     """pulsatileFlow_R_RCR as shared: Rd C = 0.1 s, so mu = exp(-10); one cycle nearly forgets the start."""
     from hemocircuit.svzerod.output import _circuits, start_state

@@ -17,7 +17,14 @@ AA: their atrial activation (the ``wrapping_cosine`` of activation.py with Tsa, 
 their 25-mode Fourier series of ventricular elastance, NOT normalised (as in this block).
 Valves: v = 0 (closed) while P_upstream <= P_downstream and Q <= 0, else 1; their post_solve
 sets a closed valve's Q to 0.  Here a closed valve's dQ/dt is 0 and Q >= 0 is a hard limit
-(the integration stops where Q reaches 0 and puts it there), the same semantics.
+(the integration stops where Q reaches 0 and puts it there), the same semantics: on the
+solution Q >= 0, so "Q <= 0" is "Q = 0", and v = 0 only at Q = 0 exactly with P_upstream <=
+P_downstream.  Below the bound (Q < 0: only the integrator's stages go there, never an
+accepted step) the valve is open: the open valve's equations continued smoothly.  Their
+v(Q <= 0) instead made f jump on the bound's far side: the Rosenbrock stages sampled both sides
+and the steps' results stayed just above 0 (Q_RA ~1e-7 mL/s with dQ/dt = -4e3 mL/s^2 at
+t = 6.0195 s of closedLoopHeart_singleVessel), so the integrator crept on with steps of
+~1e-10 s (300 000 steps reached t = 6.019459 s) without ever reaching the bound.
 Note (theirs, kept): the left atrium fills with the right ventricle's outflow v_RV Q_RV; the
 pulmonary RC only sets the back-pressure P_pul.  So the blood volume is
 V_RA + V_RV + V_LA + V_LV + Cpa P_out (not Cp P_pul), which is what the stores declare.
@@ -95,8 +102,9 @@ def _pressures(p, x, t):
 
 @jit
 def _valve(dp, q):
-    """1 open, 0 closed (closed while the pressure difference and the flow are both <= 0)."""
-    return 0.0 if (dp <= 0.0 and q <= 0.0) else 1.0
+    """1 open, 0 closed: closed on the hard limit Q = 0 while the pressure difference is <= 0
+    (their dp <= 0 and Q <= 0 on a solution with Q >= 0); open below the bound (see above)."""
+    return 0.0 if (dp <= 0.0 and q == 0.0) else 1.0
 
 
 @jit

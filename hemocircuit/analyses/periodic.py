@@ -88,7 +88,14 @@ def _laws(circuit):
 
 def shoot(circuit, x_guess, T_guess, forced=False, rtol=1e-9, tol=1e-8, max_iter=25, rel_step=1e-6, progress=None):
     """Newton shooting from (x_guess, T_guess).  Returns a PeriodicOrbit.  ``progress``: a bar
-    of the Newton iterations (with the residual) on stderr (:mod:`hemocircuit.progress`)."""
+    of the Newton iterations (with the residual) on stderr (:mod:`hemocircuit.progress`).
+
+    A Newton update that puts a state below its hard limit (a closed valve's flow below 0) is
+    projected onto the limit: no state of the system lies below it, and from there the
+    integration stops at t = 0 (before: "step size too small").  Without convergence the orbit
+    is the iterate of smallest residual, not the last one: where Newton's iteration wanders
+    (closedLoopHeart_singleVessel: residuals between 1e-4 and 1e-8, cause not found,
+    docs/svzerod.md "Limitations") its last iterate may be far from its best."""
     from ..progress import bar
     with bar(max_iter, "shooting", unit="iteration", progress=progress) as b:
         return _shoot(circuit, x_guess, T_guess, forced, rtol, tol, max_iter, rel_step, b)
@@ -107,10 +114,12 @@ def _shoot(circuit, x_guess, T_guess, forced, rtol, tol, max_iter, rel_step, pba
     f_s = c.rhs(0.0, x_s) * 1.0
     n_hat = (f_s / S) / max(np.linalg.norm(f_s / S), 1e-300)  # section normal, scaled
     L = _laws(c)
+    limits = c.hard_limits()
     law0 = L @ x0 if L.size else np.zeros(0)
     res_norm = np.inf
     converged = False
     M = None
+    best = None  # (residual, x0, T, M) of the best iterate
     for it in range(1, max_iter + 1):
         # monodromy d phi / d x0 by forward differences of the flow map (the derivatives
         # service; steps rel_step * scale, above the integrator's error), one batched run
@@ -132,15 +141,21 @@ def _shoot(circuit, x_guess, T_guess, forced, rtol, tol, max_iter, rel_step, pba
         JJ = np.vstack(J)
         res_norm = float(np.max(np.abs(R)))
         pbar.update_to(it, residual=f"{res_norm:.2e}")
+        if best is None or res_norm < best[0]:
+            best = (res_norm, x0.copy(), T, M)
         if res_norm < tol:
             converged = True
             break
         dz = np.linalg.lstsq(JJ, -R, rcond=None)[0]
         x0 = x0 + dz[:nx] * S
+        for li, bound, _ in limits:
+            x0[li] = max(x0[li], bound)
         if not forced:
             T = T + dz[-1]
             if T <= 0:
                 raise SolverError("shooting: the period became non-positive; give a better initial guess")
+    if not converged and best is not None:
+        res_norm, x0, T, M = best
     # one more integration for the orbit itself (dense) and the final multipliers
     _, r = _flow(c, x0[None], np.array([T]), rtol=rtol, n_out=401)
     t = r.t[0]
@@ -205,10 +220,18 @@ def _periodic(args, c):
     """The orbit (converged or not) and the output that found its period."""
     from ..outputs import default_outputs, drive_of, input_element
 
+    if args.forced == "":
+        # without --output or declared outputs: the quantities the cycle criterion watches
+        # (an svZeroDSolver model's vessel caps), a pressure first
+        interest = default_outputs(c, "periodic", required=False)
+        orb = _forced_by_period(args, c, args.output)
+        watched = list(orb.metadata["measures"].get("cycle_quantities") or [])
+        interest = interest or sorted(watched, key=lambda k: not k.startswith("P("))
+        if args.output is None and not interest:
+            default_outputs(c, "periodic", required=True)  # the error naming the netlist
+        return orb, args.output or interest[0], interest
     interest = default_outputs(c, "periodic", required=args.output is None)
     output = args.output or interest[0]
-    if args.forced == "":
-        return _forced_by_period(args, c, output), output, interest
     if args.forced:
         src = input_element(c, args.forced)
         comp, drive = drive_of(c, src)

@@ -1,0 +1,64 @@
+"""The closed-loop heart worked example (examples/svzerod_closed_loop.py, docs/svzerod.md):
+its periodic state by shooting against cycle-by-cycle integration, and physical relations of
+the orbit.  Needs their closedLoopHeart_singleVessel.json (../shared/svzerod; skipped
+otherwise)."""
+from __future__ import annotations
+
+import importlib.util
+import os
+
+import numpy as np
+import pytest
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+SHARED = os.environ.get("SVZEROD_CASES", "/work/shared/svzerod")
+MODEL = os.path.join(SHARED, "cases", "closedLoopHeart_singleVessel.json")
+pytestmark = pytest.mark.skipif(not os.path.isfile(MODEL), reason="svZeroDSolver test cases not present")
+
+
+@pytest.fixture(scope="module")
+def example():
+    spec = importlib.util.spec_from_file_location("svzerod_closed_loop",
+                                                  os.path.join(HERE, "..", "examples", "svzerod_closed_loop.py"))
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+@pytest.fixture(scope="module")
+def orbit(example):
+    (fig, orb), = example.sweep(MODEL, (1.0,), max_iter=6)
+    return fig, orb
+
+
+def test_shooting_agrees_with_cycles_to_convergence(example, orbit):
+    """The orbit's start is the state after 15 cycles from their initial condition (the
+    multipliers' |mu| ~ 0.25: 15 cycles leave ~1e-9 of the start's distance), and the
+    orbit closes: x(T) = x(0)."""
+    from hemocircuit.analyses.transient import simulate
+    from hemocircuit.ic import apply_ic
+
+    fig, orb = orbit
+    c, model = example.load(MODEL)
+    S = c.state_scales
+    x0 = apply_ic(c, np.zeros(c.nx), model.initial)
+    res = simulate(c, 15 * model.period, dt=model.period / 100, x0=x0, rtol=1e-9, progress=False)
+    assert np.max(np.abs((orb.x0 - np.asarray(res.x)[-1]) / S)) < 1e-4
+    assert np.max(np.abs((orb.x[-1] - orb.x[0]) / S)) < 1e-4
+    mu = np.abs(orb.nontrivial_multipliers)
+    assert 0.1 < mu.max() < 0.5  # stable: the cycles converge (from their start: 5 cycles to 1 %)
+
+
+def test_stroke_volume_and_mean_pressures(orbit):
+    """SV = max - min V_LV equals the aortic valve's flow integrated over the cycle (mitral and
+    aortic valves never open together); the mean flow through the vessel is SV/T (the aortic
+    capacitor's volume is periodic); the mean pressure drop from the heart's outlet to its
+    inlet is (R_vessel + Rp + Rd) times that flow (the vessel's inductor and the RCR's
+    capacitor average out over a period)."""
+    fig, orb = orbit
+    assert 20.0 < fig["stroke_volume"] < 100.0
+    assert fig["aortic_valve_volume"] == pytest.approx(fig["stroke_volume"], rel=1e-3)
+    assert fig["mean_vessel_flow"] == pytest.approx(fig["stroke_volume"] / orb.period, rel=1e-3)
+    drop = fig["mean_aortic_pressure"] - fig["mean_venous_pressure"]
+    assert drop == pytest.approx(fig["R_systemic"] * fig["mean_vessel_flow"], rel=1e-3)
+    assert 0 < fig["ejection_fraction"] < 1 and fig["P_LV_max"] > fig["mean_aortic_pressure"]
