@@ -9,9 +9,11 @@ Their semantics (src/solve/SimulationParameters.cpp, Solver.cpp): time step T/(N
 points per cardiac cycle T; ``number_of_cardiac_cycles`` cycles; by default only the last cycle
 is written, its times shifted to start at 0 (``output_all_cycles`` writes every step from 0);
 ``output_mean_only`` writes the mean over the written rows; ``steady_initial`` (their default)
-starts from a steady state with the time series at their means.  Here the start is always the
-true operating point of the model with the time series at their means (theirs is 31
-pseudo-time steps, so only rows after the first cycle are compared for all-cycles output).
+starts from a steady state with the time series at their means.  Here the start is the true
+operating point of the model with the time series at their means (theirs is 31 pseudo-time
+steps, so only rows after the first cycle are compared for all-cycles output), except for a
+case whose run does not forget its start (:func:`keeps_its_start`), which starts by their
+procedure.  With ``use_cycle_to_cycle_error`` the cycles are theirs (:func:`simulate_case`).
 
 Error of a variable: max |ours - theirs| over the compared rows, divided by the range of theirs
 over those rows (by max |theirs| when the range is below 1e-6 of it: steady and mean rows, and
@@ -97,7 +99,7 @@ def read_result(path):
 #: its written cycle carries the drift of every cycle before it (chamber_elastance_inductor:
 #: Vc moves 1.1e-5 mL per cycle against a range of 0.002 mL in the last one, while Vc itself
 #: is 96 mL, so rtol |Vc| is no useful bound: at rtol 1e-5 .. 1e-8 each opening and closing
-#: of its inflow valve left an error of ~8e-7 mL that the error estimate did not see,
+#: of its inflow valve left an error of ~9e-7 and ~6e-7 mL that the error estimate did not see,
 #: 1.5e-6 mL per cycle, 2 % of the range after 30 cycles); ATOL is per unit of state scale
 DRIFT_RTOL, DRIFT_ATOL = 1e-10, 1e-8
 
