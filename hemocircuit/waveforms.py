@@ -12,7 +12,8 @@ Netlist forms (every number with a unit; the source's own unit gives the value d
                                                    evaluated at t0 + (t - t0) mod period, t0 its
                                                    first time (svZeroDSolver's time series)
 Tables are parsed at load time; evaluation is plain numpy.  ``breakpoints(t0, t1)`` lists the
-times in (t0, t1) where the value or its slope jumps, so the transient solver restarts there;
+times in (t0, t1) where the value or its slope jumps (a pwl table's times, less those between
+two intervals of the same slope), so the transient solver restarts there;
 ``jumps(t0, t1)`` the ones of them where the value itself may jump (the others are slope-only
 kinks, where the compiled integrator ends a step but needs no new evaluation).
 """
@@ -80,7 +81,19 @@ class Table(Waveform):
         return np.asarray(self.values, dtype=float)[np.maximum(i, 0)]
 
     def breakpoints(self, t0=-np.inf, t1=np.inf):
-        return [float(x) for x in self.times]
+        if not self.linear:
+            return [float(x) for x in self.times]
+        # linear interpolation: an interior time between two intervals of the same slope
+        # (e.g. a run of equal values, as the zero diastole of svZeroDSolver's pressure
+        # tables) is no kink; the ends, repeated times and every slope change are
+        t, v = np.asarray(self.times, dtype=float), np.asarray(self.values, dtype=float)
+        keep = np.ones(t.size, bool)
+        if t.size > 2:
+            dt0, dt1 = t[1:-1] - t[:-2], t[2:] - t[1:-1]
+            with np.errstate(over="ignore", invalid="ignore"):  # inf or nan: not equal, kept
+                same = (dt0 > 0) & (dt1 > 0) & ((v[1:-1] - v[:-2]) * dt1 == (v[2:] - v[1:-1]) * dt0)
+            keep[1:-1] = ~same
+        return [float(x) for x in t[keep]]
 
     def jumps(self, t0=-np.inf, t1=np.inf):
         if not self.linear:  # a step at every time
@@ -149,8 +162,8 @@ class Periodic(Waveform):
         return self.table.sample(t0 + np.remainder(np.asarray(t, dtype=float).reshape(-1) - t0, self.period))
 
     def breakpoints(self, t0=-np.inf, t1=np.inf):
-        # the table's times in every cycle, and the cycle boundaries (the value may jump there)
-        return self._every_cycle(np.append(self.table.times, self.table.times[0]), t0, t1)
+        # the table's kinks in every cycle, and the cycle boundaries (the value may jump there)
+        return self._every_cycle(np.append(self.table.breakpoints(), self.table.times[0]), t0, t1)
 
     def jumps(self, t0=-np.inf, t1=np.inf):
         tab = self.table

@@ -608,3 +608,19 @@ def test_lazy_kernels_pickle_by_name():
     from hemocircuit.components.resistor import kernel_stamp
 
     assert pickle.loads(pickle.dumps(kernel_stamp)) is kernel_stamp
+
+
+def test_pwl_tables_kink_only_where_the_slope_changes():
+    """An interior time between two intervals of the same slope (a run of equal values, a
+    straight ramp) is no breakpoint; the ends, repeated times and slope changes are, also in
+    every cycle of a periodic table (svZeroDSolver's inlet pressure: zero after 0.18 s)."""
+    pwl = parse_waveform({"pwl": [["0 s", "0 mmHg"], ["1 s", "1 mmHg"], ["2 s", "2 mmHg"], ["3 s", "0 mmHg"],
+                                  ["4 s", "0 mmHg"], ["5 s", "0 mmHg"], ["5 s", "3 mmHg"], ["6 s", "3 mmHg"]]},
+                         "mmHg")
+    assert pwl.breakpoints() == [0.0, 2.0, 3.0, 5.0, 5.0, 6.0]
+    t = np.linspace(-1.0, 7.0, 801)
+    assert np.array_equal(pwl.sample(t), np.interp(t, pwl.times, pwl.values))  # values unchanged
+    per = parse_waveform({"periodic": {"period": "1 s", "pwl": [["0 s", "0 mmHg"], ["0.1 s", "4 mmHg"],
+                                                                ["0.2 s", "0 mmHg"], ["0.5 s", "0 mmHg"],
+                                                                ["1 s", "0 mmHg"]]}}, "mmHg")
+    assert per.breakpoints(0.0, 2.0) == pytest.approx([0.0, 0.1, 0.2, 1.0, 1.1, 1.2, 2.0])

@@ -364,3 +364,105 @@ def test_heart_valves_close_without_creeping():
     assert q.min() >= 0.0 and (q == 0.0).mean() > 0.3  # each valve closed for part of the cycle
     tot = c.law_volumes(X)[0]
     assert np.ptp(tot) < 1e-6 * abs(tot[0])
+
+
+def test_chamber_case_keeps_its_start_and_passes():
+    """chamber_elastance_inductor: both valves closed most of the cycle make its slowest mode
+    far slower than its 30 s run, so the runner starts it by their steady_initial procedure,
+    which gives their start (their solver's t = 0 row with output_all_cycles: Vc 96.06182131 mL,
+    Q_out -9.2214539e-4 mL/s in their cgs units), and the case passes against converged/; an
+    RCR case forgets its start (tau 0.1 s)."""
+    import json
+
+    from hemocircuit.analyses.op import operating_point
+    from hemocircuit.svzerod.conformance import keeps_its_start, run_case
+    from hemocircuit.svzerod.importer import guess_units
+    from hemocircuit.svzerod.output import _circuits
+    from hemocircuit.svzerod.steady_initial import their_steady_initial
+
+    def model_of(name):
+        path = os.path.join(SHARED, "cases", name + ".json")
+        with open(path) as fh:
+            m = import_svzerod(path, units=guess_units(json.load(fh)))
+        return m, _circuits(m, None)
+
+    m, (c, cm) = model_of("chamber_elastance_inductor")
+    assert keeps_its_start(m, cm, operating_point(cm).x)
+    x = their_steady_initial(m, cm)
+    assert x[c.state_names.index("ventricle.Vc")] == pytest.approx(96.06182131239247, abs=1e-7)
+    assert x[c.state_names.index("ventricle.Q_out")] == pytest.approx(-9.221453883781882e-4, rel=1e-6)
+    r = run_case(os.path.join(SHARED, "cases", "chamber_elastance_inductor.json"), "converged")
+    assert r.ok, (r.err_p, r.err_q, r.worst, r.note)
+    m, (c, cm) = model_of("pulsatileFlow_R_RCR")
+    assert not keeps_its_start(m, cm, operating_point(cm).x)
+
+
+@have_cases
+def test_chamber_outflow_jacobian_resolves_the_valve():
+    """One cycle of chamber_elastance_inductor at rtol 1e-7 from their start: with Q_out's
+    finite-difference step (1e-7 x its scale) below the width 1/(k Rmax) = 1e-7 mL/s over
+    which valve 1 switches, RODAS5P needs a few hundred steps (it took 21 703 with scale 10,
+    whose step 1e-6 mL/s made the Jacobian wrong at each opening and closing)."""
+    import json
+
+    from hemocircuit.kernels.system import CompiledSystem
+    from hemocircuit.svzerod.importer import guess_units
+    from hemocircuit.svzerod.output import _circuits
+
+    path = os.path.join(SHARED, "cases", "chamber_elastance_inductor.json")
+    with open(path) as fh:
+        m = import_svzerod(path, units=guess_units(json.load(fh)))
+    c, _ = _circuits(m, None)
+    s = CompiledSystem.of(c)
+    x0 = np.array([6.34375125e-03, 96.06182131239247, -9.221453883781882e-04])  # their start
+    br = c.breakpoints(0.0, 1.0, kinks=False)
+    X, st = s.integrate(np.linspace(0.0, 1.0, 101), x0, s.params(c)[0], rtol=1e-7, breaks=br,
+                        kinks=sorted(set(c.breakpoints(0.0, 1.0)) - set(br)))
+    assert st["status"] == 0 and st["steps"] < 1500, st
+    assert X[-1, 1] == pytest.approx(96.06181015, abs=5e-6)  # their dt/1000 solution after one cycle
+
+
+def _cycle_error_model(tmp_path, n_cycles, all_cycles=True):
+    """FLOW 1 + 0.5 sin -> vessel (R 100, C 1e-2) -> RESISTANCE 1000 from zero, with their
+    use_cycle_to_cycle_error: tau = C (R + Rd) = 11 s, 10 points per cycle of 1 s."""
+    import json
+
+    t = np.linspace(0.0, 1.0, 11)
+    cfg = {"simulation_parameters": {"number_of_cardiac_cycles": n_cycles, "number_of_time_pts_per_cardiac_cycle": 11,
+                                     "output_all_cycles": all_cycles, "use_cycle_to_cycle_error": True,
+                                     "sim_cycle_to_cycle_percent_error": 1.0, "steady_initial": False},
+           "vessels": [{"vessel_name": "v", "vessel_id": 0, "zero_d_element_type": "BloodVessel",
+                        "zero_d_element_values": {"R_poiseuille": 100.0, "C": 1e-2},
+                        "boundary_conditions": {"inlet": "IN", "outlet": "OUT"}}],
+           "boundary_conditions": [{"bc_name": "IN", "bc_type": "FLOW",
+                                    "bc_values": {"Q": list(1.0 + 0.5 * np.sin(2 * np.pi * t)), "t": list(t)}},
+                                   {"bc_name": "OUT", "bc_type": "RESISTANCE", "bc_values": {"R": 1000.0, "Pd": 0.0}}],
+           "initial_condition": {}}
+    p = tmp_path / "m.json"
+    p.write_text(json.dumps(cfg))
+    return str(p), cfg
+
+
+def test_runner_adds_their_extra_cycles(tmp_path):
+    """Without an RCR their criterion runs one more cycle at a time after the given ones until
+    the mean pressure and flow at the vessel caps change by <= 1 % (Solver.cpp): the rows of
+    those cycles follow, times restarting at dt; the criterion fails between the two cycles
+    before the last and holds between the last two.  Only the last cycle written: the given
+    last cycle's rows, whatever was run after."""
+    from hemocircuit.svzerod.conformance import simulate_case
+    from hemocircuit.svzerod.cycles import cycle_errors, cycle_means
+
+    path, cfg = _cycle_error_model(tmp_path, 3)
+    m = import_svzerod(path)
+    res, keep, t_out, _ = simulate_case(m, cfg=cfg)
+    n = (t_out.size - 1) // 10
+    assert n > 3 and t_out.size == 10 * n + 1  # extra cycles were run and written
+    np.testing.assert_allclose(t_out[:31], np.arange(31) * 0.1, atol=1e-12)
+    np.testing.assert_allclose(t_out[31:41], np.arange(1, 11) * 0.1, atol=1e-12)
+    cols = [m.columns["v:pressure_in"], m.columns["v:flow_in"]]
+    errs = np.max([cycle_errors(cycle_means(np.asarray(res[k])[keep], 11))[0] for k in cols], axis=0)
+    assert errs[-1] <= 0.01 < errs[-2], errs
+    path, cfg = _cycle_error_model(tmp_path, 3, all_cycles=False)
+    m = import_svzerod(path)
+    res, keep, t_out, _ = simulate_case(m, cfg=cfg)
+    assert t_out.size == 11 and np.asarray(res.t)[keep][0] == pytest.approx(2.0)

@@ -8,9 +8,10 @@ the measured distance of their stored result from their own converged one (their
 tenth of the time step, same rows), listed in GAP.  Excluded: the external-coupling cases
 (coupledBlock_*), the two their suite expects to fail (*mismatchPeriod: inconsistent periods,
 which the importer rejects, checked here), steadyFlow_calibration (a calibration input, no
-simulation), the two use_cycle_to_cycle_error cases (their criterion adds cycles: not
-reproduced by the conformance runner yet) and chamber_sphere (its first output rows carry
-their integrator's start from an inconsistent all-zero state: see docs/svzerod.md).
+simulation) and chamber_sphere (its first output rows carry their integrator's start from an
+inconsistent all-zero state, which does not converge with their step: see docs/svzerod.md).
+The two use_cycle_to_cycle_error cases run their cycles (the runner's extra cycles and their
+eq. 21 count).
 """
 from __future__ import annotations
 
@@ -29,9 +30,13 @@ pytestmark = pytest.mark.skipif(not UPSTREAM, reason="HEMOCIRCUIT_SVZEROD_UPSTRE
 #: up; cases not listed are converged within 1e-3 of the issue's tolerance
 GAP = {"closedLoopHeart_singleVessel_decomposed": (0.45, 0.065),
        "closedLoopHeart_withCoronaries": (0.24, 0.25),
-       "pulsatileFlow_CStenosis_steadyPressure_definedPeriod": (2.5e-4, 1.2e-2)}
-SKIP = ("steadyFlow_calibration", "chamber_sphere", "pulsatileFlow_R_coronary_cycle_error",
-        "pulsatileFlow_bifurcationR_RCR_cycle_error")
+       "pulsatileFlow_CStenosis_steadyPressure_definedPeriod": (2.5e-4, 1.2e-2),
+       # steady_initial false: their first steps from the all-zero start; stored vs dt/10 0.1395 / 0.2204
+       "pulsatileFlow_R_coronary_cycle_error": (0.14, 0.23),
+       # 5 points per cycle: stored vs dt/10 0.0799 / 0.2428, and their dt/10 is itself 2.24e-3 /
+       # 1.51e-3 from their dt/1000 solution (ours is 2.5e-5 / 5.4e-6 from that one)
+       "pulsatileFlow_bifurcationR_RCR_cycle_error": (0.0825, 0.245)}
+SKIP = ("steadyFlow_calibration", "chamber_sphere")
 
 
 def _cases_dir():

@@ -10,6 +10,13 @@ with A(t) the activation function (option ``activation``, parameters as in
 components/svzerod/activation.py).  Pressures relative to ``ref`` (ground in imported models).
 Units: Emax, Emin [mmHg/mL], Vrd, Vrs [mL], Impedance L [mmHg*s^2/mL] > 0, period [s].
 States: Vc [mL] (a volume store, so closed loops conserve it), Q_out [mL/s].
+Q_out's scale is 0.1 mL/s, not 10: the scale sets the finite-difference step of the
+integrator's Jacobian (1e-7 x max(|Q_out|, scale)), and Q_out usually feeds a ValveTanh, whose
+flow switches between its closed and open branches over about 1/(k Rmax) (1e-7 mL/s for
+chamber_elastance_inductor's k = 100 cm^2/dyn, Rmax = 1e5 dyn s/cm^5).  A step of 1e-6 mL/s
+(scale 10) spans ten such widths, the Jacobian is wrong there and RODAS5P crept through each
+valve-1 opening and closing in 6 000 - 15 000 steps (21 700 per cycle, ~80 s for the case's 30
+cycles); with 1e-8 mL/s it takes ~50 (docs/svzerod.md, "Speed").
 Local unknowns [P_in, P_out, P_ref, q]: branch (in, ref) with P_in - P_ref = E (Vc - Vrest)
 carrying q = dVc/dt; Q_out (state) imposed from in to out, so Q_in = q + Q_out.
 """
@@ -44,7 +51,7 @@ class ChamberElastanceInductor(Component):
         return (("in", "ref", "pressure"), ("in", "out", "flow"))
 
     def states(self):
-        return (State("Vc", "mL", 10.0, "chamber volume"), State("Q_out", "mL/s", 10.0, "outflow (inductor)"))
+        return (State("Vc", "mL", 10.0, "chamber volume"), State("Q_out", "mL/s", 0.1, "outflow (inductor)"))
 
     def storages(self):
         return (Storage("in", "ref", "Vc", state="Vc"),)

@@ -511,7 +511,7 @@ def cmd_tran_svzerod(args):
         raise HemocircuitError(f"--svzerod-output: {args.netlist} is not an svZeroDSolver JSON model "
                                "(simulation_parameters and blocks)")
     model = import_svzerod(args.netlist, units=guess_units(cfg))
-    c, res = simulate_svzerod(model, sets=_sets(args.set), start=args.svzerod_start)
+    c, res = simulate_svzerod(model, sets=_sets(args.set), start=args.svzerod_start, cfg=cfg)
     path = write_svzerod_output(args.svzerod_output, model, c, res, cfg)
     layout = "per variable" if model.sim.get("output_variable_based") else "per block"
     print(f"{model.n_cycles} cycles of {model.period:g} s, {model.points} points per cycle; solver {res.stats}")

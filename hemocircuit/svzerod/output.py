@@ -154,7 +154,17 @@ def written_steps(model):
     dt = model.period / (N - 1)
     first = 0 if model.sim.get("output_all_cycles") else (N - 1) * (n - 1)
     i = np.arange(first, steps, interval)
-    return i, (i - first) * dt
+    times = (i - first) * dt
+    extra = int(model.sim.get("_extra_cycles", 0))
+    if extra and model.sim.get("output_all_cycles"):
+        # their extra-cycle loop (run_integration): its output counter goes on, its step
+        # counter restarts, so step g of it is written when g % interval == 0, at time
+        # ((g - steps) mod (N-1) + 1) dt
+        g = np.arange(steps, steps + extra * (N - 1))
+        g = g[g % interval == 0]
+        i = np.concatenate([i, g])
+        times = np.concatenate([times, ((g - steps) % (N - 1) + 1) * dt])
+    return i, times
 
 
 def unit_factors(model):
@@ -291,11 +301,14 @@ def start_state(model, circuit, start="operating-point", sets=None, mean_circuit
     return apply_ic(circuit, operating_point(cm).x, model.initial_given)
 
 
-def simulate_svzerod(model, sets=None, rtol=None, start="operating-point"):
+def simulate_svzerod(model, sets=None, rtol=None, start="operating-point", cfg=None):
     """(circuit, result) of a run with their semantics: t = 0 .. n T on their step grid, from
     :func:`start_state` ``start``.  ``sets``: {ID.PARAM: value} changed in the circuit and in
     its time-averaged variant (``--set``).  ``rtol``: the integrator's, by default the
-    conformance runner's for the model (conformance.case_rtol)."""
+    conformance runner's for the model (conformance.case_rtol, or its DRIFT_RTOL and
+    DRIFT_ATOL for a model whose run keeps its start).  With ``use_cycle_to_cycle_error``,
+    no RCR and ``cfg`` (their configuration, for their vessel caps) the run goes on one cycle
+    at a time until their criterion holds (:func:`their_extra_cycles`)."""
     from ..analyses.transient import TransientResult, simulate
     from .conformance import case_rtol
 
@@ -307,16 +320,73 @@ def simulate_svzerod(model, sets=None, rtol=None, start="operating-point"):
         t = np.arange(0, (model.points - 1) * model.n_cycles + 1) * dt
         x = np.zeros((t.size, 0))
         return c, TransientResult(t, x, c.outputs(t, x), c.column_units(), c.state_names)
-    return c, simulate(c, model.n_cycles * model.period, dt=dt, x0=x0, rtol=rtol or case_rtol(model), progress=False)
+    atol = None
+    if rtol is None:  # the conformance runner's: drift tolerances for a run that keeps its start
+        from ..analyses.op import operating_point
+        from .conformance import DRIFT_ATOL, DRIFT_RTOL, keeps_its_start
+
+        rtol = case_rtol(model)
+        if keeps_its_start(model, cm, operating_point(cm).x):
+            rtol, atol = DRIFT_RTOL, DRIFT_ATOL
+    res = simulate(c, model.n_cycles * model.period, dt=dt, x0=x0, rtol=rtol, atol=atol, progress=False)
+    if model.sim.get("use_cycle_to_cycle_error") and cfg is not None and not any(
+            g.comp.type_name == "rcr_bc" for g in c.groups):
+        res = their_extra_cycles(model, cfg, c, res, rtol, atol)
+    return c, res
+
+
+def their_extra_cycles(model, cfg, c, res, rtol=None, atol=None, max_extra=1000):
+    """Their extra cycles without an RCR (Solver.cpp run_integration): while their criterion
+    fails on the last two cycles (cycles.cycle_means, cycle_errors at their vessel caps), one
+    more cycle from the state reached.  Returns the run extended by them (t continuing);
+    ``model.sim['_extra_cycles']`` records how many, so :func:`written_steps` writes their
+    rows of them (with output_all_cycles: times restarting at dt in each, as theirs)."""
+    from ..analyses.transient import TransientResult, simulate
+    from .cycles import cycle_errors, cycle_means, their_tolerance, vessel_caps
+
+    T, N, n = model.period, model.points, model.n_cycles
+    dt = T / (N - 1)
+    tol = their_tolerance(model.sim)
+    quantities = [q for _, fq, pq in vessel_caps(cfg, model) for q in (fq, pq)]
+    t0 = np.asarray(res.t)
+    k = np.rint(t0 / dt).astype(int)
+    _, first = np.unique(k, return_index=True)  # one row per step of their grid
+    first = first[np.abs(t0[first] - k[first] * dt) < 1e-9 * T]
+    ts, xs = [t0[first]], [np.asarray(res.x)[first]]
+    cols = {q: [np.asarray(res.columns[q])[first]] for q in quantities}
+    extra = 0
+    while True:
+        tail = [np.concatenate(cols[q])[-(2 * (N - 1) + 1):] for q in quantities]
+        if all(v.size == 2 * (N - 1) + 1 for v in tail) and all(
+                cycle_errors(cycle_means(v, N))[0, -1] <= tol for v in tail):
+            break
+        if extra >= max_extra:
+            raise HemocircuitError(f"{model.name}: their cycle-to-cycle criterion not met in {max_extra} extra cycles")
+        t_a = (n + extra) * T
+        r = simulate(c, t_a + T, t0=t_a, dt=dt, x0=xs[-1][-1], rtol=rtol, atol=atol, progress=False)
+        kr = np.rint(np.asarray(r.t) / dt).astype(int)
+        _, fr = np.unique(kr, return_index=True)
+        fr = fr[kr[fr] > kr[0]]
+        ts.append(np.asarray(r.t)[fr])
+        xs.append(np.asarray(r.x)[fr])
+        for q in quantities:
+            cols[q].append(np.asarray(r.columns[q])[fr])
+        extra += 1
+    model.sim["_extra_cycles"] = extra
+    if not extra:
+        return res
+    t, x = np.concatenate(ts), np.concatenate(xs)
+    out = TransientResult(t, x, c.outputs(t, x), c.column_units(), c.state_names, stats=res.stats)
+    out.metadata.update({k: v for k, v in res.metadata.items() if k != "solver"})
+    return out
 
 
 def apply_their_cycle_rule(model, circuit):
     """With ``use_cycle_to_cycle_error`` and an RCR boundary condition their solver replaces
     the number of cycles by ceil(-tau_max/T ln tol) (Solver.cpp constructor, their eq. 21):
     the same here (model.sim changed), so the written rows are theirs.  Without an RCR they
-    run extra cycles until their criterion holds but write no rows of them (their extra-cycle
-    loop restarts its step counter), so the output keeps the given cycles.  Returns the
-    number of cycles."""
+    run extra cycles until their criterion holds (:func:`their_extra_cycles`; their rows of
+    them only with output_all_cycles).  Returns the number of cycles."""
     from .cycles import pfaller_cycles, rcr_time_constants, their_tolerance
 
     if model.sim.get("use_cycle_to_cycle_error"):
@@ -343,6 +413,6 @@ def svzerod_output(model_path, out_path, rtol=None, start="operating-point", uni
 
     cfg = _read_config(model_path)
     model = import_svzerod(model_path, units=units or guess_units(cfg))
-    c, res = simulate_svzerod(model, sets=sets, rtol=rtol, start=start)
+    c, res = simulate_svzerod(model, sets=sets, rtol=rtol, start=start, cfg=cfg)
     write_svzerod_output(out_path, model, c, res, cfg)
     return model, c, res
