@@ -418,3 +418,26 @@ def test_compiled_system_is_kept_per_structure_and_type_setting(monkeypatch):
     monkeypatch.setenv("HEMOCIRCUIT_ENGINE_TYPES", "all")
     s_all = CompiledSystem.of(c)
     assert s_all is not s and len(s_all.layout.kernels) > len(s.layout.kernels)
+
+
+def test_output_grid_ends_once_at_t_end():
+    """The output times from t0 every dt, and t_end once: t0 + k dt that rounds just below
+    t_end (0.7 + 10 x 0.1 = 1.7000000000000002, 2.1 + 20 x 0.05 ...) used to be followed by
+    t_end itself, a second row at the same time (99 of 284 (t0, dt) pairs below)."""
+    from hemocircuit.analyses.transient import _output_grid
+
+    for t0 in np.arange(0.0, 50.0, 0.7):
+        for dt in (0.1, 0.05, 0.01, 0.3):
+            t_end = t0 + 1.0
+            g = _output_grid(t0, t_end, dt)
+            assert g[0] == t0 and g[-1] == t_end, (t0, dt)
+            gaps = np.diff(g)
+            assert np.all(gaps[:-1] > 0.999 * dt) and 1e-6 * dt < gaps[-1] < 1.001 * dt, (t0, dt, g[-3:])
+    np.testing.assert_allclose(_output_grid(0.0, 1.0, 0.3), [0.0, 0.3, 0.6, 0.9, 1.0], rtol=0, atol=1e-15)
+
+
+def test_run_from_a_later_start_has_no_repeated_time():
+    c = hc.load(os.path.join(NETLISTS, "payne06_passive.yaml"))
+    res = c.simulate(1.7, t0=0.7, dt=0.1, engine="compiled")
+    t = np.asarray(res.t)
+    assert t[0] == 0.7 and t[-1] == 1.7 and len(t) == 11 and np.all(np.diff(t) > 0.09)

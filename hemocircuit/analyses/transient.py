@@ -364,9 +364,13 @@ def _output_grid(t0, t_end, dt):
     """The compiled engine's output times: every dt from t0, and t_end (1001 points without dt)."""
     if dt is None:
         return np.linspace(t0, t_end, 1001)
-    t_grid = np.arange(t0, t_end + 0.5 * dt, dt)
-    t_grid = t_grid[t_grid <= t_end + 1e-9 * max(1.0, abs(t_end))]
-    return np.append(t_grid, t_end) if t_grid[-1] < t_end else t_grid
+    tol = 1e-9 * max(1.0, abs(t_end))
+    n = int(np.floor((t_end - t0 + tol) / dt)) + 1
+    t_grid = t0 + dt * np.arange(n)
+    if n > 1 and t_end - t_grid[-1] <= tol:  # the last multiple of dt is t_end (to rounding):
+        t_grid[-1] = t_end                   # t_end itself, not a second point next to it
+        return t_grid
+    return np.append(t_grid, t_end)
 
 
 def _simulate_compiled(system, c, x, t0, t_end, dt, events, rtol, atol, max_step, first_step, bar=None,

@@ -245,7 +245,7 @@ def _their_extra_cycles(model, cfg, c, res, rtol, atol, max_extra=1000):
             raise HemocircuitError(f"{model.name}: their cycle-to-cycle criterion not met in {max_extra} extra cycles")
         r = simulate(c, t_end + T, t0=t_end, dt=dt, x0=x, rtol=rtol, atol=atol, progress=False)
         k_r = np.rint(np.asarray(r.t) / dt).astype(int)
-        _, first = np.unique(k_r, return_index=True)  # one row per step (the grid may repeat t_end)
+        _, first = np.unique(k_r, return_index=True)  # one row per step
         rows = first[k_r[first] > k_r[0]]
         for k in cols:
             cols[k].append(np.asarray(r.columns[k])[rows])
