@@ -333,6 +333,49 @@ def test_kernel_matches_the_numpy_hooks(name, netlist_samples):
                     _close(out[j], np.broadcast_to(ob_np[o], (1, n))[0, e], f"observable {o}, {where}")
 
 
+@pytest.mark.parametrize("name", [n for n in NAMES if TYPES[n]().kernel() is not None
+                                  and TYPES[n]().kernel().derivs_jac is not None])
+def test_kernel_partials_match_differences_of_derivs(name, netlist_samples):
+    """A kernel's optional derivs_jac (Kernel.derivs_jac): dx as its derivs, and partials in the
+    states and local unknowns that central differences of derivs confirm (1e-5 of each row's
+    size), on every sample; 0 where it does not apply."""
+    cls = TYPES[name]
+    for comp, p, x, u in samples_of(cls, netlist_samples):
+        k = comp.kernel()
+        iopt = comp.kernel_options()
+        S, L = len(comp.states()), len(comp.local_nodes) + len(comp.branches())
+        n = x.shape[1]
+        pmat = np.ascontiguousarray(np.stack([np.broadcast_to(p[nm], (1, n))[0] for nm in comp.parameters], axis=1))
+        for e in range(n):
+            xe = np.ascontiguousarray(x[0, e] * 1.001, dtype=float)  # off an equilibrium
+            ue = np.ascontiguousarray(u[0, e], dtype=float)
+            dx, Jx, Ju = np.zeros(S), np.zeros((S, S)), np.zeros((S, L))
+            if k.derivs_jac(pmat[e], xe, ue, 0.0, iopt, dx, Jx, Ju) == 0:
+                continue
+            ref = np.zeros(S)
+            k.derivs(pmat[e], xe, ue, 0.0, iopt, ref)
+            np.testing.assert_array_equal(dx, ref)
+
+            def diff(v, c, of_x):
+                h = 1e-6 * max(abs(v[c]), 1e-9 if of_x else 1.0)
+                out = []
+                for sgn in (1.0, -1.0):
+                    w = v.copy()
+                    w[c] += sgn * h
+                    d = np.zeros(S)
+                    k.derivs(pmat[e], w if of_x else xe, ue if of_x else w, 0.0, iopt, d)
+                    out.append(d)
+                return (out[0] - out[1]) / (2 * h)
+
+            FDx = np.stack([diff(xe, c, True) for c in range(S)], axis=1)
+            FDu = np.stack([diff(ue, c, False) for c in range(L)], axis=1)
+            size = np.abs(xe) + 1e-12
+            row = np.max(np.abs(FDx) * size, axis=1, keepdims=True) + np.max(np.abs(FDu), axis=1, keepdims=True)
+            where = f"{name} {comp.opts} element {e}"
+            assert np.all(np.abs(Jx - FDx) * size <= 1e-5 * row + 1e-300), where
+            assert np.all(np.abs(Ju - FDu) <= 1e-5 * row + 1e-300), where
+
+
 def test_every_type_is_sampled(netlist_samples):
     """Each registered type gets at least one parameter set (defaults or a netlist)."""
     for name, cls in TYPES.items():
