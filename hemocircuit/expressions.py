@@ -94,7 +94,7 @@ class Reference:
         """A constant as a pint quantity in SI base units (the load-time dimension check).
         Made when asked rather than stored: a stored pint quantity travels with every circuit
         sent to a worker process, whose first unpickling then builds pint's application
-        registry (0.5-1.2 s per worker; measured on the vasomotion circuit)."""
+        registry (1.56 s per worker, measured on the vasomotion circuit)."""
         return Q_(self.constant, self.base_unit)
 
 

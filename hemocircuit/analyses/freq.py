@@ -146,7 +146,7 @@ def _run_chunk_members(job):
                     advance()
                     continue
             Y, X_in = np.array([cols[o] for o in outputs]), cols[inp_node_col]
-            # the block's findings, when there are any, are this member's own
+            # no finding in the block's rows: none in this member's; else check its own rows
             findings = plausibility.check(bc, cols) if block_cols is None or block_findings else []
             if plausibility.errors(findings):
                 failed[m] = True

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import functools
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -27,6 +27,8 @@ class Layout:
     slots: dict            # (element id, parameter) -> column of P
     n_params: int
     autonomous: bool = False  # no waveform, no time-dependent element: f does not depend on t
+    #: (element ids, parameter) -> their columns of P (param_matrix; filled on first use)
+    columns: dict = field(default_factory=dict, repr=False)
 
 
 #: environment variable choosing the engine's types: "used" (default) or "all"
@@ -177,9 +179,8 @@ def param_matrix(circuit, layout: Layout) -> np.ndarray:
 def _columns(layout: Layout, ids, name) -> np.ndarray:
     """Columns of P of parameter ``name`` of elements ``ids`` (kept on the layout: a batch
     integration asks for the matrix at every call, ~60 columns for the vasomotion circuit)."""
-    cache = layout.__dict__.setdefault("_columns", {})
     key = (tuple(ids), name)
-    cols = cache.get(key)
+    cols = layout.columns.get(key)
     if cols is None:
-        cols = cache[key] = np.array([layout.slots[(eid, name)] for eid in ids], dtype=np.int64)
+        cols = layout.columns[key] = np.array([layout.slots[(eid, name)] for eid in ids], dtype=np.int64)
     return cols

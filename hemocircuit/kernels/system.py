@@ -40,13 +40,10 @@ class CompiledSystem:
         asks for it, and building the layout costs ~1 ms."""
         ps = circuit.parameters
         waves = tuple(ps.group_waves(k) for k in range(len(circuit.groups)))
-        # the engine's type set follows $HEMOCIRCUIT_ENGINE_TYPES (layout.engine_kernels)
+        # the engine's type set follows $HEMOCIRCUIT_ENGINE_TYPES (layout.engine_kernels); the
+        # entry keeps the waveform tuples alive, so their ids in the key cannot be reused
         key = ("compiled_system", os.environ.get(ENGINE_TYPES_VAR, "used")) + tuple(id(w) for w in waves)
-        # the entry holds the waveform tuples themselves: an id is only compared while its object lives
-        held, system = circuit.structure.cached(key, lambda: (waves, cls._build(circuit)))
-        if any(a is not b for a, b in zip(held, waves)):  # pragma: no cover - ids reused: build anew
-            return cls._build(circuit)
-        return system
+        return circuit.structure.cached(key, lambda: (waves, cls._build(circuit)))[1]
 
     @classmethod
     def _build(cls, circuit) -> "CompiledSystem | None":

@@ -764,14 +764,10 @@ class _Importer:
 def _read(path_or_cfg):
     if isinstance(path_or_cfg, dict):
         return path_or_cfg, None
+    from ..netlist import read_json_file
+
     path = str(path_or_cfg)
-    try:
-        with open(path) as fh:
-            return json.load(fh), path
-    except OSError as exc:
-        raise NetlistError(f"cannot read {path}: {exc.strerror}", file=path) from None
-    except json.JSONDecodeError as exc:
-        raise NetlistError(f"not valid JSON: {exc}", file=path) from None
+    return read_json_file(path, "svZeroDSolver model"), path
 
 
 def import_svzerod(path_or_cfg, units: str = "cgs", name=None, source=None) -> SvzModel:
