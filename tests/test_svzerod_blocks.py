@@ -223,6 +223,18 @@ def test_fourier_activation_is_their_normalised_series():
         assert activation(k, t + 3.0, 1.0, a) == pytest.approx(activation(k, t, 1.0, a), abs=1e-12)
 
 
+def test_fourier_series_by_recurrence_is_the_direct_sum():
+    """fourier_raw takes mode i's cos and sin by angle addition from mode 1: the same series
+    as the 25 cos/sin terms written out (their ActivationFunction.cpp), to rounding."""
+    from hemocircuit.components.svzerod.activation import FT_ELAST, fourier_raw
+
+    for T in (1.0, 1.0169, 0.8):
+        for tc in np.linspace(0.0, T, 97):
+            w = 2.0 * math.pi * np.arange(25) * tc / T
+            direct = float(np.cos(w) @ FT_ELAST[:, 0] - np.sin(w) @ FT_ELAST[:, 1])
+            assert abs(fourier_raw(tc, T) - direct) < 2e-15
+
+
 def test_fourier_chamber_reproduces_the_heart_elastance(tmp_path):
     """Their note: a ChamberElastanceInductor with the fourier activation, Emax = max F E_s and
     Emin = min F E_s gives E(t) = F(t) E_s, the ClosedLoopHeartAndPulmonary ventricle's."""

@@ -73,28 +73,38 @@ _STATES = ("V_RA", "Q_RA", "V_RV", "Q_RV", "V_pul", "V_LA", "Q_LA", "V_LV", "Q_L
 
 
 @jit
-def _activations(t, p):
-    """(AA, F): their atrial activation and the raw ventricular Fourier elastance at t."""
+def _atrial_activation(t, p):
+    """AA: their atrial activation at t (the wrapping_cosine of activation.py with Tsa, tpwave)."""
     T = p[PERIOD]
     Tsa = T * p[TSA]
     tp = T / p[TPWAVE]
     tc = np.fmod(t, T)
-    AA = 0.0
     if tc <= tp:
-        AA = 0.5 * (1.0 - math.cos(2.0 * math.pi * (tc - tp + Tsa) / Tsa))
-    elif tc >= (T - Tsa) + tp and tc < T:
-        AA = 0.5 * (1.0 - math.cos(2.0 * math.pi * (tc - tp - (T - Tsa)) / Tsa))
-    return AA, fourier_raw(tc, T)
+        return 0.5 * (1.0 - math.cos(2.0 * math.pi * (tc - tp + Tsa) / Tsa))
+    if tc >= (T - Tsa) + tp and tc < T:
+        return 0.5 * (1.0 - math.cos(2.0 * math.pi * (tc - tp - (T - Tsa)) / Tsa))
+    return 0.0
+
+
+@jit
+def _activations(t, p):
+    """(AA, F): their atrial activation and the raw ventricular Fourier elastance at t."""
+    return _atrial_activation(t, p), fourier_raw(np.fmod(t, p[PERIOD]), p[PERIOD])
+
+
+@jit
+def _atrium(AA, Emax, Kxp, Kxv, Vaso, V):
+    """Pressure of an atrium: active AA Emax (V - Vaso) plus passive Kxp (exp((V - Vaso) Kxv) - 1)
+    weighted 1 - AA (their update_solution)."""
+    return AA * Emax * (V - Vaso) + Kxp * (math.exp((V - Vaso) * Kxv) - 1.0) * (1.0 - AA)
 
 
 @jit
 def _pressures(p, x, t):
     """(P_RA, P_RV, P_pul, P_LA, P_LV, P_ao) from the states at time t."""
     AA, F = _activations(t, p)
-    psi_ra = p[KXP_RA] * (math.exp((x[0] - p[VASO_RA]) * p[KXV_RA]) - 1.0)
-    psi_la = p[KXP_LA] * (math.exp((x[5] - p[VASO_LA]) * p[KXV_LA]) - 1.0)
-    P_ra = AA * p[EMAX_RA] * (x[0] - p[VASO_RA]) + psi_ra * (1.0 - AA)
-    P_la = AA * p[EMAX_LA] * (x[5] - p[VASO_LA]) + psi_la * (1.0 - AA)
+    P_ra = _atrium(AA, p[EMAX_RA], p[KXP_RA], p[KXV_RA], p[VASO_RA], x[0])
+    P_la = _atrium(AA, p[EMAX_LA], p[KXP_LA], p[KXV_LA], p[VASO_LA], x[5])
     P_rv = F * p[ERV_S] * (x[2] - p[VRV_U])
     P_lv = F * p[ELV_S] * (x[7] - p[VLV_U])
     return P_ra, P_rv, x[4] / p[CP], P_la, P_lv, x[9] / p[CPA]
@@ -109,7 +119,9 @@ def _valve(dp, q):
 
 @jit
 def heart_stamp(p, x, u, t, iopt, A, b):
-    P_ra, P_rv, P_pul, P_la, P_lv, P_ao = _pressures(p, x, t)
+    # the two pressures it defines; the ventricles' Fourier elastance is not needed here
+    P_ra = _atrium(_atrial_activation(t, p), p[EMAX_RA], p[KXP_RA], p[KXV_RA], p[VASO_RA], x[0])
+    P_ao = x[9] / p[CPA]
     A[0, 3] = 1.0
     A[2, 3] = -1.0
     A[3, 0] = 1.0
