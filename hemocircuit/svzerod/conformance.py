@@ -164,11 +164,10 @@ def simulate_case(model, rtol=None, timed_runs=1, atol=None, cfg=None):
         write_netlist(model.mean_netlist, os.path.join(d, "mean.yaml"))
         c = load(os.path.join(d, "m.yaml"))
         cm = load(os.path.join(d, "mean.yaml"))
-    from .output import apply_their_cycle_rule
+    from .output import apply_their_cycle_rule, runs_extra_cycles
 
     apply_their_cycle_rule(model, c)
-    extra_rule = bool(model.sim.get("use_cycle_to_cycle_error")) and not any(
-        g.comp.type_name == "rcr_bc" for g in c.groups) and c.nx > 0
+    extra_rule = runs_extra_cycles(model, c)
     if extra_rule and cfg is None:
         raise HemocircuitError(f"{model.name}: use_cycle_to_cycle_error needs the model's configuration (cfg) "
                                "for their vessel caps")
@@ -199,8 +198,7 @@ def simulate_case(model, rtol=None, timed_runs=1, atol=None, cfg=None):
             res.metadata["conformance"] = {"start": start, "rtol": rtol, "atol": atol}
             t = np.asarray(res.t)
             if extra_rule:
-                meta = res.metadata["conformance"]
-                res, meta["extra_cycles"] = _their_extra_cycles(model, cfg, c, res, rtol, atol)
+                res = _with_their_extra_cycles(model, cfg, c, res, rtol, atol)
         times.append((time.perf_counter() - t0, time.process_time() - c0))
     if isinstance(res, dict) and "_their_times" in res:  # extra cycles: their row times
         t_out = res.pop("_their_times")
@@ -216,46 +214,24 @@ def simulate_case(model, rtol=None, timed_runs=1, atol=None, cfg=None):
     return res, keep, t_out[keep], np.array(times)
 
 
-def _their_extra_cycles(model, cfg, c, res, rtol, atol, max_extra=1000):
-    """Their extra cycles without an RCR (Solver.cpp run_integration): while the criterion
-    fails on the last two cycles, one more cycle from the state reached.  Returns (columns
-    dict of every row, with '_their_times' the times of their rows; number of extra
-    cycles).  With only the last cycle written (output_all_cycles false) their rows are
-    those of the given last cycle (their extra-cycle loop writes none), so res is kept."""
-    from ..analyses.transient import simulate
-    from .cycles import cycle_errors, cycle_means, their_tolerance, vessel_caps
+def _with_their_extra_cycles(model, cfg, c, res, rtol, atol):
+    """``res`` with their extra cycles (output.their_extra_cycles: while their criterion fails
+    on the last two cycles, one more).  With output_all_cycles their rows of those cycles are
+    written too, times restarting at dt in each: returned as a columns dict of every row with
+    '_their_times' their times.  Otherwise their rows are those of the given last cycle (their
+    extra-cycle loop writes none), so ``res`` is kept (its metadata says how many ran)."""
+    from .output import their_extra_cycles
 
-    T, N, n = model.period, model.points, model.n_cycles
-    dt = T / (N - 1)
-    tol = their_tolerance(model.sim)
-    quantities = [q for _, fq, pq in vessel_caps(cfg, model) for q in (fq, pq)]
-    cols = {k: [np.asarray(v)] for k, v in res.columns.items()}
-    x = np.asarray(res.x[-1])
-    t_end, extra = n * T, 0
-
-    def converged():
-        tail = {q: np.concatenate(cols[q])[-(2 * (N - 1) + 1):] for q in quantities}
-        if any(v.size < 2 * (N - 1) + 1 for v in tail.values()):  # one cycle run: no two to compare
-            return False
-        errs = [cycle_errors(cycle_means(tail[q], N))[0, -1] for q in quantities]
-        return all(e <= tol for e in errs)
-
-    while not converged():
-        if extra >= max_extra:
-            raise HemocircuitError(f"{model.name}: their cycle-to-cycle criterion not met in {max_extra} extra cycles")
-        r = simulate(c, t_end + T, t0=t_end, dt=dt, x0=x, rtol=rtol, atol=atol, progress=False)
-        k_r = np.rint(np.asarray(r.t) / dt).astype(int)
-        _, first = np.unique(k_r, return_index=True)  # one row per step
-        rows = first[k_r[first] > k_r[0]]
-        for k in cols:
-            cols[k].append(np.asarray(r.columns[k])[rows])
-        x, t_end, extra = np.asarray(r.x[-1]), t_end + T, extra + 1
-    if not model.sim.get("output_all_cycles"):
-        return res, extra
-    out = {k: np.concatenate(v) for k, v in cols.items()}
-    base = np.rint(np.asarray(res.t) / dt) * dt
-    out["_their_times"] = np.concatenate([base] + [np.arange(1, N) * dt] * extra)
-    return out, extra
+    ext = their_extra_cycles(model, cfg, c, res, rtol, atol)
+    extra = res.metadata["conformance"]["extra_cycles"] = model.sim["_extra_cycles"]
+    if not (extra and model.sim.get("output_all_cycles")):
+        return res
+    N = model.points
+    dt = model.period / (N - 1)
+    n_given = ext.t.size - extra * (N - 1)  # the rows before the extra cycles
+    out = dict(ext.columns)
+    out["_their_times"] = np.concatenate([np.rint(ext.t[:n_given] / dt) * dt] + [np.arange(1, N) * dt] * extra)
+    return out
 
 
 def compare(model, res, keep, t_out, theirs):

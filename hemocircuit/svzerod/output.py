@@ -329,10 +329,18 @@ def simulate_svzerod(model, sets=None, rtol=None, start="operating-point", cfg=N
         if keeps_its_start(model, cm, operating_point(cm).x):
             rtol, atol = DRIFT_RTOL, DRIFT_ATOL
     res = simulate(c, model.n_cycles * model.period, dt=dt, x0=x0, rtol=rtol, atol=atol, progress=False)
-    if model.sim.get("use_cycle_to_cycle_error") and cfg is not None and not any(
-            g.comp.type_name == "rcr_bc" for g in c.groups):
+    if cfg is not None and runs_extra_cycles(model, c):
         res = their_extra_cycles(model, cfg, c, res, rtol, atol)
     return c, res
+
+
+def runs_extra_cycles(model, circuit):
+    """True when their solver runs extra cycles until its criterion holds: with
+    ``use_cycle_to_cycle_error`` and no RCR boundary condition (with one it runs the count of
+    :func:`apply_their_cycle_rule` instead), and states to integrate."""
+    from .cycles import rcr_time_constants
+
+    return bool(model.sim.get("use_cycle_to_cycle_error")) and circuit.nx > 0 and not rcr_time_constants(circuit)
 
 
 def their_extra_cycles(model, cfg, c, res, rtol=None, atol=None, max_extra=1000):
