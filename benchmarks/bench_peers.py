@@ -936,7 +936,13 @@ def parse_kw(items):
     out = {}
     for it in items or []:
         k, _, v = it.partition("=")
-        out[k.strip()] = yaml.safe_load(v)
+        val = yaml.safe_load(v)
+        if isinstance(val, str):  # YAML 1.1 reads 5e-6 (no dot) as a string
+            try:
+                val = float(val)
+            except ValueError:
+                pass
+        out[k.strip()] = val
     return out
 
 
