@@ -175,6 +175,62 @@ def test_tableau_observed_order(name):
     assert np.log2(err[0] / err[1]) > q - 1 - 0.2, err
 
 
+def test_rodas5p_dense_output_order():
+    """RODAS5P's own dense output (tableaus.dense: Steinebach's coefficients, given over the
+    transformed stages and converted to the engine's classical ones) is order 4 inside a step:
+    halving h divides its local error at theta = 0.3, 0.5, 0.8 by ~2^5, against a DOP853
+    reference; it ends on the step's solution (theta = 1) and starts on x0 (theta = 0)."""
+    from scipy.integrate import solve_ivp
+
+    from hemocircuit.kernels.tableaus import classical, dense
+
+    def f(t, y):
+        return np.array([-2 * y[0] + y[1] ** 2 + np.sin(t), -y[1] + np.cos(t) * y[0]])
+
+    gamma, A, G, b, e, _ = classical("rodas5p")
+    H = dense("rodas5p")
+    assert H.shape == (3, 8)
+    c, d = A.sum(axis=1), gamma + G.sum(axis=1)
+    t0, y0 = 0.3, np.array([1.0, 0.5])
+    errs = []
+    for h in (0.1, 0.05):
+        J = np.array([[-2.0, 2 * y0[1]], [np.cos(t0), -1.0]])
+        ft = np.array([np.cos(t0), -np.sin(t0) * y0[0]])
+        W = np.eye(2) - gamma * h * J
+        K = np.zeros((8, 2))
+        for s in range(8):
+            K[s] = np.linalg.solve(W, h * f(t0 + c[s] * h, y0 + A[s, :s] @ K[:s]) + h * J @ (G[s, :s] @ K[:s])
+                                   + h * h * d[s] * ft)
+        y1, D = y0 + b @ K, H @ K
+        ref = solve_ivp(f, (t0, t0 + h), y0, method="DOP853", rtol=1e-13, atol=1e-14, dense_output=True)
+
+        def at(th):
+            return (1 - th) * y0 + th * (y1 + (1 - th) * (D[0] + th * (D[1] + th * D[2])))
+        assert np.array_equal(at(1.0), y1) and np.allclose(at(0.0), y0, rtol=0, atol=1e-15)
+        errs.append(max(np.max(np.abs(at(th) - ref.sol(t0 + th * h))) for th in (0.3, 0.5, 0.8)))
+    assert np.log2(errs[0] / errs[1]) > 4.4, errs
+
+
+def test_step_size_controllers():
+    """Both controllers reach the RC closed form at rtol 1e-8 (the predictive one, RODAS5P's
+    default, in fewer steps here); an unknown one is an error naming the choices."""
+    from hemocircuit.kernels import tableaus
+
+    c = hc.load(os.path.join(TEST_NETLISTS, "base_rc.yaml"))
+    system = CompiledSystem.of(c)
+    t = np.linspace(0.0, 5.0, 101)
+    steps = {}
+    for ctrl in ("pi", "predictive"):
+        X, st = system.integrate_batch(t, np.zeros((1, c.nx)), system.params(c), rtol=1e-8, controller=ctrl)
+        assert st[0, 0] == 0
+        expect = 0.5 * 80.0 * (1 - np.exp(-t))
+        assert np.max(np.abs(X[0, :, c.state_names.index("C1.V")] - expect)) < 2e-7 * 40.0, ctrl
+        steps[ctrl] = st[0, 2]
+    assert steps["predictive"] < steps["pi"], steps
+    with pytest.raises(ValueError, match="predictive"):
+        tableaus.packed("rodas5p", controller="fast")
+
+
 @pytest.mark.parametrize("name", sorted(NOMINAL_ORDER))
 def test_tableau_stiff_limit(name):
     """R(z) at z = h lambda -> -inf: 0 for the L-stable methods, ~0.63 for ROS34PW3 (A-stable

@@ -636,6 +636,17 @@ def hermite(x0, f0, x1, f1, h, s, out):
 
 
 @njit(cache=True, nogil=True, internal=True, _nrt=False)
+def stage_dense(x0, x1, D, nd, s, out):
+    """The method's own dense output (tableaus module docstring): (1 - s) x0 +
+    s (x1 + (1 - s) (D_0 + s (D_1 + s D_2))), rows of D past nd zero."""
+    for i in range(x0.shape[0]):
+        p = 0.0
+        for m in range(nd - 1, -1, -1):
+            p = D[m, i] + s * p
+        out[i] = (1 - s) * x0[i] + s * (x1[i] + (1 - s) * p)
+
+
+@njit(cache=True, nogil=True, internal=True, _nrt=False)
 def hermite_root(y0, d0, y1, d1):
     """First fraction s in [0, 1] where the cubic (values y0 > 0 >= y1, scaled slopes d0, d1)
     crosses zero (bisection, 50 halvings)."""
@@ -686,6 +697,9 @@ def integrate(t_out, x0, P, lay, scales, lim_i, lim_b, lim_r, breaks, bjump, rto
     oC = oE + ns
     oD = oC + ns
     oR = oD + ns
+    oH = oR + ns
+    nd = int(tab[oH])  # dense-output rows (0: cubic Hermite), H at oH + 1 (nd x ns)
+    predictive = tab[oH + 1 + nd * ns] != 0.0  # step-size controller (tableaus.CONTROLLERS)
     work = make_work(lay)
     jw = make_jac_work(lay)
     x = x0.copy()
@@ -696,6 +710,7 @@ def integrate(t_out, x0, P, lay, scales, lim_i, lim_b, lim_r, breaks, bjump, rto
     gs = np.empty(nx)
     err = np.empty(nx)
     K = np.empty((ns, nx))
+    Dd = np.zeros((max(nd, 1), nx))
     fr = np.empty(nx)
     J = np.zeros((nx, nx))
     ft = np.zeros(nx)
@@ -724,6 +739,7 @@ def integrate(t_out, x0, P, lay, scales, lim_i, lim_b, lim_r, breaks, bjump, rto
     status = 0
     nrej_run = 0
     err_prev = 1.0
+    h_prev = 0.0  # the last accepted step (predictive controller; 0 before the first)
     while t < t_end and k_out < T:
         if nsteps >= max_steps:
             status = -2
@@ -816,11 +832,18 @@ def integrate(t_out, x0, P, lay, scales, lim_i, lim_b, lim_r, breaks, bjump, rto
         if enorm <= 1.0:
             # PI step-size control (Gustafsson): smoother steps, fewer rejections than I alone
             en = max(enorm, 1e-10)
-            fac = 0.9 * en ** (-0.7 / q) * err_prev ** (0.4 / q)
-            fac = min(5.0, max(0.2, fac))
+            if predictive:
+                fac = min(6.0, max(0.2, 0.9 * en ** (-1.0 / q)))
+                if h_prev > 0.0:
+                    fac = min(fac, max(0.2, min(6.0, 0.9 * (hh / h_prev) * (err_prev / (en * en)) ** (1.0 / q))))
+                h_prev = hh
+                err_prev = max(en, 1e-2)
+            else:
+                fac = 0.9 * en ** (-0.7 / q) * err_prev ** (0.4 / q)
+                fac = min(5.0, max(0.2, fac))
+                err_prev = max(en, 1e-4)
             if nrej_run > 0:  # just after a rejection: no growth (Hairer & Wanner's facmax = 1)
                 fac = min(fac, 1.0)
-            err_prev = max(en, 1e-4)
             tn = tb if at_break else t + hh
             nfev += 1
             ok = rhs_into(min(tn, tlim), xn, P, lay, work, fn)  # left limit at a breakpoint
@@ -863,11 +886,23 @@ def integrate(t_out, x0, P, lay, scales, lim_i, lim_b, lim_r, breaks, bjump, rto
             if not ok:
                 status = -3
                 break
-            # dense output: cubic Hermite between (t, x, f) and (tn, xn, fn)
+            # dense output: the method's own where it has one and the step is whole (no
+            # bound hit or hold changed its end), else cubic Hermite of (t, x, f), (tn, xn, fn)
+            own = nd > 0 and k_hit < 0 and not held
+            if own and k_out < T and t_out[k_out] <= tn + 1e-12 * max(1.0, abs(tn)):
+                for m in range(nd):
+                    for i in range(nx):
+                        acc = 0.0
+                        for s in range(ns):
+                            acc += tab[oH + 1 + m * ns + s] * K[s, i]
+                        Dd[m, i] = acc
             while k_out < T and t_out[k_out] <= tn + 1e-12 * max(1.0, abs(tn)):
                 sfrac = (t_out[k_out] - t) / hh if hh > 0 else 1.0
                 sfrac = min(1.0, max(0.0, sfrac))
-                hermite(x, f, xn, fn, hh, sfrac, xh)
+                if own:
+                    stage_dense(x, xn, Dd, nd, sfrac, xh)
+                else:
+                    hermite(x, f, xn, fn, hh, sfrac, xh)
                 for i in range(nx):
                     out[k_out, i] = xh[i]
                 k_out += 1

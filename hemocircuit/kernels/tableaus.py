@@ -20,11 +20,19 @@ transformed form u_i = sum_j Gamma_ij k_j of RODAS-type codes back to the classi
 RODAS-type methods assume a fairly exact Jacobian: the engine refreshes it every step for them
 (``jac_reuse`` = 1; reusing it over 2 or 3 steps doubled the step count of the vasomotion run).
 
+Dense output: where the method has one (``rodas5p``: Steinebach's, as in OrdinaryDiffEq.jl's
+Rodas5PTableau h21..h48, order 4), x(t + theta h) =
+(1 - theta) x + theta (x_new + (1 - theta) (D_1 + theta (D_2 + theta D_3))) with
+D_m = sum_s H_ms k_s; the others use the cubic Hermite interpolant of (x, f) at both ends
+(order 3), which limits a large step's accuracy between its ends.
+
 Packed array (read by the engine): [ns, gamma, q, jac_reuse, event_restart, soft_kinks, autonomous,
 local_jacobian,
-A (ns*ns, row major), G (ns*ns), b (ns), e (ns), c (ns), d (ns), reuse (ns)], where q is the
-order of the error estimate (step-size exponent 1/q), reuse[s] = 1 when stage s evaluates f at
-the same point as stage s-1 (ROS4-type methods; the engine then skips the evaluation).
+A (ns*ns, row major), G (ns*ns), b (ns), e (ns), c (ns), d (ns), reuse (ns), nd, H (nd*ns),
+controller],
+where q is the order of the error estimate (step-size exponent 1/q), reuse[s] = 1 when stage s
+evaluates f at the same point as stage s-1 (ROS4-type methods; the engine then skips the
+evaluation), nd the number of dense-output rows (0: Hermite; at most 3).
 """
 from __future__ import annotations
 
@@ -68,9 +76,11 @@ def _ros34pw3():
     return gamma, A, Gam - gamma * np.eye(4), b, b - bhat, 3
 
 
-def _rodas(gamma, a, C, order):
+def _rodas(gamma, a, C, order, H_transformed=None):
     """RODAS-type (stiffly accurate): the solution is the last stage's point plus u_ns, the
-    embedded one the last stage's point (m = last row of a with 1, m_err = e_ns)."""
+    embedded one the last stage's point (m = last row of a with 1, m_err = e_ns).
+    ``H_transformed``: dense-output rows over the transformed stages u (u = Gamma k), returned
+    over the classical ones as H Gamma (as b = m Gamma)."""
     a = np.asarray(a, dtype=float)
     ns = a.shape[0]
     m = a[-1].copy()
@@ -78,7 +88,10 @@ def _rodas(gamma, a, C, order):
     m_err = np.zeros(ns)
     m_err[-1] = 1.0
     A, G, b, e = _from_transformed(gamma, a, C, m, m_err)
-    return gamma, A, G, b, e, order
+    H = np.zeros((0, ns))
+    if H_transformed is not None:
+        H = np.asarray(H_transformed, dtype=float) @ (G + gamma * np.eye(ns))
+    return gamma, A, G, b, e, order, H
 
 
 def _rodas4():
@@ -94,7 +107,7 @@ def _rodas4():
          [-0.1073529058151375, -9.594562251023355, -20.47028614809616, 0, 0, 0],
          [7.496443313967647, -10.24680431464352, -33.99990352819905, 11.70890893206160, 0, 0],
          [8.083246795921522, -7.981132988064893, -31.52159432874371, 16.31930543123136, -6.058818238834054, 0]]
-    return _rodas(0.25, a, C, 4)
+    return _rodas(0.25, a, C, 4)[:6]
 
 
 def _rodas5p():
@@ -117,7 +130,14 @@ def _rodas5p():
                 -28.087943162872662]
     C[7, :7] = [37.80277123390563, -3.2571969029072276, 112.26918849496327, 66.9347231244047, -40.06618937091002,
                 -54.66780262877968, -9.48861652309627]
-    return _rodas(0.21193756319429014, a, C, 5)
+    # dense output (Steinebach 2023; OrdinaryDiffEq.jl h21..h28, h31..h38, h41..h48)
+    H = [[25.948786856663858, -2.5579724845846235, 10.433815404888879, -2.3679251022685204,
+          0.524948541321073, 1.1241088310450404, 0.4272876194431874, -0.17202221070155493],
+         [-9.91568850695171, -0.9689944594115154, 3.0438037242978453, -24.495224566215796,
+          20.176138334709044, 15.98066361424651, -6.789040303419874, -6.710236069923372],
+         [11.419903575922262, 2.8879645146136994, 72.92137995996029, 80.12511834622643,
+          -52.072871366152654, -59.78993625266729, -0.15582684282751913, 4.883087185713722]]
+    return _rodas(0.21193756319429014, a, C, 5, H)
 
 
 METHODS = {"ros34pw2": _ros34pw2, "ros34pw3": _ros34pw3, "rodas4": _rodas4, "rodas5p": _rodas5p}
@@ -136,32 +156,52 @@ BDF = "bdf"
 #: reference at rtol 1e-6 (13 % of the amplitude), RODAS5P's 6.8e-4 at 1e-5.  So BDF is used
 #: where it is as accurate: the forced runs of ``freq`` (docs/performance.md).
 DEFAULT = "rodas5p"
+#: step-size controllers (engine_template.integrate): "pi", Gustafsson's PI rule
+#: h_new = 0.9 h err^(-0.7/q) err_prev^(0.4/q); "predictive", Gustafsson's predictive rule as in
+#: Hairer & Wanner's RODAS/RADAU5 (IV.8 (8.21)): the smaller of the I rule 0.9 h err^(-1/q) and
+#: 0.9 h (h / h_prev) (err_prev / err^2)^(1/q), err_prev >= 1e-2; growth within [0.2, 6]
+CONTROLLERS = {"pi": 0, "predictive": 1}
+CONTROLLER = {"rodas5p": "predictive"}
 
 
 def classical(name):
     """(gamma, A, G, b, e, q) of method ``name`` in the classical form."""
+    return _method(name)[:6]
+
+
+def dense(name):
+    """The dense-output rows H (nd x ns) over the classical stages; nd = 0 without one."""
+    return _method(name)[6]
+
+
+def _method(name):
     if name not in METHODS:
         raise ValueError(f"unknown integration method {name!r}: choose one of {sorted(METHODS)}")
-    return METHODS[name]()
+    m = METHODS[name]()
+    return m if len(m) == 7 else (*m, np.zeros((0, len(m[3]))))
 
 
 def packed(name="rodas5p", jac_reuse=None, event_restart=1, soft_kinks=1, autonomous=0,
-           local_jacobian=1) -> np.ndarray:
+           local_jacobian=1, controller=None) -> np.ndarray:
     """The float64 array the engine reads (see the module docstring).  ``autonomous``: the
     circuit has no waveform and no time-dependent element, so df/dt = 0 is not evaluated.
     ``local_jacobian``: the state Jacobian element by element, composed through the nodal
     solve (engine_template.local_jacobian_into) where it applies: 1 with the kernels' analytic
     partials where they have them (Kernel.derivs_jac), 2 by element-local differences only;
-    0: one whole right-hand side differenced per state.  (Built once per set of arguments and copied: packing
-    costs ~0.5 ms, a third of a short run's Python time.)"""
+    0: one whole right-hand side differenced per state.  ``controller``: the step-size rule,
+    ``"pi"`` or ``"predictive"`` (module docstring); default CONTROLLER[name].  (Built once per
+    set of arguments and copied: packing costs ~0.5 ms, a third of a short run's Python time.)"""
     jr = JAC_REUSE.get(name) if jac_reuse is None else int(jac_reuse)
+    ctrl = CONTROLLER.get(name, "pi") if controller is None else controller
+    if ctrl not in CONTROLLERS:
+        raise ValueError(f"unknown step-size controller {ctrl!r}: choose one of {sorted(CONTROLLERS)}")
     return _packed(name, jr, float(event_restart), float(soft_kinks), float(autonomous),
-                   float(local_jacobian)).copy()
+                   float(local_jacobian), float(CONTROLLERS[ctrl])).copy()
 
 
 @functools.lru_cache(maxsize=64)
-def _packed(name, jr, event_restart, soft_kinks, autonomous, local_jacobian):
-    gamma, A, G, b, e, q = classical(name)
+def _packed(name, jr, event_restart, soft_kinks, autonomous, local_jacobian, controller):
+    gamma, A, G, b, e, q, H = _method(name)
     ns = len(b)
     c = A.sum(axis=1)
     d = gamma + G.sum(axis=1)
@@ -170,4 +210,5 @@ def _packed(name, jr, event_restart, soft_kinks, autonomous, local_jacobian):
         if np.allclose(A[s], A[s - 1], rtol=0, atol=1e-14):
             reuse[s] = 1.0
     head = [ns, gamma, q, jr, event_restart, soft_kinks, autonomous, local_jacobian]
-    return np.concatenate([head, A.ravel(), G.ravel(), b, e, c, d, reuse]).astype(np.float64)
+    return np.concatenate([head, A.ravel(), G.ravel(), b, e, c, d, reuse, [H.shape[0]], H.ravel(),
+                           [controller]]).astype(np.float64)
