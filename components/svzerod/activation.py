@@ -179,6 +179,53 @@ def activation(kind, t, T, a):
     return 0.0
 
 
+def kink_phases(kind, T, a):
+    """Times within the first period where A(t) (or its slope) is not smooth, from which the
+    function repeats every T: the ends of the cosine pieces above (two_hill: its onset at
+    t_shift, where s^m1 starts; fourier: none).  ``a``: {ACT_PARAMS name: value}."""
+    if kind == "half_cosine":
+        return [a["t_active"], a["t_active"] + a["t_twitch"]]
+    if kind == "piecewise_cosine":
+        return [a["contract_start"], a["contract_start"] + a["contract_duration"], a["relax_start"],
+                a["relax_start"] + a["relax_duration"]]
+    if kind == "two_hill":
+        return [a["t_shift"]]
+    if kind == "wrapping_cosine":
+        return [T / a["tpwave"], T - T * a["Tsa"] + T / a["tpwave"]]
+    return []
+
+
+def activation_breakpoints(kind, p, t0, t1):
+    """The kinks of activation ``kind`` in (t0, t1) for every parameter set and element of
+    ``p`` (Component.breakpoints of the chambers)."""
+    return periodic_breakpoints(lambda T, a: kink_phases(kind, T, a), p, USED[kind], t0, t1)
+
+
+def periodic_breakpoints(phases_of, p, names, t0, t1):
+    """Times in (t0, t1) of ``phases_of(T, {name: value}) + n T`` (n >= 0) over every
+    parameter set and element of ``p`` (arrays; ``p['period']`` is T, ``names`` the others
+    the phases need): the scheduled kinks of a periodic function of time, where the
+    integrators end a step."""
+    names = tuple(names)
+    arrs = np.broadcast_arrays(*(np.asarray(p[n], float) for n in ("period",) + names))
+    out = []
+    for vals in set(zip(*(v.reshape(-1).tolist() for v in arrs))):
+        T = vals[0]
+        for ph in phases_of(T, dict(zip(names, vals[1:]))):
+            n0, n1 = max(0, math.floor((t0 - ph) / T)), math.ceil((t1 - ph) / T)
+            if n1 - n0 > MAX_BREAKPOINTS:
+                raise ValueError(f"{n1 - n0} cycles of period {T:g} s in ({t0:g}, {t1:g}) s: too many to step "
+                                 f"onto each kink; integrate over fewer cycles at a time")
+            out.append(ph + T * np.arange(n0, n1 + 1, dtype=float))
+    pts = np.unique(np.concatenate(out)) if out else np.empty(0)
+    return [float(v) for v in pts[(pts > t0) & (pts < t1)]]
+
+
+#: most cycles periodic_breakpoints lists in one call (a run of 1e6 cardiac cycles at once
+#: would hold 1e6 kinks per phase)
+MAX_BREAKPOINTS = 1_000_000
+
+
 def activation_np(kind, t, p):
     """Activation for every parameter set and element: p[name] arrays (B, E) -> (B, E) (``t``
     a float or an array broadcasting with them)."""

@@ -27,7 +27,8 @@ import numpy as np
 from hemocircuit.component import Component, Observable, Option, Param, State, Storage
 
 from ._common import batch_shape, E_UNIT, L_UNIT, jit
-from .activation import KINDS, act_parameters, activation, activation_np, check_activation
+from .activation import (KINDS, act_parameters, activation, activation_np, activation_breakpoints,
+                         check_activation)
 
 _OWN = {"Emax": Param(E_UNIT, lower=0.0, doc="maximum elastance"),
         "Emin": Param(E_UNIT, lower=0.0, doc="minimum elastance"),
@@ -63,6 +64,10 @@ class ChamberElastanceInductor(Component):
 
     def check(self, p):
         return check_activation(self.opts["activation"], p)
+
+    def breakpoints(self, p, t0, t1):
+        """The activation's kinks (activation.kink_phases): steps end there."""
+        return activation_breakpoints(self.opts["activation"], p, t0, t1)
 
     def _elastance(self, p, t):
         a = activation_np(self.opts["activation"], t, p)

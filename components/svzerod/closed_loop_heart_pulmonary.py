@@ -45,7 +45,7 @@ import numpy as np
 from hemocircuit.component import Component, Observable, Param, State, Storage
 
 from ._common import batch_shape, C_UNIT, E_UNIT, L_UNIT, R_UNIT, each_element, jit, kernel_derivatives
-from .activation import fourier_raw
+from .activation import activation_breakpoints, fourier_raw
 
 _P = {"period": ("s", "cardiac period (their cardiac_cycle_period)"),
       "Tsa": ("dimensionless", "atrial systole fraction of the period"),
@@ -182,6 +182,11 @@ class ClosedLoopHeartAndPulmonary(Component):
             "right ventricular outflow (pulmonary valve)", "pulmonary capacitor charge Cp P_pul",
             "left atrial volume", "left atrial outflow (mitral)", "left ventricular volume",
             "left ventricular outflow (aortic valve)", "aortic capacitor volume Cpa P_out")))
+
+    def breakpoints(self, p, t0, t1):
+        """The atrial activation's kinks (wrapping_cosine; the ventricles' Fourier series is
+        smooth): steps end there."""
+        return activation_breakpoints("wrapping_cosine", p, t0, t1)
 
     def hard_limits(self):
         """A valve's flow never falls below 0 (their post_solve zeroes a closed valve's flow):

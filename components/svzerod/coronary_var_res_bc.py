@@ -24,6 +24,7 @@ import numpy as np
 from hemocircuit.component import Observable, Param
 
 from ._common import batch_shape, R_UNIT, jit
+from .activation import periodic_breakpoints
 from .coronary_bc import CoronaryBC, coronary_stamp
 
 
@@ -58,6 +59,11 @@ class CoronaryVarResBC(CoronaryBC):
 
     def observables(self):
         return super().observables() + (Observable("Ram", "mmHg*s/mL", "microvascular resistance Ram(t)"),)
+
+    def breakpoints(self, p, t0, t1):
+        """Where Ram(t)'s pieces meet (its second derivative jumps): each period's start, T_vc
+        and T_vc + T_vr; steps end there."""
+        return periodic_breakpoints(lambda T, a: [0.0, a["T_vc"], a["T_vc"] + a["T_vr"]], p, ("T_vc", "T_vr"), t0, t1)
 
     def _ram(self, p, t):
         shape = batch_shape(p, np.shape(t))

@@ -16,7 +16,8 @@ import numpy as np
 from hemocircuit.component import Component, Observable, Option, Param, State, Storage
 
 from ._common import batch_shape, E_UNIT, jit
-from .activation import KINDS, act_parameters, activation, activation_np, check_activation
+from .activation import (KINDS, act_parameters, activation, activation_np, activation_breakpoints,
+                         check_activation)
 
 
 class LinearElastanceChamber(Component):
@@ -49,6 +50,10 @@ class LinearElastanceChamber(Component):
 
     def check(self, p):
         return check_activation(self.opts["activation"], p)
+
+    def breakpoints(self, p, t0, t1):
+        """The activation's kinks (activation.kink_phases): steps end there."""
+        return activation_breakpoints(self.opts["activation"], p, t0, t1)
 
     def _elastance(self, p, t):
         return p["Epass"] + p["Emax"] * activation_np(self.opts["activation"], t, p)
