@@ -14,6 +14,11 @@ middle of their range, and the accuracy of the timed run: its largest error agai
 converged results (``converged/``, relative to each variable's range, as the conformance
 runner) next to the acceptance tolerance of the case.  The machine is shared: the load
 average is printed, and under load the CPU times are the figures to read.
+
+Where their Python module ``pysvzerod`` is importable (built from their source; not a
+dependency of this project), their solver is also timed here, in this process, on the same
+JSON (``pysvzerod.simulate``: one untimed call, then the median of ``--repeat``), and the
+ratios are to that side-by-side time ("here"); the README's figure stays in its column.
 """
 from __future__ import annotations
 
@@ -36,6 +41,22 @@ def their_ms(text):
     return float(np.mean(nums)) if nums else float("nan")
 
 
+def time_theirs(cfg, repeat):
+    """Median wall time [ms] of their in-process solve of ``cfg``, or None without pysvzerod."""
+    try:
+        import pysvzerod
+    except ImportError:
+        return None
+    import time
+    pysvzerod.simulate(cfg)
+    times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        pysvzerod.simulate(cfg)
+        times.append(time.perf_counter() - t0)
+    return float(np.median(times)) * 1e3
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--folder", default=os.path.join(HERE, "..", "..", "shared", "svzerod"))
@@ -52,11 +73,12 @@ def main(argv=None):
     theirs = their_times(os.path.join(folder, "README.md"))
     print("load average %.1f %.1f %.1f" % os.getloadavg())
     print(f"{'case':30s} {'rtol':>6s} {'ours median':>12s} {'min':>9s} {'CPU':>9s} {'theirs':>12s} "
-          f"{'wall x':>6s} {'CPU x':>6s} {'err P / Q vs converged':>22s} {'tol':>6s}")
+          f"{'here':>9s} {'wall x':>6s} {'CPU x':>6s} {'err P / Q vs converged':>22s} {'tol':>6s}")
     for name in args.case or TIMED:
         path = os.path.join(folder, "cases", f"{name}.json")
         with open(path) as fh:
-            model = import_svzerod(path, units=guess_units(json.load(fh)))
+            cfg = json.load(fh)
+        model = import_svzerod(path, units=guess_units(cfg))
         simulate_case(model)  # loads (or compiles) the engine
         res, keep, t_out, times = simulate_case(model, timed_runs=args.repeat)
         rtol = res.metadata.get("conformance", {}).get("rtol", case_rtol(model))
@@ -67,8 +89,11 @@ def main(argv=None):
             err = f"{e_p:.1e} / {e_q:.1e}"
         wall, cpu = np.median(times, axis=0) * 1e3
         ref = theirs.get(name, "")
+        here = time_theirs(cfg, args.repeat)
+        base = their_ms(ref) if here is None else here
+        here_s = "-" if here is None else f"{here:.2f} ms"
         print(f"{name:30s} {rtol:6.0e} {wall:9.2f} ms {times[:, 0].min() * 1e3:6.2f} ms {cpu:6.2f} ms "
-              f"{ref:>12s} {wall / their_ms(ref):6.2f} {cpu / their_ms(ref):6.2f} {err:>22s} "
+              f"{ref:>12s} {here_s:>9s} {wall / base:6.2f} {cpu / base:6.2f} {err:>22s} "
               f"{tolerances(name, model)[0]:6.0e}")
     print("load average %.1f %.1f %.1f" % os.getloadavg())
     return 0
