@@ -160,3 +160,45 @@ def test_handover_at_a_hard_limit(monkeypatch):
     assert res.stats["limit_events"] >= 2 and np.min(res["art.Ca"]) >= c.hard_limits()[0][1] - 1e-15
     on_grid = np.isin(np.round(res.t, 9), np.round(ref.t, 9))
     assert np.max(np.abs(res["art.r"][on_grid] - ref["art.r"])) < 0.05  # um, on ~40 um swings
+
+
+_PREBUILD_SCRIPT = r"""
+import json, os, sys
+import numpy as np
+import hemocircuit as hc
+from hemocircuit.kernels import prebuild
+from hemocircuit.kernels.system import CompiledSystem
+c = hc.load(sys.argv[1])
+system = CompiledSystem.of(c)
+fn = system.mod.local_jacobian_into
+before = prebuild._in_cache(fn)
+proc = prebuild.start(system)
+rc = proc.wait(timeout=900) if proc is not None else None
+after = prebuild._in_cache(fn)
+again = prebuild.start(system)  # cached now: no second helper
+t = np.linspace(0.0, 5.0, 51)
+X, st = system.integrate_batch(t, np.zeros((1, c.nx)), system.params(c), rtol=1e-8)
+print(json.dumps({"before": before, "rc": rc, "after": after, "again": again is None,
+                  "loaded_not_compiled": fn.stats.cache_hits and not fn.stats.cache_misses,
+                  "V": X[0, :, c.state_names.index("C1.V")].tolist(), "status": float(st[0, 0])}))
+"""
+
+
+def test_prebuild_helper_compiles_the_jacobian_for_the_integrator(tmp_path):
+    """kernels.prebuild in a fresh cache: the helper process compiles local_jacobian_into into
+    numba's cache with the integrator's argument types, so the integrator loads it instead of
+    compiling it (numba's cache hit, no miss), starts no second helper once it is cached, and
+    the run is right (R-C charging, V = C P (1 - exp(-t/RC)))."""
+    import json
+
+    env = {**os.environ, "HEMOCIRCUIT_CACHE_DIR": str(tmp_path / "hc"), "NUMBA_CACHE_DIR": str(tmp_path / "nb"),
+           "HEMOCIRCUIT_ENGINE_TYPES": "used", "HEMOCIRCUIT_PREBUILD": "1"}
+    out = subprocess.run([sys.executable, "-c", _PREBUILD_SCRIPT, os.path.join(TEST_NETLISTS, "base_rc.yaml")],
+                         env=env, capture_output=True, text=True, timeout=1200)
+    assert out.returncode == 0, out.stderr[-3000:]
+    r = json.loads(out.stdout.strip().splitlines()[-1])
+    assert r["before"] is False and r["rc"] == 0 and r["after"] is True and r["again"] is True
+    assert r["loaded_not_compiled"], r
+    t = np.linspace(0.0, 5.0, 51)
+    assert r["status"] == 0
+    assert np.max(np.abs(np.array(r["V"]) - 0.5 * 80.0 * (1 - np.exp(-t)))) < 2e-7 * 40.0

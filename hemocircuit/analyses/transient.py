@@ -153,6 +153,11 @@ def _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step
                                         and np.isfinite(output_from) and t0 <= output_from <= t_end):
         raise SolverError(f"output_from = {output_from!r} s: the first output time must lie in the run, "
                           f"between t0 = {t0:g} s and t_end = {t_end:g} s")
+    if engine != "scipy" and compile == "wait" and (engine == "compiled" or method == "BDF"):
+        from ..kernels.system import CompiledSystem
+        system = CompiledSystem.of(c)
+        if system is not None:  # a first compile: its second process starts before the operating point
+            system.start_prebuild()
     x = operating_point(c, t=t0).x if x0 is None else np.asarray(x0, dtype=float).copy()
     if ic:
         from ..ic import apply_ic
@@ -177,7 +182,7 @@ def _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step
                 handover = _Handover(system, t0, t_end)  # the scipy path below, until the build is ready
                 if wanted(progress):
                     print("hemocircuit: the compiled engine for these component types is being built in the "
-                          "background (first run, about a minute); integrating on the scipy path meanwhile",
+                          "background (first run, about 20-45 s); integrating on the scipy path meanwhile",
                           file=sys.stderr)
             else:
                 with bar(t_end - t0, "tran (simulated time)", unit="s", progress=progress) as pbar:

@@ -1,0 +1,76 @@
+"""Compile part of a new engine in a second process while the first compiles the rest.
+
+A first compilation of an engine is one numba compilation of the integrator, which types and
+lowers every function it calls, one after the other, on one core (docs/performance.md: 21 s
+for the vasomotion engine, of which the element-local Jacobian ``local_jacobian_into`` 4.9 s).
+Numba caches each function on its own: when the integrator reaches a callee that is already
+in the cache for the same argument types, it loads it instead of compiling it.  So
+:func:`start` launches ``python -m hemocircuit.kernels.prebuild JOB``, which compiles
+``local_jacobian_into`` (through the never-run ``compile_local_jacobian``, whose arguments have
+the integrator's types) while this process compiles the right-hand side and the nodal solve,
+which the integrator reaches first.  If the helper is late or fails, the integrator compiles
+the function itself, as without it: the helper only ever saves time.
+"""
+from __future__ import annotations
+
+import os
+import pickle
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+
+def start(system):
+    """Start the helper for ``system``'s engine unless ``local_jacobian_into`` is compiled in
+    this process or in numba's cache already (or ``$HEMOCIRCUIT_PREBUILD`` is 0: the benchmark's
+    switch).  Returns the process or None."""
+    fn = system.mod.local_jacobian_into
+    if os.environ.get("HEMOCIRCUIT_PREBUILD", "1") == "0" or fn.overloads or _in_cache(fn):
+        return None
+    mod = Path(system.mod.__file__)
+    job = mod.with_suffix(f".{os.getpid()}.prebuild")
+    try:
+        with open(job, "wb") as fh:
+            pickle.dump({"module": str(mod), "lay": system.lay, "nx": int(system.scales.size),
+                         "nP": int(system.layout.n_params)}, fh)
+        return subprocess.Popen([sys.executable, "-m", "hemocircuit.kernels.prebuild", str(job)],
+                                stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                                start_new_session=True, close_fds=True)
+    except (OSError, pickle.PicklingError, AttributeError, TypeError):
+        job.unlink(missing_ok=True)
+        return None
+
+
+def _in_cache(dispatcher) -> bool:
+    """True when numba's on-disk cache holds some compilation of ``dispatcher`` (its index
+    file exists; numba keeps one per function).  False if that cannot be told."""
+    try:
+        return Path(dispatcher._cache._cache_file._index_path).exists()
+    except AttributeError:  # another numba version's layout: assume not cached
+        return False
+
+
+def _run(job: Path) -> int:
+    import importlib.util
+
+    import numba
+
+    with open(job, "rb") as fh:
+        spec = pickle.load(fh)
+    job.unlink(missing_ok=True)
+    path = Path(spec["module"])
+    loader = importlib.util.spec_from_file_location(path.stem, path)
+    mod = importlib.util.module_from_spec(loader)
+    sys.modules[path.stem] = mod
+    loader.loader.exec_module(mod)
+    x, P = np.empty(spec["nx"]), np.empty(spec["nP"])
+    P.setflags(write=False)  # integrate_batch's P is a read-only view (np.broadcast_to) in a single run
+    sig = (numba.float64, numba.typeof(x), numba.typeof(P), numba.typeof(spec["lay"]), numba.typeof(x))
+    mod.compile_local_jacobian.compile(sig)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(_run(Path(sys.argv[1])))
