@@ -89,7 +89,7 @@ def simulate(circuit, t_end, dt=None, t0=0.0, x0=None, protocol=None, method="BD
     progress: a bar of the simulated time on stderr (default: :mod:`hemocircuit.progress`'s
         setting, on for the command line unless --quiet).
     compile: with engine 'auto', what a run does when the compiled engine of the circuit's
-        component types is not built yet (its first run; building takes about a minute):
+        component types is not built yet (its first run; building takes 20-45 s):
         'wait' compiles it first; 'background' starts the build in another process
         (:mod:`hemocircuit.kernels.background`), integrates on the scipy path meanwhile and
         continues on the compiled engine from the first piece after the build is ready

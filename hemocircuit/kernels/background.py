@@ -1,6 +1,6 @@
 """Build a circuit's compiled engine in a background process while the first run goes on.
 
-Compiling an engine for a new set of component types takes about a minute (see
+Compiling an engine for a new set of component types takes 20-45 s on 2 cores (see
 docs/performance.md).  ``hemocircuit tran`` does not wait for it: when the engine is not
 built yet it starts this module as a detached process (``python -m
 hemocircuit.kernels.background JOB``), integrates on the scipy path meanwhile, and hands the
