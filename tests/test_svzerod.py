@@ -131,6 +131,37 @@ def test_activation_functions_against_their_definitions():
     assert activation(1, 0.1, T, p) == 0.0 and activation(1, 1.6, T, p) == pytest.approx(0.5 * (1 + np.cos(np.pi * 0.1 / 0.3)))
 
 
+@pytest.mark.parametrize("kind,values", [
+    ("half_cosine", {"t_active": 0.2, "t_twitch": 0.3}),
+    ("half_cosine", {"t_active": 0.3, "t_twitch": 0.6}),  # the twitch reaches past the period: a jump at nT
+    ("piecewise_cosine", {"contract_start": 0.207, "relax_start": 0.29625, "contract_duration": 0.08925,
+                          "relax_duration": 0.26975}),
+    ("two_hill", {"t_shift": 0.207, "tau_1": 0.1855, "tau_2": 0.3117, "m1": 1.32, "m2": 27.4}),
+    ("wrapping_cosine", {"Tsa": 0.40742, "tpwave": 8.976868}),
+    ("fourier", {})])
+def test_activation_breakpoints_cover_every_kink(kind, values):
+    """Every point of (0, 3T) where A(t), its slope or its curvature jumps (found numerically:
+    a third difference on a 1e-4 s grid 20x above its 99.5th percentile, which the smooth parts
+    set) (the first of each run of flagged points) lies within 3 grid steps of a listed breakpoint (activation.activation_breakpoints,
+    which the chambers declare)."""
+    from hemocircuit.components.svzerod.activation import ACT_PARAMS, activation, activation_breakpoints
+
+    T, h = 0.8, 1e-4
+    a = np.array([values.get(n, 0.0) for n, _ in ACT_PARAMS])
+    t = np.arange(h, 3 * T - h, h)
+    A = np.array([activation(("half_cosine", "piecewise_cosine", "two_hill", "wrapping_cosine", "fourier").index(kind),
+                             tt, T, a) for tt in t])
+    d3 = np.abs(np.diff(A, 3))
+    flagged = t[2:-1][d3 > 20 * np.percentile(d3, 99.5) + 1e-14]
+    # a kink flags a few neighbours (two_hill's s^1.32 onset: a run of them): its first point
+    starts = flagged[np.r_[True, np.diff(flagged) > 10 * h]] if flagged.size else flagged
+    listed = np.array(activation_breakpoints(kind, {"period": T, **values}, 0.0, 3 * T))
+    for k in starts:
+        assert listed.size and np.min(np.abs(listed - k)) <= 3 * h, (kind, k, listed)
+    if kind == "fourier":
+        assert listed.size == 0
+
+
 def test_piecewise_valve_steady_flow(tmp_path):
     """Forward: Q = P/(Rmin + R_bc); a backward pressure sees Rmax (PiecewiseValve.cpp)."""
     mmHg = 1333.22387415

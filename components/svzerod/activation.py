@@ -181,12 +181,14 @@ def activation(kind, t, T, a):
 
 def kink_phases(kind, T, a):
     """Times within the first period where A(t) (or its slope) is not smooth, from which the
-    function repeats every T: the ends of the cosine pieces above (two_hill: its onset at
-    t_shift, where s^m1 starts; fourier: none).  ``a``: {ACT_PARAMS name: value}."""
+    function repeats every T (for t >= 0, where their models run): the ends of the cosine
+    pieces above and, where a piece can reach past the period (half_cosine, piecewise_cosine),
+    the period's start, where fmod wraps; two_hill: its onset at t_shift, where s^m1 starts;
+    fourier: none.  ``a``: {ACT_PARAMS name: value}."""
     if kind == "half_cosine":
-        return [a["t_active"], a["t_active"] + a["t_twitch"]]
+        return [0.0, a["t_active"], a["t_active"] + a["t_twitch"]]
     if kind == "piecewise_cosine":
-        return [a["contract_start"], a["contract_start"] + a["contract_duration"], a["relax_start"],
+        return [0.0, a["contract_start"], a["contract_start"] + a["contract_duration"], a["relax_start"],
                 a["relax_start"] + a["relax_duration"]]
     if kind == "two_hill":
         return [a["t_shift"]]
@@ -206,24 +208,26 @@ def periodic_breakpoints(phases_of, p, names, t0, t1):
     parameter set and element of ``p`` (arrays; ``p['period']`` is T, ``names`` the others
     the phases need): the scheduled kinks of a periodic function of time, where the
     integrators end a step."""
+    from hemocircuit.errors import SolverError
+
     names = tuple(names)
     arrs = np.broadcast_arrays(*(np.asarray(p[n], float) for n in ("period",) + names))
-    out = []
+    out, count = [], 0
     for vals in set(zip(*(v.reshape(-1).tolist() for v in arrs))):
         T = vals[0]
         for ph in phases_of(T, dict(zip(names, vals[1:]))):
             n0, n1 = max(0, math.floor((t0 - ph) / T)), math.ceil((t1 - ph) / T)
-            if n1 - n0 > MAX_BREAKPOINTS:
-                raise ValueError(f"{n1 - n0} cycles of period {T:g} s in ({t0:g}, {t1:g}) s: too many to step "
-                                 f"onto each kink; integrate over fewer cycles at a time")
+            count += max(0, n1 - n0 + 1)
+            if count > MAX_BREAKPOINTS:
+                raise SolverError(f"more than {MAX_BREAKPOINTS} scheduled kinks of a periodic activation "
+                                  f"(period {T:g} s) in ({t0:g}, {t1:g}) s: integrate over fewer cycles at a time")
             out.append(ph + T * np.arange(n0, n1 + 1, dtype=float))
     pts = np.unique(np.concatenate(out)) if out else np.empty(0)
     return [float(v) for v in pts[(pts > t0) & (pts < t1)]]
 
 
-#: most cycles periodic_breakpoints lists in one call (a run of 1e6 cardiac cycles at once
-#: would hold 1e6 kinks per phase)
-MAX_BREAKPOINTS = 1_000_000
+#: most kinks periodic_breakpoints lists in one call, over all phases and parameter sets
+MAX_BREAKPOINTS = 4_000_000
 
 
 def activation_np(kind, t, p):

@@ -842,7 +842,7 @@ def integrate(t_out, x0, P, lay, scales, lim_i, lim_b, lim_r, breaks, bjump, rto
                 enorm = np.inf
         nsteps += 1
         if enorm <= 1.0:
-            # PI step-size control (Gustafsson): smoother steps, fewer rejections than I alone
+            # step-size control (tableaus.CONTROLLERS): Gustafsson's predictive rule or his PI rule
             en = max(enorm, 1e-10)
             if predictive:
                 fac = min(6.0, max(0.2, 0.9 * en ** (-1.0 / q)))

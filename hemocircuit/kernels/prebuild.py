@@ -5,7 +5,7 @@ lowers every function it calls, one after the other, on one core (docs/performan
 for the vasomotion engine, of which the element-local Jacobian ``local_jacobian_into`` 4.9 s).
 Numba caches each function on its own: when the integrator reaches a callee that is already
 in the cache for the same argument types, it loads it instead of compiling it.  So
-:func:`start` launches ``python -m hemocircuit.kernels.prebuild JOB``, which compiles
+:func:`start` launches ``python -m hemocircuit.kernels.prebuild`` (the job on its stdin), which compiles
 ``local_jacobian_into`` (through the never-run ``compile_local_jacobian``, whose arguments have
 the integrator's types) while this process compiles the right-hand side and the nodal solve,
 which the integrator reaches first.  If the helper is late or fails, the integrator compiles
@@ -22,44 +22,52 @@ from pathlib import Path
 import numpy as np
 
 
+#: engine modules whose helper this process started (one per module, whatever the systems),
+#: and the helpers' processes (kept so that they are reaped)
+_started: set = set()
+_helpers: list = []
+
+
 def start(system):
     """Start the helper for ``system``'s engine unless ``local_jacobian_into`` is compiled in
-    this process or in numba's cache already (or ``$HEMOCIRCUIT_PREBUILD`` is 0: the benchmark's
-    switch).  Returns the process or None."""
+    this process or in numba's cache already, or a helper for that module was started here
+    (or ``$HEMOCIRCUIT_PREBUILD`` is 0: the benchmark's switch).  Returns the process or None."""
     fn = system.mod.local_jacobian_into
-    if os.environ.get("HEMOCIRCUIT_PREBUILD", "1") == "0" or fn.overloads or _in_cache(fn):
+    name = system.mod.__name__
+    if os.environ.get("HEMOCIRCUIT_PREBUILD", "1") == "0" or name in _started or fn.overloads or _in_cache(fn):
         return None
-    mod = Path(system.mod.__file__)
-    job = mod.with_suffix(f".{os.getpid()}.prebuild")
+    _started.add(name)
+    _helpers[:] = [p for p in _helpers if p.poll() is None]
+    job = pickle.dumps({"module": str(system.mod.__file__), "lay": system.lay, "nx": int(system.scales.size),
+                        "nP": int(system.layout.n_params)})
     try:
-        with open(job, "wb") as fh:
-            pickle.dump({"module": str(mod), "lay": system.lay, "nx": int(system.scales.size),
-                         "nP": int(system.layout.n_params)}, fh)
-        return subprocess.Popen([sys.executable, "-m", "hemocircuit.kernels.prebuild", str(job)],
-                                stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                                start_new_session=True, close_fds=True)
-    except (OSError, pickle.PicklingError, AttributeError, TypeError):
-        job.unlink(missing_ok=True)
+        proc = subprocess.Popen([sys.executable, "-m", "hemocircuit.kernels.prebuild"], stdin=subprocess.PIPE,
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
+                                close_fds=True)
+        proc.stdin.write(job)  # the job through its stdin: no file to leave behind
+        proc.stdin.close()
+    except OSError:
         return None
+    _helpers.append(proc)
+    return proc
 
 
 def _in_cache(dispatcher) -> bool:
     """True when numba's on-disk cache holds some compilation of ``dispatcher`` (its index
-    file exists; numba keeps one per function).  False if that cannot be told."""
+    file exists; numba keeps one per function).  True as well when that cannot be told (another
+    numba's internals): then no helper starts, as before there was one."""
     try:
         return Path(dispatcher._cache._cache_file._index_path).exists()
-    except AttributeError:  # another numba version's layout: assume not cached
-        return False
+    except AttributeError:
+        return True
 
 
-def _run(job: Path) -> int:
+def _run() -> int:
     import importlib.util
 
     import numba
 
-    with open(job, "rb") as fh:
-        spec = pickle.load(fh)
-    job.unlink(missing_ok=True)
+    spec = pickle.load(sys.stdin.buffer)
     path = Path(spec["module"])
     loader = importlib.util.spec_from_file_location(path.stem, path)
     mod = importlib.util.module_from_spec(loader)
@@ -73,4 +81,4 @@ def _run(job: Path) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(_run(Path(sys.argv[1])))
+    sys.exit(_run())

@@ -147,14 +147,16 @@ JAC_REUSE = {"ros34pw2": 6, "ros34pw3": 6, "rodas4": 1, "rodas5p": 1}
 #: the variable-order BDF method (engine_template.integrate_bdf): no tableau, the engine's
 #: other integrator
 BDF = "bdf"
-#: the engine's default method: RODAS5P (order 5, fresh element-local Jacobian each step).  It
-#: costs the same CPU as ROS34PW2 at rtol 1e-5 and is 55x closer to the reference cycle.
-#: BDF takes 2-3x less CPU on the vasomotion run at rtol 1e-6 to 1e-8 (its Jacobian is kept:
-#: ~2.8 right-hand sides per step against ~8.8 plus a Jacobian) and its limit cycle is within
-#: 3.3e-5 of the reference at 1e-6, but it damps a slowly growing oscillation: in the envelope
-#: map's member Pa = 70 mmHg, zeta = 0.2 its r max at t = 1000 s is 4.3e-3 off a rtol 1e-9
-#: reference at rtol 1e-6 (13 % of the amplitude), RODAS5P's 6.8e-4 at 1e-5.  So BDF is used
-#: where it is as accurate: the forced runs of ``freq`` (docs/performance.md).
+#: the engine's default method: RODAS5P (order 5, fresh element-local Jacobian each step).
+#: Measured with the PI controller (session 5): the same CPU as ROS34PW2 at rtol 1e-5 and 55x
+#: closer to the reference cycle; BDF 2-3x less CPU on the vasomotion run at rtol 1e-6 to 1e-8
+#: (its Jacobian is kept: ~2.8 right-hand sides per step against ~8.8 plus a Jacobian) and its
+#: limit cycle within 3.3e-5 of the reference at 1e-6, but it damps a slowly growing
+#: oscillation: in the envelope map's member Pa = 70 mmHg, zeta = 0.2 its r max at t = 1000 s
+#: is 4.3e-3 off a rtol 1e-9 reference at rtol 1e-6 (13 % of the amplitude), RODAS5P's 6.8e-4
+#: at 1e-5 (2.6e-3 with the predictive controller, RODAS5P's default since session 8: its
+#: longer steps cost accuracy on that member, docs/performance.md).  So BDF is used where it is
+#: as accurate: the forced runs of ``freq``.
 DEFAULT = "rodas5p"
 #: step-size controllers (engine_template.integrate): "pi", Gustafsson's PI rule
 #: h_new = 0.9 h err^(-0.7/q) err_prev^(0.4/q); "predictive", Gustafsson's predictive rule as in
