@@ -288,10 +288,13 @@ def _wait(running, timeout, reap):
                 _, st, ru = os.wait4(pid, 0)
                 reap(pid, None, ru, "timeout")
                 return
-        pid, st, ru = os.wait4(-1, os.WNOHANG)
-        if pid:
-            reap(pid, st, ru, "")
-            return
+        # its own children only: wait4(-1) would also reap other children of this process (a
+        # test run's background engine builds), which are not in ``running``
+        for pid in list(running):
+            got, st, ru = os.wait4(pid, os.WNOHANG)
+            if got:
+                reap(pid, st, ru, "")
+                return
         time.sleep(0.01)
 
 
