@@ -280,7 +280,8 @@ class Component:
         """Times in (t0, t1) where the element's equations are discontinuous or not smooth in
         time (a sine term switching on; a periodic activation's kinks, listed for every cycle
         of the range), over every element of the group and every parameter set of ``p``: the
-        compiled integrators end a step there, the scipy path restarts there.  Waveform breakpoints are found by the circuit itself."""
+        compiled integrators end a step there, the scipy path restarts there.  Waveform
+        breakpoints are found by the circuit itself."""
         return []
 
     def hard_limits(self) -> tuple[tuple[str, float, str | None], ...]:

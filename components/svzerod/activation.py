@@ -87,7 +87,7 @@ def fourier_raw(tc, T):
     """Their un-normalised 25-mode series at time tc in the cycle (the heart block's F(t)).
     cos and sin of mode i by the angle-addition recurrence from mode 1: two trigonometric
     calls instead of 50 (the heart evaluates this in every derivs call); it agrees with the
-    direct sum to ~1e-15 (tests/svzerod/test_activation.py)."""
+    direct sum to ~1e-15 (tests/test_svzerod_blocks.py)."""
     w = 2.0 * math.pi * tc / T
     c1, s1 = math.cos(w), math.sin(w)
     c, s = 1.0, 0.0

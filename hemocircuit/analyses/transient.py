@@ -154,10 +154,11 @@ def _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step
         raise SolverError(f"output_from = {output_from!r} s: the first output time must lie in the run, "
                           f"between t0 = {t0:g} s and t_end = {t_end:g} s")
     if engine != "scipy" and compile == "wait" and (engine == "compiled" or method == "BDF"):
+        from ..kernels import prebuild
         from ..kernels.system import CompiledSystem
         system = CompiledSystem.of(c)
         if system is not None:  # a first compile: its second process starts before the operating point
-            system.start_prebuild()
+            prebuild.start(system)
     x = operating_point(c, t=t0).x if x0 is None else np.asarray(x0, dtype=float).copy()
     if ic:
         from ..ic import apply_ic

@@ -22,21 +22,25 @@ from pathlib import Path
 import numpy as np
 
 
-#: engine modules whose helper this process started (one per module, whatever the systems),
-#: and the helpers' processes (kept so that they are reaped)
-_started: set = set()
+#: engine modules this process has decided for (a helper started or not needed: once per
+#: module, whatever the systems and calls), and the helpers' processes (kept to be reaped)
+_decided: set = set()
 _helpers: list = []
 
 
 def start(system):
-    """Start the helper for ``system``'s engine unless ``local_jacobian_into`` is compiled in
-    this process or in numba's cache already, or a helper for that module was started here
-    (or ``$HEMOCIRCUIT_PREBUILD`` is 0: the benchmark's switch).  Returns the process or None."""
-    fn = system.mod.local_jacobian_into
+    """Start the helper for ``system``'s engine, once per engine module and process, unless
+    ``local_jacobian_into`` is compiled here or in numba's cache already (or
+    ``$HEMOCIRCUIT_PREBUILD`` is 0: the benchmark's switch).  Called before every first
+    integration (CompiledSystem.integrate_batch) and earlier by ``tran --compile wait``; costs a
+    set lookup after the first call.  Returns the process or None."""
     name = system.mod.__name__
-    if os.environ.get("HEMOCIRCUIT_PREBUILD", "1") == "0" or name in _started or fn.overloads or _in_cache(fn):
+    if name in _decided:
         return None
-    _started.add(name)
+    _decided.add(name)
+    fn = system.mod.local_jacobian_into
+    if os.environ.get("HEMOCIRCUIT_PREBUILD", "1") == "0" or fn.overloads or _in_cache(fn):
+        return None
     _helpers[:] = [p for p in _helpers if p.poll() is None]
     job = pickle.dumps({"module": str(system.mod.__file__), "lay": system.lay, "nx": int(system.scales.size),
                         "nP": int(system.layout.n_params)})

@@ -31,7 +31,6 @@ class CompiledSystem:
         self.lim_i = np.array([li for li, _, _ in limits], dtype=np.int64)
         self.lim_b = np.array([b for _, b, _ in limits], dtype=float)
         self.lim_r = np.array([-1 if r is None else r for _, _, r in limits], dtype=np.int64)
-        self._prebuilt = False
 
     @classmethod
     def of(cls, circuit) -> "CompiledSystem | None":
@@ -52,14 +51,6 @@ class CompiledSystem:
         if layout is None:
             return None
         return cls(layout, engine_module(layout.kernels), circuit.state_scales, circuit.hard_limits())
-
-    def start_prebuild(self) -> None:
-        """Once per system: if the engine is still to be compiled, compile part of it in a
-        second process meanwhile (kernels.prebuild).  Called before the first integration;
-        callers that know a compile is coming (``tran --compile wait``) call it earlier."""
-        if not self._prebuilt:
-            self._prebuilt = True
-            prebuild.start(self)
 
     def params(self, circuit) -> np.ndarray:
         """P (B, slots) of ``circuit`` (same structure as the one this system was built from)."""
@@ -114,7 +105,7 @@ class CompiledSystem:
         hmax = np.ascontiguousarray(np.broadcast_to(np.asarray(hmax, dtype=float), (B,)))
         method = method or tableaus.DEFAULT
         brk, jump = merge_breaks(breaks, kinks)
-        self.start_prebuild()
+        prebuild.start(self)  # a first compile: part of it in a second process
         if method == tableaus.BDF:
             unknown = set(tab_options) - {"local_jacobian"}
             if unknown:

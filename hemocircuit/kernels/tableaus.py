@@ -43,6 +43,11 @@ import numpy as np
 HEADER = 8
 
 
+def _no_dense(ns):
+    """H of a method without its own dense output (0 rows: the engine uses cubic Hermite)."""
+    return np.zeros((0, ns))
+
+
 def _from_transformed(gamma, a, C, m, m_err):
     """Classical (A, G, b, e, c, d) from the transformed form (a, C, m, m_err) of
     Hairer & Wanner II (7.21): Gamma^-1 = diag(1/gamma) - C, A = a Gamma, b = m Gamma."""
@@ -58,7 +63,7 @@ def _from_transformed(gamma, a, C, m, m_err):
 
 def _ros34pw2():
     from ..batch_integrator import A, B_EMB, B_SOL, G, GAMMA
-    return GAMMA, A, G, B_SOL, B_SOL - B_EMB, 3
+    return GAMMA, A, G, B_SOL, B_SOL - B_EMB, 3, _no_dense(4)
 
 
 def _ros34pw3():
@@ -73,7 +78,7 @@ def _ros34pw3():
                     [-4.1731389379448741e-1, 4.1091047035857703e-1, -1.3558873204765276, gamma]])
     b = np.array([2.2047681286931747e-1, 2.7828278331185935e-3, 7.1844787635140066e-3, 7.6955588053404989e-1])
     bhat = np.array([3.1300297285209688e-1, -2.8946895245112692e-1, 9.7646597959903003e-1, 0])
-    return gamma, A, Gam - gamma * np.eye(4), b, b - bhat, 3
+    return gamma, A, Gam - gamma * np.eye(4), b, b - bhat, 3, _no_dense(4)
 
 
 def _rodas(gamma, a, C, order, H_transformed=None):
@@ -88,7 +93,7 @@ def _rodas(gamma, a, C, order, H_transformed=None):
     m_err = np.zeros(ns)
     m_err[-1] = 1.0
     A, G, b, e = _from_transformed(gamma, a, C, m, m_err)
-    H = np.zeros((0, ns))
+    H = _no_dense(ns)
     if H_transformed is not None:
         H = np.asarray(H_transformed, dtype=float) @ (G + gamma * np.eye(ns))
     return gamma, A, G, b, e, order, H
@@ -107,7 +112,7 @@ def _rodas4():
          [-0.1073529058151375, -9.594562251023355, -20.47028614809616, 0, 0, 0],
          [7.496443313967647, -10.24680431464352, -33.99990352819905, 11.70890893206160, 0, 0],
          [8.083246795921522, -7.981132988064893, -31.52159432874371, 16.31930543123136, -6.058818238834054, 0]]
-    return _rodas(0.25, a, C, 4)[:6]
+    return _rodas(0.25, a, C, 4)
 
 
 def _rodas5p():
@@ -177,10 +182,10 @@ def dense(name):
 
 
 def _method(name):
+    """(gamma, A, G, b, e, q, H) of method ``name``."""
     if name not in METHODS:
         raise ValueError(f"unknown integration method {name!r}: choose one of {sorted(METHODS)}")
-    m = METHODS[name]()
-    return m if len(m) == 7 else (*m, np.zeros((0, len(m[3]))))
+    return METHODS[name]()
 
 
 def packed(name="rodas5p", jac_reuse=None, event_restart=1, soft_kinks=1, autonomous=0,
