@@ -262,7 +262,9 @@ def dc_guess(circuit, t=0.0, max_iter=200, tol=DC_GUESS_TOL, start=None):
         u[:, i, 0] = target
         X[:, g.sidx[i]] = g.comp.initial_states(plist[circuit.groups.index(g)], u)[:, i]
     anchors = {(id(s["anchor"][0]), s["anchor"][1]) for s in circuit.law_specs}
-    relax = 1.0 if circuit.all_constant else 0.5
+    # full steps while they shrink (the map contracts: half the iterations of a fixed 0.5 on
+    # the bundled netlists), damped by half from the first step that does not
+    relax, last = 1.0, np.inf
     Xn_prev = None
     for it in range(max_iter):
         u, plist_b, stamps = _dc_u(circuit, t, X)
@@ -281,6 +283,10 @@ def dc_guess(circuit, t=0.0, max_iter=200, tol=DC_GUESS_TOL, start=None):
         if Xn_prev is not None and np.max(np.abs(Xn - Xn_prev) / (np.abs(Xn) + circuit.state_scales)) < tol:
             return Xn
         Xn_prev = Xn
+        size = np.max(np.abs(step) / (np.abs(X) + circuit.state_scales))
+        if size >= last:
+            relax = 0.5
+        last = size
         X = X + relax * step
         if np.max(np.abs(step) / (np.abs(X) + circuit.state_scales)) < tol:
             break
