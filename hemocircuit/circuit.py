@@ -39,6 +39,10 @@ from .netlist import GROUND, Netlist, load_netlist
 from .parameters import ParameterSchema, ParameterSet
 from .units import UnitError, parse_quantity
 
+#: outputs() of at least this many rows take the nodal solution from the compiled engine when
+#: it is built (below, a call's fixed cost outweighs what it saves)
+COMPILED_OUTPUT_ROWS = 64
+
 
 def _scatter(ST, local):
     """Global contributions (rows, N) of local stamps (rows, ...) through a sparse scatter."""
@@ -1065,10 +1069,13 @@ class Circuit:
                     cols.append(Column(f"V({e})" if o.name in store_vols else f"{e}.{o.name}", o.unit))
         return cols
 
-    def outputs(self, t, x) -> dict:
+    def outputs(self, t, x, engine="auto") -> dict:
         """All outputs for states x (T, nx) at times t (T,) -> {column name: (T,) array}.
 
-        Evaluated for all times at once (the time series is treated as a batch).
+        Evaluated for all times at once (the time series is treated as a batch).  ``engine``
+        'auto': from COMPILED_OUTPUT_ROWS rows on, the nodal solution and flows come from the
+        compiled engine when it is built (kernels.system.CompiledSystem.nodal_outputs; the same
+        values to rounding, ~5x less time); 'numpy': always the numpy evaluation.
         """
         x = np.atleast_2d(np.asarray(x, dtype=float))
         T = x.shape[0]
@@ -1079,21 +1086,32 @@ class Circuit:
         tt = np.broadcast_to(np.asarray(t, dtype=float), (T,)).reshape(T, 1) if np.ndim(t) else float(t)
         if self.B != 1 and T % self.B:
             raise HemocircuitError("outputs() of a batch circuit needs one member's parameters: use member(k)")
-        u, plist, stamps = self.evaluate(tt, x, want="u")
+        nodal = self._compiled_nodal(tt, x) if engine == "auto" and T >= COMPILED_OUTPUT_ROWS else None
+        if nodal is None:
+            u, plist, stamps = self.evaluate(tt, x, want="u")
+        else:  # the same u and flows from the compiled engine
+            u, F = nodal
+            plist, stamps = self._bound_params(x, self._params_for(T), tt), [None] * len(self.groups)
         out = {}
         for j, n in enumerate(self.nodes):
             if ":" not in n:
                 out[f"P({n})"] = u[:, j]
+        e0 = 0  # the group's first element in the compiled engine's numbering (group order)
         for g, p, st in zip(self.groups, plist, stamps):
-            if st is None:  # static group: stamp it for the flows
-                st = g.comp.stamp(p, x[:, g.sidx], None, tt, None) + (None,)
-            A_loc, b_loc, src = st
             ul = u[:, g.uidx]
-            # the branch flow: the first row of the local residual A u - b (only it is reported)
-            flows = None
-            if g.K:
-                A_row = A_loc[:, :, 0, :]
-                flows = np.einsum("bej,bej->be", np.broadcast_to(A_row, (T,) + A_row.shape[1:]), ul) - b_loc[..., 0]
+            if nodal is not None:
+                flows, src = nodal[1][:, e0:e0 + g.E], (g.source_values(tt, T) if g.waves else None)
+            else:
+                if st is None:  # static group: stamp it for the flows
+                    st = g.comp.stamp(p, x[:, g.sidx], None, tt, None) + (None,)
+                A_loc, b_loc, src = st
+                # the branch flow: the first row of the local residual A u - b (only it is reported)
+                flows = None
+                if g.K:
+                    A_row = A_loc[:, :, 0, :]
+                    flows = (np.einsum("bej,bej->be", np.broadcast_to(A_row, (T,) + A_row.shape[1:]), ul)
+                             - b_loc[..., 0])
+            e0 += g.E
             xl = x[:, g.sidx]
             obs = g.comp.observe(p, xl, ul, tt, src)
             store_vols = set(g.comp.volume_observables())  # volumes are V(id)
@@ -1107,6 +1125,19 @@ class Circuit:
                     key = f"V({e})" if o.name in store_vols else f"{e}.{o.name}"
                     out[key] = np.broadcast_to(obs[o.name][:, i] if np.ndim(obs[o.name]) == 2 else obs[o.name], (T,))
         return out
+
+    def _compiled_nodal(self, tt, x):
+        """(u, element flows) for outputs() from the compiled engine, or None: a sparse circuit,
+        no engine for its types, or an engine this process would have to compile first (outputs
+        never wait for a compilation)."""
+        if self.sparse:
+            return None
+        from .kernels.system import CompiledSystem
+
+        system = CompiledSystem.of(self)
+        if system is None or not system.nodal_outputs_ready():
+            return None
+        return system.nodal_outputs(tt, x, system.params(self))
 
     def column_units(self):
         return {c.name: c.unit for c in self.columns()}

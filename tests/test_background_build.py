@@ -176,19 +176,24 @@ proc = prebuild.start(system)
 rc = proc.wait(timeout=900) if proc is not None else None
 after = prebuild._in_cache(fn)
 again = prebuild.start(system)  # cached now: no second helper
-t = np.linspace(0.0, 5.0, 51)
+t = np.linspace(0.0, 5.0, 101)
 X, st = system.integrate_batch(t, np.zeros((1, c.nx)), system.params(c), rtol=1e-8)
+out = c.outputs(t, X[0])  # 101 rows: through the compiled nodal solve, which the helper compiled too
+nf = system.mod.nodal_outputs
 print(json.dumps({"before": before, "rc": rc, "after": after, "again": again is None,
                   "loaded_not_compiled": fn.stats.cache_hits and not fn.stats.cache_misses,
-                  "V": X[0, :, c.state_names.index("C1.V")].tolist(), "status": float(st[0, 0])}))
+                  "outputs_loaded": nf.stats.cache_hits and not nf.stats.cache_misses,
+                  "V": X[0, :, c.state_names.index("C1.V")].tolist(), "Q": out["Q(R1)"].tolist(),
+                  "status": float(st[0, 0])}))
 """
 
 
 def test_prebuild_helper_compiles_the_jacobian_for_the_integrator(tmp_path):
-    """kernels.prebuild in a fresh cache: the helper process compiles local_jacobian_into into
-    numba's cache with the integrator's argument types, so the integrator loads it instead of
-    compiling it (numba's cache hit, no miss), starts no second helper once it is cached, and
-    the run is right (R-C charging, V = C P (1 - exp(-t/RC)))."""
+    """kernels.prebuild in a fresh cache: the helper process compiles local_jacobian_into (and
+    the outputs' nodal_outputs) into numba's cache with the callers' argument types, so the
+    integrator and Circuit.outputs load them instead of compiling them (numba's cache hit, no
+    miss), starts no second helper once it is cached, and the run is right (R-C charging,
+    V = C P (1 - exp(-t/RC)), Q = P/R exp(-t/RC))."""
     import json
 
     env = {**os.environ, "HEMOCIRCUIT_CACHE_DIR": str(tmp_path / "hc"), "NUMBA_CACHE_DIR": str(tmp_path / "nb"),
@@ -198,7 +203,9 @@ def test_prebuild_helper_compiles_the_jacobian_for_the_integrator(tmp_path):
     assert out.returncode == 0, out.stderr[-3000:]
     r = json.loads(out.stdout.strip().splitlines()[-1])
     assert r["before"] is False and r["rc"] == 0 and r["after"] is True and r["again"] is True
-    assert r["loaded_not_compiled"], r
-    t = np.linspace(0.0, 5.0, 51)
+    assert r["loaded_not_compiled"] and r["outputs_loaded"], r
+    t = np.linspace(0.0, 5.0, 101)
     assert r["status"] == 0
     assert np.max(np.abs(np.array(r["V"]) - 0.5 * 80.0 * (1 - np.exp(-t)))) < 2e-7 * 40.0
+    # the flow through R = 2 mmHg s/mL: (80 mmHg - V/C) / R = 40 exp(-t) mL/s
+    assert np.max(np.abs(np.array(r["Q"]) - 40.0 * np.exp(-t))) < 2e-7 * 40.0

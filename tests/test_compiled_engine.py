@@ -38,6 +38,58 @@ def test_rhs_matches_numpy_path(path):
     assert np.allclose(system.rhs(1.0, X, P), c.rhs(1.0, X), rtol=1e-9, atol=1e-12)
 
 
+SVZEROD_CASES = os.environ.get("SVZEROD_CASES", "/work/shared/svzerod") + "/cases"
+#: bundled netlists, plus their valve models (elements nonlinear in the pressures: Newton in the
+#: nodal solve) when the shared svZeroDSolver cases are here
+OUTPUT_MODELS = BUNDLED + [os.path.join(SVZEROD_CASES, f"{n}.json") for n in ("valve_tanh", "chamber_elastance_inductor")]
+
+
+@pytest.mark.parametrize("path", OUTPUT_MODELS, ids=os.path.basename)
+def test_compiled_outputs_match_numpy_path(path):
+    """Circuit.outputs with the nodal solution and flows from the compiled engine
+    (CompiledSystem.nodal_outputs) gives the numpy evaluation's columns, in its order, to
+    rounding: over a simulated run, and for a batch of members with their rows member-major
+    (as freq evaluates a block)."""
+    from hemocircuit.circuit import COMPILED_OUTPUT_ROWS
+
+    if not os.path.exists(path):
+        pytest.skip(f"{path} is not here")
+    c = hc.load(path)
+    system = CompiledSystem.of(c)
+    if system is None:
+        pytest.skip("a component type without a kernel")
+    res = c.simulate(2.0, dt=2.0 / (COMPILED_OUTPUT_ROWS + 10), engine="compiled", rtol=1e-6)
+    x, t = np.asarray(res.x), np.asarray(res.t)
+    assert system.nodal_outputs_ready()
+    calls = system.mod.nodal_outputs.stats.cache_hits, system.mod.nodal_outputs.stats.cache_misses
+    fast, ref = c.outputs(t, x), c.outputs(t, x, engine="numpy")
+    # the compiled path ran (else this compares the numpy path with itself)
+    assert system.mod.nodal_outputs.overloads, calls
+    assert list(fast) == list(ref)
+    _assert_columns_close(c, fast, ref)
+    # three members with other values of a parameter (the first positive one), W rows each,
+    # member-major
+    path_, base = next((f"{g.ids[0]}.{name}", float(np.ravel(v)[0])) for g, p in zip(c.groups, c.group_params())
+                       for name, v in p.items() if np.all(np.isfinite(v)) and np.ravel(v)[0] > 0)
+    b = c.batch(3).with_values({path_: base * np.array([0.9, 1.0, 1.1])})
+    W = x.shape[0]
+    T, X = np.tile(t, 3), np.tile(x, (3, 1))
+    fast, ref = b.outputs(T, X), b.outputs(T, X, engine="numpy")
+    _assert_columns_close(c, fast, ref)
+    assert W >= COMPILED_OUTPUT_ROWS
+
+
+def _assert_columns_close(c, fast, ref):
+    """Equal to rounding: relative 1e-9, absolute 1e-10 of the largest column of the same unit
+    (a flow that is zero to rounding, 1e-13 mL/s, is compared with the circuit's flows)."""
+    units = c.column_units()
+    big = {}
+    for k, v in ref.items():
+        big[units[k]] = max(big.get(units[k], 0.0), float(np.max(np.abs(v))))
+    for k in ref:
+        assert np.allclose(fast[k], ref[k], rtol=1e-9, atol=1e-10 * big[units[k]] + 1e-300), k
+
+
 def test_rc_step_closed_form(tmp_path):
     """R-C charged from a pressure step: V(t) = C P (1 - exp(-t/RC)) (compiled integrator)."""
     c = hc.load(os.path.join(TEST_NETLISTS, "base_rc.yaml"))  # R = 2 mmHg s/mL, C = 0.5 mL/mmHg

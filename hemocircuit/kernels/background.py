@@ -122,6 +122,8 @@ def _build(job: Path) -> int:
     try:
         _simulate_compiled(system, c, spec["x0"], spec["t0"], spec["t0"] + BUILD_RUN, None, [], spec["rtol"],
                            None, np.inf, None)
+        # and the outputs' nodal solve, which a long run's outputs use (its few rows here do not)
+        system.nodal_outputs(np.full(1, spec["t0"]), np.asarray(spec["x0"], dtype=float)[None], system.params(c))
     except Exception as exc:  # noqa: BLE001 - recorded; the foreground then shows it itself
         _marker(system, "failed").write_text(f"{type(exc).__name__}: {exc}\n")
         print(f"failed: {type(exc).__name__}: {exc}", flush=True)

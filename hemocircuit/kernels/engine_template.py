@@ -23,7 +23,7 @@
 #   st (E,)          1 if its whole stamp is constant ("static": stamped once, into A0 and b0)
 # Units: as the numpy path -- pressures mmHg, flows mL/s, time s, states in declared units.
 #
-# Entry points called from Python: rhs, rhs_batch, integrate_batch.  Every other compiled
+# Entry points called from Python: rhs, rhs_batch, nodal_outputs, integrate_batch(_bdf).  Every other compiled
 # function is ``internal=True`` (the header's njit): numba then builds no Python/C wrapper for it,
 # whose unboxing of the layout and work tuples cost ~15 % of the first compilation.
 
@@ -337,6 +337,47 @@ def rhs_batch(t, X, P, lay):
             prepare_static(t, X[k], p, lay, work)
         rhs_into(t, X[k], p, lay, work, out[k])
     return out
+
+
+@njit(cache=True, nogil=True)
+def nodal_outputs(T, X, P, lay, U, F):
+    """What Circuit.outputs needs from the nodal system, for rows X (m, nx) at times T (m,):
+    the solution U (m, n+1; ground last) and every element's flow F (m, E), the first row of its
+    local residual Al ul - bl (zero for an element with no local unknowns).  P (B, nP): row k
+    belongs to member k // (m // B) (member-major rows, as Circuit.outputs lays them out).
+    Returns -1, or the first row whose nodal system is singular or whose Newton fails."""
+    return nodal_outputs_into(T, X, P, lay, make_work(lay), U, F)
+
+
+@njit(cache=True, nogil=True, internal=True, _nrt=False)
+def nodal_outputs_into(T, X, P, lay, work, U, F):
+    """nodal_outputs with the scratch arrays given (no allocation: compiled without reference
+    counting, as rhs_into)."""
+    (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st) = lay
+    u, Al, bl, ul, pl, xl, il = work[4], work[5], work[6], work[7], work[9], work[10], work[11]
+    m = X.shape[0]
+    per = m // P.shape[0]
+    for k in range(m):
+        p = P[k // per]
+        if k % per == 0:
+            prepare_static(T[k], X[k], p, lay, work)
+        Pe = effective_params(T[k], X[k], p, lay, work)
+        if not solve_nodes(T[k], X[k], Pe, lay, work):
+            return k
+        for i in range(n + 1):
+            U[k, i] = u[i]
+        for e in range(et.shape[0]):
+            if L[e] == 0:
+                F[k, e] = 0.0
+                continue
+            # at the converged u, an element nonlinear in the pressures stamps its
+            # linearisation there, whose residual is its flow at u
+            stamp_element(e, T[k], X[k], Pe, et, L, ep, ex, eu, ui, eo, io, u, Al, bl, ul, pl, xl, il)
+            acc = -bl[0]
+            for j in range(L[e]):
+                acc += Al[0, j] * ul[j]
+            F[k, e] = acc
+    return -1
 
 
 # --- Rosenbrock(-W) integrator.  The tableau is a run-time argument (``tab``, packed by

@@ -8,7 +8,8 @@ in the cache for the same argument types, it loads it instead of compiling it.  
 :func:`start` launches ``python -m hemocircuit.kernels.prebuild`` (the job on its stdin), which compiles
 ``local_jacobian_into`` (through the never-run ``compile_local_jacobian``, whose arguments have
 the integrator's types) while this process compiles the right-hand side and the nodal solve,
-which the integrator reaches first.  If the helper is late or fails, the integrator compiles
+which the integrator reaches first; then ``nodal_outputs`` (the outputs of a long run), which
+this process reaches only after the integration.  If the helper is late or fails, the integrator compiles
 the function itself, as without it: the helper only ever saves time.
 """
 from __future__ import annotations
@@ -81,6 +82,10 @@ def _run() -> int:
     P.setflags(write=False)  # integrate_batch's P is a read-only view (np.broadcast_to) in a single run
     sig = (numba.float64, numba.typeof(x), numba.typeof(P), numba.typeof(spec["lay"]), numba.typeof(x))
     mod.compile_local_jacobian.compile(sig)
+    # then the outputs' nodal solve (CompiledSystem.nodal_outputs, with its argument types),
+    # which this process's run reaches only after the integration
+    v, m = numba.typeof(np.empty(1)), numba.typeof(np.empty((1, 1)))
+    mod.nodal_outputs.compile((v, m, m, numba.typeof(spec["lay"]), m, m))
     return 0
 
 

@@ -64,6 +64,28 @@ class CompiledSystem:
             return self.mod.rhs(float(t), x, P[0], self.lay)
         return self.mod.rhs_batch(float(t), np.ascontiguousarray(x), P, self.lay)
 
+    def nodal_outputs(self, t, X, P):
+        """(u (m, n+1), element flows (m, E)) for rows X (m, nx) at times t (m,) with P (B,
+        slots), rows member-major (engine_template.nodal_outputs); None when a row's nodal
+        system fails or a value is not finite (the numpy path then says why)."""
+        X = np.array(X, dtype=float, order="C")
+        m = X.shape[0]
+        T = np.array(np.broadcast_to(np.asarray(t, dtype=float).reshape(-1), (m,)), order="C")
+        P = np.array(P, dtype=float, order="C", ndmin=2)
+        U, F = np.empty((m, self.lay[0] + 1)), np.empty((m, self.lay[2].shape[0]))
+        if self.mod.nodal_outputs(T, X, P, self.lay, U, F) >= 0 or not (np.all(np.isfinite(U))
+                                                                        and np.all(np.isfinite(F))):
+            return None
+        return U, F
+
+    def nodal_outputs_ready(self) -> bool:
+        """True when :meth:`nodal_outputs` runs without compiling in this process's foreground:
+        it is compiled here or in numba's cache, or this process already runs this engine's
+        integrator (then it compiles once, a few seconds; the prebuild helper usually has it)."""
+        mod = self.mod
+        return bool(mod.nodal_outputs.overloads or mod.integrate_batch.overloads
+                    or mod.integrate_batch_bdf.overloads or prebuild._in_cache(mod.nodal_outputs))
+
     def jacobian(self, t, x, P, local=True):
         """State Jacobian d(dx/dt)/dx (nx, nx) at (t, x) for one parameter row P (slots,):
         element-local, composed through the nodal solve (``local`` True or 1: with the kernels'
