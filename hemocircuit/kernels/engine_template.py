@@ -346,23 +346,24 @@ def nodal_outputs(T, X, P, lay, U, F):
     local residual Al ul - bl (zero for an element with no local unknowns).  P (B, nP): row k
     belongs to member k // (m // B) (member-major rows, as Circuit.outputs lays them out).
     Returns -1, or the first row whose nodal system is singular or whose Newton fails."""
-    return nodal_outputs_into(T, X, P, lay, make_work(lay), U, F)
+    return nodal_outputs_into(T, X, P, lay, make_work(lay), np.empty(X.shape[1]), U, F)
 
 
 @njit(cache=True, nogil=True, internal=True, _nrt=False)
-def nodal_outputs_into(T, X, P, lay, work, U, F):
+def nodal_outputs_into(T, X, P, lay, work, dx, U, F):
     """nodal_outputs with the scratch arrays given (no allocation: compiled without reference
-    counting, as rhs_into)."""
+    counting, as rhs_into).  Through rhs_into, which leaves the effective parameters in work[0]
+    and the nodal solution in work[4]: its compilation (the integrator's, from the cache) is
+    reused instead of typing the inlined nodal solve again (7 s of a first compilation)."""
     (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st) = lay
-    u, Al, bl, ul, pl, xl, il = work[4], work[5], work[6], work[7], work[9], work[10], work[11]
+    Pe, u, Al, bl, ul, pl, xl, il = work[0], work[4], work[5], work[6], work[7], work[9], work[10], work[11]
     m = X.shape[0]
     per = m // P.shape[0]
     for k in range(m):
         p = P[k // per]
         if k % per == 0:
             prepare_static(T[k], X[k], p, lay, work)
-        Pe = effective_params(T[k], X[k], p, lay, work)
-        if not solve_nodes(T[k], X[k], Pe, lay, work):
+        if not rhs_into(T[k], X[k], p, lay, work, dx):
             return k
         for i in range(n + 1):
             U[k, i] = u[i]

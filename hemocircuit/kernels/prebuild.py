@@ -84,8 +84,9 @@ def _run() -> int:
     mod.compile_local_jacobian.compile(sig)
     # then the outputs' nodal solve (CompiledSystem.nodal_outputs, with its argument types),
     # which this process's run reaches only after the integration
-    v, m = numba.typeof(np.empty(1)), numba.typeof(np.empty((1, 1)))
-    mod.nodal_outputs.compile((v, m, m, numba.typeof(spec["lay"]), m, m))
+    v, m, P2 = numba.typeof(np.empty(1)), numba.typeof(np.empty((1, 1))), np.empty((1, spec["nP"]))
+    P2.setflags(write=False)
+    mod.nodal_outputs.compile((v, m, numba.typeof(P2), numba.typeof(spec["lay"]), m, m))
     return 0
 
 

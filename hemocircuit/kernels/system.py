@@ -72,6 +72,7 @@ class CompiledSystem:
         m = X.shape[0]
         T = np.array(np.broadcast_to(np.asarray(t, dtype=float).reshape(-1), (m,)), order="C")
         P = np.array(P, dtype=float, order="C", ndmin=2)
+        P.setflags(write=False)  # read-only rows, as the integrator's: its rhs_into compilation serves
         U, F = np.empty((m, self.lay[0] + 1)), np.empty((m, self.lay[2].shape[0]))
         if self.mod.nodal_outputs(T, X, P, self.lay, U, F) >= 0 or not (np.all(np.isfinite(U))
                                                                         and np.all(np.isfinite(F))):
