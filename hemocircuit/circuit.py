@@ -50,6 +50,12 @@ def _scatter(ST, local):
     return np.asarray((ST @ flat.T).T)
 
 
+def _member_row(values, m):
+    """Member m's row (1, ...) of a batch parameter array (B or 1, ...)."""
+    v = np.asarray(values)
+    return v if v.ndim == 0 or v.shape[0] == 1 else v[m:m + 1]
+
+
 def _bincount_scatter(uidx, b_loc, Bx, N1):
     """Global right-hand-side contributions (Bx, N1) of local ones b_loc (1 or Bx, E, L), adding
     duplicates (the sparse path: cheaper per call than a scipy product for single rows)."""
@@ -1156,15 +1162,23 @@ class Circuit:
                                 None if reset is None else g.sidx[i, names.index(reset)]))
         return out
 
-    def breakpoints(self, t0, t1, kinks=True):
+    def breakpoints(self, t0, t1, kinks=True, members=False):
         """Scheduled discontinuities in (t0, t1): waveform breakpoints and the elements' own
         (Component.breakpoints, e.g. a source's sine term switching on).  ``kinks=False``
-        leaves out the waveforms' slope-only kinks (Waveform.jumps: where the value may jump)."""
+        leaves out the waveforms' slope-only kinks (Waveform.jumps: where the value may jump).
+        The union over the batch's members, or with ``members`` one list per member, each with
+        its own parameter values only (so that no member steps on another's kinks)."""
+        if members:
+            return [self._breakpoints(t0, t1, kinks, m) for m in range(self.B)]
+        return self._breakpoints(t0, t1, kinks, None)
+
+    def _breakpoints(self, t0, t1, kinks, member):
         pts = set()
         for g in self.groups:
-            for _, _, wf in g.waves:
+            for _, _, wf in g.waves:  # one waveform per element, common to every member
                 pts.update(b for b in (wf.breakpoints(t0, t1) if kinks else wf.jumps(t0, t1)) if t0 < b < t1)
-            pts.update(float(b) for b in g.comp.breakpoints(g.p, t0, t1) if t0 < b < t1)
+            p = g.p if member is None else {k: _member_row(v, member) for k, v in g.p.items()}
+            pts.update(float(b) for b in g.comp.breakpoints(p, t0, t1) if t0 < b < t1)
         return sorted(pts)
 
     def describe(self) -> str:

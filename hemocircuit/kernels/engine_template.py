@@ -1011,14 +1011,15 @@ def integrate(t_out, x0, P, lay, scales, lim_i, lim_b, lim_r, breaks, bjump, rto
 def integrate_batch(t_out, X0, P, lay, scales, lim_i, lim_b, lim_r, breaks, bjump, rtol, atol, h0, hmax, max_steps,
                     tab):
     """integrate() for each member: t_out (B, T), X0 (B, nx), P (B, nP), hmax (B,), breaks and
-    bjump (K,) (1 where a source may jump, 0 at a slope-only kink) ->
-    (out (B, T, nx), stats (B, 6) as integrate's return values)."""
+    bjump (B, K): each member's breakpoints, padded with +inf (bjump 1 where a source may jump,
+    0 at a slope-only kink) -> (out (B, T, nx), stats (B, 6) as integrate's return values)."""
     B = X0.shape[0]
     out = np.empty((B, t_out.shape[1], X0.shape[1]))
     stats = np.zeros((B, 6))
     for m in range(B):
         status, t, steps, rej, nfev, nev = integrate(t_out[m], X0[m], P[m], lay, scales, lim_i, lim_b, lim_r,
-                                                     breaks, bjump, rtol, atol, h0, hmax[m], max_steps, tab, out[m])
+                                                     breaks[m], bjump[m], rtol, atol, h0, hmax[m], max_steps, tab,
+                                                     out[m])
         stats[m, 0] = status
         stats[m, 1] = t
         stats[m, 2] = steps
@@ -1413,14 +1414,14 @@ def integrate_bdf(t_out, x0, P, lay, scales, lim_i, lim_b, lim_r, breaks, rtol, 
 @njit(cache=True, nogil=True)
 def integrate_batch_bdf(t_out, X0, P, lay, scales, lim_i, lim_b, lim_r, breaks, rtol, atol, h0, hmax, max_steps,
                         local_jac):
-    """integrate_bdf() for each member, as integrate_batch.  (A separate entry point, not a
+    """integrate_bdf() for each member, as integrate_batch (breaks (B, K)).  (A separate entry point, not a
     method flag of integrate_batch: numba compiles, per process, only the integrator used.)"""
     B = X0.shape[0]
     out = np.empty((B, t_out.shape[1], X0.shape[1]))
     stats = np.zeros((B, 6))
     for m in range(B):
         status, t, steps, rej, nfev, nev = integrate_bdf(t_out[m], X0[m], P[m], lay, scales, lim_i, lim_b, lim_r,
-                                                         breaks, rtol, atol, h0, hmax[m], max_steps, local_jac,
+                                                         breaks[m], rtol, atol, h0, hmax[m], max_steps, local_jac,
                                                          out[m])
         stats[m, 0] = status
         stats[m, 1] = t

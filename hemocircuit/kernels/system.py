@@ -118,7 +118,8 @@ class CompiledSystem:
     def integrate_batch(self, t_out, X0, P, rtol=1e-6, atol=None, breaks=(), h0=1e-3, hmax=np.inf,
                         max_steps=10_000_000, method=None, kinks=(), **tab_options):
         """integrate() for every member: t_out (T,) or (B, T), X0 (B, nx), P (B, slots), hmax
-        scalar or (B,).
+        scalar or (B,); ``breaks`` and ``kinks`` one sequence for every member, or a list of B
+        sequences (each member's own).
         Returns (X (B, T, nx), stats (B, 6): status, t, steps, rejected, nfev, limit events)."""
         X0 = np.ascontiguousarray(X0, dtype=float)
         B = X0.shape[0]
@@ -127,7 +128,7 @@ class CompiledSystem:
         atol_v = (rtol * 1e-3 if atol is None else atol) * self.scales
         hmax = np.ascontiguousarray(np.broadcast_to(np.asarray(hmax, dtype=float), (B,)))
         method = method or tableaus.DEFAULT
-        brk, jump = merge_breaks(breaks, kinks)
+        brk, jump = member_breaks(B, breaks, kinks)
         prebuild.start(self)  # a first compile: part of it in a second process
         if method == tableaus.BDF:
             unknown = set(tab_options) - {"local_jacobian"}
@@ -145,6 +146,26 @@ class CompiledSystem:
         """The packed method for integrate_batch (hemocircuit.kernels.tableaus)."""
         opts = {"autonomous": int(self.layout.autonomous), **tab_options}
         return tableaus.packed(method, **opts)
+
+
+def member_breaks(B, breaks, kinks=()):
+    """(times (B, K), jump flags (B, K)) for integrate_batch: ``breaks`` and ``kinks`` either
+    one sequence of times for every member or a list of B sequences, merged per member
+    (merge_breaks) and padded with +inf (a time never reached)."""
+    def per_member(v):
+        rows = list(v)
+        if rows and all(np.ndim(r) == 1 for r in rows):  # a sequence of times per member
+            if len(rows) != B:
+                raise ValueError(f"breakpoints for {len(rows)} members, the batch has {B}")
+            return rows
+        return [rows] * B
+
+    rows = [merge_breaks(b, k) for b, k in zip(per_member(breaks), per_member(kinks))]
+    K = max([1] + [r[0].size for r in rows])
+    times, jump = np.full((B, K), np.inf), np.ones((B, K))
+    for m, (t, j) in enumerate(rows):
+        times[m, :t.size], jump[m, :t.size] = t, j
+    return times, jump
 
 
 def merge_breaks(breaks, kinks=()):
