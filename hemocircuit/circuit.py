@@ -1168,9 +1168,12 @@ class Circuit:
         leaves out the waveforms' slope-only kinks (Waveform.jumps: where the value may jump).
         The union over the batch's members, or with ``members`` one list per member, each with
         its own parameter values only (so that no member steps on another's kinks)."""
-        if members:
-            return [self._breakpoints(t0, t1, kinks, m) for m in range(self.B)]
-        return self._breakpoints(t0, t1, kinks, None)
+        union = self._breakpoints(t0, t1, kinks, None)
+        if not members:
+            return union
+        if not union or self.B == 1:  # nothing to tell apart (e.g. every block of a frequency response)
+            return [list(union) for _ in range(self.B)]
+        return [self._breakpoints(t0, t1, kinks, m) for m in range(self.B)]
 
     def _breakpoints(self, t0, t1, kinks, member):
         pts = set()
