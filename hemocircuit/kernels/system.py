@@ -160,7 +160,12 @@ def member_breaks(B, breaks, kinks=()):
             return rows
         return [rows] * B
 
-    rows = [merge_breaks(b, k) for b, k in zip(per_member(breaks), per_member(kinks))]
+    merged, rows = {}, []  # members with the same times share one merge (a batch's usual case)
+    for b, k in zip(per_member(breaks), per_member(kinks)):
+        key = (tuple(b), tuple(k))
+        if key not in merged:
+            merged[key] = merge_breaks(b, k)
+        rows.append(merged[key])
     K = max([1] + [r[0].size for r in rows])
     times, jump = np.full((B, K), np.inf), np.ones((B, K))
     for m, (t, j) in enumerate(rows):
