@@ -111,6 +111,20 @@ def _cpu():
     return time.process_time() + ch.ru_utime + ch.ru_stime
 
 
+def repeated(n, run):
+    """``run()`` n times, each timed: (the first result, median wall, median CPU, all walls).
+    A batch is one call of a few hundred ms on a shared VM, whose speed moves by +-20 % from
+    call to call: the median of a few calls of each tool says more than one."""
+    out, walls, cpus = None, [], []
+    for k in range(max(1, n)):
+        with Clock() as ck:
+            r = run()
+        out = r if k == 0 else out
+        walls.append(ck.wall)
+        cpus.append(ck.cpu)
+    return out, float(np.median(walls)), float(np.median(cpus)), walls
+
+
 def timed(fn, repeats):
     """{median_s, times_s, cpu_median_s, cpu_s} and the last result of ``repeats`` calls of fn()."""
     walls, cpus, res = [], [], None
@@ -470,12 +484,11 @@ def bench_envelope(a, hc_kw):
             hc.load(os.path.join(NET, "vasomotion.yaml")), ("Pa.value", [80.0]), outputs=["art.r", "Q(Rla)"],
             t_end=1.0, dt=dt, workers=a.workers, **kw))
     log(f"  hemocircuit envelope, {len(pas) * len(zetas)} runs on {a.workers} workers ...")
-    with Clock() as ck_hc:
-        rows = envelope(c, ("Pa.value", pas), [("art.zeta", zetas)], outputs=["art.r", "Q(Rla)"], t_end=t_end,
-                        dt=dt, workers=a.workers, **kw)
-    t_hc = ck_hc.wall
+    rows, t_hc, cpu_hc, walls_hc = repeated(a.batch_repeats, lambda: envelope(
+        hc.load(os.path.join(NET, "vasomotion.yaml")), ("Pa.value", pas), [("art.zeta", zetas)],
+        outputs=["art.r", "Q(Rla)"], t_end=t_end, dt=dt, workers=a.workers, **kw))  # a new circuit each call
     rows = _envelope_rows(rows)
-    log(f"  hemocircuit envelope: {t_hc:.1f} s (cpu incl. workers {ck_hc.cpu:.1f} s)")
+    log(f"  hemocircuit envelope: {t_hc:.2f} s (cpu incl. workers {cpu_hc:.2f} s; calls {walls_hc})")
     # the same start states for roadrunner: operating point at each Pa + the envelope's kick
     t0 = time.perf_counter()
     free = [j for j in range(c.nx) if j not in law_states(c)]
@@ -492,22 +505,24 @@ def bench_envelope(a, hc_kw):
     res["roadrunner_compile_s"] = t_compile
     res["roadrunner_tolerances"] = rr_tolerances(rr, rtol, a.rr_atol)
     grid_n = int(round(t_end / dt)) + 1
-    rr_rows = []
-    ck_rr = Clock().__enter__()
-    for pa in pas:
-        for z in zetas:
-            rr.resetAll()
-            rr["Pa0"], rr["zeta"] = pa, z
-            for k, v in starts[pa].items():
-                rr[k] = v
-            S = np.array(rr.simulate(0, t_end, grid_n, ["time", "r", "q1"]))
-            rr_rows.append({"Pa.value": pa, "art.zeta": z,
+    def rr_envelope():
+        out = []
+        for pa in pas:
+            for z in zetas:
+                rr.resetAll()
+                rr["Pa0"], rr["zeta"] = pa, z
+                for k, v in starts[pa].items():
+                    rr[k] = v
+                S = np.array(rr.simulate(0, t_end, grid_n, ["time", "r", "q1"]))
+                out.append({"Pa.value": pa, "art.zeta": z,
                             **envelope_summary(S[:, 0], S[:, 1] * 1e6, S[:, 2], window, osc_tol)})
-    ck_rr.__exit__()
-    t_rr = ck_rr.wall
-    log(f"  roadrunner, the same runs one by one: {t_rr:.2f} s (cpu {ck_rr.cpu:.2f} s)")
+        return out
+
+    rr_rows, t_rr, cpu_rr, walls_rr = repeated(a.batch_repeats, rr_envelope)
+    log(f"  roadrunner, the same runs one by one: {t_rr:.2f} s (cpu {cpu_rr:.2f} s; calls {walls_rr})")
     res.update(hemocircuit_wall_s=t_hc, roadrunner_wall_s=t_rr, ratio_hc_over_rr=t_hc / t_rr,
-               hemocircuit_cpu_s=ck_hc.cpu, roadrunner_cpu_s=ck_rr.cpu, cpu_ratio_hc_over_rr=ck_hc.cpu / ck_rr.cpu)
+               hemocircuit_cpu_s=cpu_hc, roadrunner_cpu_s=cpu_rr, cpu_ratio_hc_over_rr=cpu_hc / cpu_rr,
+               batch_repeats=a.batch_repeats, hemocircuit_walls_s=walls_hc, roadrunner_walls_s=walls_rr)
     # compare member by member
     keys = ["art.r min", "art.r max", "art.r mean", "period [s]", "Q(Rla) mean"]
     # largest differences over the members on which both tools agree whether they oscillate
@@ -626,24 +641,20 @@ def bench_freq(a, hc_kw):
             hc.load(os.path.join(NET, "arterial_compliance.yaml")), [0.5], outputs=["Q(Rla)", "Q(Rsv)"],
             workers=a.workers, **kw))
     log(f"  hemocircuit frequency_response, {len(freqs) * len(taus)} runs on {a.workers} workers ...")
-    with Clock() as ck_hc:
-        rows = fr(c, freqs, outputs=["Q(Rla)", "Q(Rsv)"], grid=[("art.tau_Ca", [f"{v:g} s" for v in taus])],
-                  workers=a.workers, **kw)
+    rows, t_hc, cpu_hc, walls_hc = repeated(a.batch_repeats, lambda: fr(
+        hc.load(os.path.join(NET, "arterial_compliance.yaml")), freqs, outputs=["Q(Rla)", "Q(Rsv)"],
+        grid=[("art.tau_Ca", [f"{v:g} s" for v in taus])], workers=a.workers, **kw))  # a new circuit each call
     rows = _freq_rows(rows, ["Q(Rla)", "Q(Rsv)"])
-    t_hc = ck_hc.wall
-    log(f"  hemocircuit frequency_response: {t_hc:.1f} s (cpu incl. workers {ck_hc.cpu:.1f} s)")
+    log(f"  hemocircuit frequency_response: {t_hc:.3f} s (cpu incl. workers {cpu_hc:.3f} s; calls {walls_hc})")
     rr, t_compile = rr_load(os.path.join(a.peers, "brain_artcomp.ant"))
     res["roadrunner_compile_s"] = t_compile
     res["roadrunner_tolerances"] = rr_tolerances(rr, rtol, a.rr_atol)
-    rr_res = {}
-    with Clock() as ck_rr:
-        for tau in taus:
-            for f in freqs:
-                rr_res[(tau, float(f))] = rr_freq_run(rr, float(f), tau, opt)
-    t_rr = ck_rr.wall
-    log(f"  roadrunner, the same runs one by one: {t_rr:.2f} s (cpu {ck_rr.cpu:.2f} s)")
+    rr_res, t_rr, cpu_rr, walls_rr = repeated(a.batch_repeats, lambda: {
+        (tau, float(f)): rr_freq_run(rr, float(f), tau, opt) for tau in taus for f in freqs})
+    log(f"  roadrunner, the same runs one by one: {t_rr:.3f} s (cpu {cpu_rr:.3f} s; calls {walls_rr})")
     res.update(hemocircuit_wall_s=t_hc, roadrunner_wall_s=t_rr, ratio_hc_over_rr=t_hc / t_rr,
-               hemocircuit_cpu_s=ck_hc.cpu, roadrunner_cpu_s=ck_rr.cpu, cpu_ratio_hc_over_rr=ck_hc.cpu / ck_rr.cpu)
+               hemocircuit_cpu_s=cpu_hc, roadrunner_cpu_s=cpu_rr, cpu_ratio_hc_over_rr=cpu_hc / cpu_rr,
+               batch_repeats=a.batch_repeats, hemocircuit_walls_s=walls_hc, roadrunner_walls_s=walls_rr)
     worst_amp, worst_ph, errors, unsettled_hc, worst_at = 0.0, 0.0, [], 0, None
     table = []
     outs = ["Q(Rla)", "Q(Rsv)"]
@@ -890,7 +901,8 @@ def table(results):
     lines.append("-" * 130)
     lines.append("wall-time medians (roadrunner: resetAll + simulate; hemocircuit: the API call); hc/rr cpu: the "
                  "same ratio in CPU time (robust on a busy machine).\ncompile, load and operating point excluded "
-                 "(see the JSON); batches: one wall time each, hemocircuit on worker processes, roadrunner one by one;\n"
+                 "(see the JSON); batches: the median of --batch-repeats calls of each tool (a new circuit each),\n"
+                 "hemocircuit on worker processes, roadrunner one by one; "
                  "hemocircuit's batches after an untimed warm-up call on another circuit (as roadrunner's load), "
                  "unless --cold-batches.")
     return "\n".join(lines)
@@ -955,6 +967,8 @@ def main(argv=None):
     ap.add_argument("--hc-repeats", type=int, default=1, help="repeats of each hemocircuit single run (median)")
     ap.add_argument("--rhs-calls", type=int, default=200, help="calls per timing batch in the rhs scenario")
     ap.add_argument("--workers", type=int, default=2, help="worker processes of the hemocircuit batches")
+    ap.add_argument("--batch-repeats", type=int, default=3,
+                    help="timed calls of each batch scenario per tool (median; default 3)")
     ap.add_argument("--cold-batches", action="store_true",
                     help="time the batches as the first call of this process (numba import and the loading of "
                          "the compiled integrator included; roadrunner's load stays excluded); default: after an "
