@@ -111,14 +111,16 @@ def _cpu():
     return time.process_time() + ch.ru_utime + ch.ru_stime
 
 
-def repeated(n, run):
-    """``run()`` n times, each timed: (the first result, median wall, median CPU, all walls).
-    A batch is one call of a few hundred ms on a shared VM, whose speed moves by +-20 % from
-    call to call: the median of a few calls of each tool says more than one."""
+def repeated(n, run, setup=None):
+    """``run(setup())`` (or ``run()``) n times, each timed without its setup: (the first
+    result, median wall, median CPU, all walls).  A batch is one call of a few hundred ms on a
+    shared VM, whose speed moves by +-20 % from call to call: the median of a few calls of each
+    tool says more than one."""
     out, walls, cpus = None, [], []
     for k in range(max(1, n)):
+        arg = None if setup is None else setup()
         with Clock() as ck:
-            r = run()
+            r = run() if setup is None else run(arg)
         out = r if k == 0 else out
         walls.append(ck.wall)
         cpus.append(ck.cpu)
@@ -484,9 +486,9 @@ def bench_envelope(a, hc_kw):
             hc.load(os.path.join(NET, "vasomotion.yaml")), ("Pa.value", [80.0]), outputs=["art.r", "Q(Rla)"],
             t_end=1.0, dt=dt, workers=a.workers, **kw))
     log(f"  hemocircuit envelope, {len(pas) * len(zetas)} runs on {a.workers} workers ...")
-    rows, t_hc, cpu_hc, walls_hc = repeated(a.batch_repeats, lambda: envelope(
-        hc.load(os.path.join(NET, "vasomotion.yaml")), ("Pa.value", pas), [("art.zeta", zetas)],
-        outputs=["art.r", "Q(Rla)"], t_end=t_end, dt=dt, workers=a.workers, **kw))  # a new circuit each call
+    rows, t_hc, cpu_hc, walls_hc = repeated(a.batch_repeats, lambda cc: envelope(
+        cc, ("Pa.value", pas), [("art.zeta", zetas)], outputs=["art.r", "Q(Rla)"], t_end=t_end, dt=dt,
+        workers=a.workers, **kw), setup=lambda: hc.load(os.path.join(NET, "vasomotion.yaml")))  # a new circuit
     rows = _envelope_rows(rows)
     log(f"  hemocircuit envelope: {t_hc:.2f} s (cpu incl. workers {cpu_hc:.2f} s; calls {walls_hc})")
     # the same start states for roadrunner: operating point at each Pa + the envelope's kick
@@ -641,9 +643,9 @@ def bench_freq(a, hc_kw):
             hc.load(os.path.join(NET, "arterial_compliance.yaml")), [0.5], outputs=["Q(Rla)", "Q(Rsv)"],
             workers=a.workers, **kw))
     log(f"  hemocircuit frequency_response, {len(freqs) * len(taus)} runs on {a.workers} workers ...")
-    rows, t_hc, cpu_hc, walls_hc = repeated(a.batch_repeats, lambda: fr(
-        hc.load(os.path.join(NET, "arterial_compliance.yaml")), freqs, outputs=["Q(Rla)", "Q(Rsv)"],
-        grid=[("art.tau_Ca", [f"{v:g} s" for v in taus])], workers=a.workers, **kw))  # a new circuit each call
+    rows, t_hc, cpu_hc, walls_hc = repeated(a.batch_repeats, lambda cc: fr(
+        cc, freqs, outputs=["Q(Rla)", "Q(Rsv)"], grid=[("art.tau_Ca", [f"{v:g} s" for v in taus])],
+        workers=a.workers, **kw), setup=lambda: hc.load(os.path.join(NET, "arterial_compliance.yaml")))
     rows = _freq_rows(rows, ["Q(Rla)", "Q(Rsv)"])
     log(f"  hemocircuit frequency_response: {t_hc:.3f} s (cpu incl. workers {cpu_hc:.3f} s; calls {walls_hc})")
     rr, t_compile = rr_load(os.path.join(a.peers, "brain_artcomp.ant"))

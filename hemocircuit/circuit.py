@@ -1080,8 +1080,9 @@ class Circuit:
 
         Evaluated for all times at once (the time series is treated as a batch).  ``engine``
         'auto': from COMPILED_OUTPUT_ROWS rows on, the nodal solution and flows come from the
-        compiled engine when it is built (kernels.system.CompiledSystem.nodal_outputs; the same
-        values to rounding, ~5x less time); 'numpy': always the numpy evaluation.
+        compiled engine when this process already runs compiled code and the function is compiled
+        (kernels.system.CompiledSystem.nodal_outputs; the same values to rounding, vasomotion's
+        10 001 rows in 17 ms instead of 30 ms); 'numpy': always the numpy evaluation.
         """
         x = np.atleast_2d(np.asarray(x, dtype=float))
         T = x.shape[0]
@@ -1092,6 +1093,8 @@ class Circuit:
         tt = np.broadcast_to(np.asarray(t, dtype=float), (T,)).reshape(T, 1) if np.ndim(t) else float(t)
         if self.B != 1 and T % self.B:
             raise HemocircuitError("outputs() of a batch circuit needs one member's parameters: use member(k)")
+        if engine not in ("auto", "numpy"):
+            raise ValueError(f"engine {engine!r}: choose 'auto' or 'numpy'")
         nodal = self._compiled_nodal(tt, x) if engine == "auto" and T >= COMPILED_OUTPUT_ROWS else None
         if nodal is None:
             u, plist, stamps = self.evaluate(tt, x, want="u")
@@ -1136,7 +1139,11 @@ class Circuit:
         """(u, element flows) for outputs() from the compiled engine, or None: a sparse circuit,
         no engine for its types, or an engine this process would have to compile first (outputs
         never wait for a compilation)."""
-        if self.sparse:
+        import sys
+
+        # only where compiled engines are in use already: never import numba or write an
+        # engine module for outputs alone
+        if self.sparse or not any(name.startswith("hemocircuit_engine_") for name in sys.modules):
             return None
         from .kernels.system import CompiledSystem
 

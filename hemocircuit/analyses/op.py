@@ -262,8 +262,9 @@ def dc_guess(circuit, t=0.0, max_iter=200, tol=DC_GUESS_TOL, start=None):
         u[:, i, 0] = target
         X[:, g.sidx[i]] = g.comp.initial_states(plist[circuit.groups.index(g)], u)[:, i]
     anchors = {(id(s["anchor"][0]), s["anchor"][1]) for s in circuit.law_specs}
-    # full steps while they shrink (the map contracts: half the iterations of a fixed 0.5 on
-    # the bundled netlists), damped by half from the first step that does not
+    # full steps while they shrink fast (the map contracts: half the iterations of a fixed 0.5
+    # on the bundled netlists), damped by half from the first step that does not shrink by at
+    # least half (e.g. an iteration that alternates with a slowly decaying amplitude)
     relax, last = 1.0, np.inf
     Xn_prev = None
     for it in range(max_iter):
@@ -284,7 +285,7 @@ def dc_guess(circuit, t=0.0, max_iter=200, tol=DC_GUESS_TOL, start=None):
             return Xn
         Xn_prev = Xn
         size = np.max(np.abs(step) / (np.abs(X) + circuit.state_scales))
-        if size >= last:
+        if size > 0.5 * last:
             relax = 0.5
         last = size
         X = X + relax * step

@@ -80,12 +80,10 @@ class CompiledSystem:
         return U, F
 
     def nodal_outputs_ready(self) -> bool:
-        """True when :meth:`nodal_outputs` runs without compiling in this process's foreground:
-        it is compiled here or in numba's cache, or this process already runs this engine's
-        integrator (then it compiles once, a few seconds; the prebuild helper usually has it)."""
-        mod = self.mod
-        return bool(mod.nodal_outputs.overloads or mod.integrate_batch.overloads
-                    or mod.integrate_batch_bdf.overloads or prebuild._in_cache(mod.nodal_outputs))
+        """True when :meth:`nodal_outputs` runs without compiling: it is compiled in this process
+        or in numba's cache (the prebuild helper and the background builder put it there)."""
+        fn = self.mod.nodal_outputs
+        return bool(fn.overloads) or prebuild._in_cache(fn)
 
     def jacobian(self, t, x, P, local=True):
         """State Jacobian d(dx/dt)/dx (nx, nx) at (t, x) for one parameter row P (slots,):
