@@ -170,13 +170,10 @@ def _integrate_compiled(system, circuit, x0, t_out, rtol, atol, h0, max_steps, h
     t_out = np.asarray(t_out, dtype=float)
     grid = np.broadcast_to(t_out, (B, t_out.shape[-1]))
     P = np.broadcast_to(system.params(circuit), (B, system.layout.n_params))
-    # each member's own breakpoints (a member never steps on another's): where a source may
-    # jump, and the kinks where only a slope changes (no new evaluation of f there)
-    t0, t1 = float(grid[:, 0].min()), float(grid[:, -1].max())
-    breaks = circuit.breakpoints(t0, t1, kinks=False, members=True)
-    kinks = [sorted(set(k) - set(b)) for k, b in zip(circuit.breakpoints(t0, t1, members=True), breaks)]
-    if circuit.B == 1 and B > 1:  # one parameter set for every row of x0
-        breaks, kinks = breaks * B, kinks * B
+    # each member's own breakpoints (a member never steps on another's); one parameter set:
+    # the same for every row of x0
+    breaks, kinks = circuit.jumps_and_kinks(float(grid[:, 0].min()), float(grid[:, -1].max()),
+                                            members=circuit.B > 1)
     out, st = system.integrate_batch(grid, x0, P, rtol=rtol, atol=atol, breaks=breaks, kinks=kinks, h0=h0,
                                      hmax=h_max, max_steps=max_steps, method=method)
     ok = st[:, 0] == 0

@@ -1182,6 +1182,16 @@ class Circuit:
             return [list(union) for _ in range(self.B)]
         return [self._breakpoints(t0, t1, kinks, m) for m in range(self.B)]
 
+    def jumps_and_kinks(self, t0, t1, members=False):
+        """(jumps, kinks) in (t0, t1), what the integrators take as ``breaks`` and ``kinks``:
+        where a source may jump (f is evaluated again there), and the other breakpoints, where
+        only a slope changes.  With ``members``: one list of each per member."""
+        jumps = self.breakpoints(t0, t1, kinks=False, members=members)
+        every = self.breakpoints(t0, t1, members=members)
+        if not members:
+            return jumps, sorted(set(every) - set(jumps))
+        return jumps, [sorted(set(a) - set(j)) for a, j in zip(every, jumps)]
+
     def _breakpoints(self, t0, t1, kinks, member):
         pts = set()
         for g in self.groups:

@@ -171,10 +171,10 @@ from hemocircuit.kernels.system import CompiledSystem
 c = hc.load(sys.argv[1])
 system = CompiledSystem.of(c)
 fn = system.mod.local_jacobian_into
-before = prebuild._in_cache(fn)
+before = prebuild.in_cache(fn)
 proc = prebuild.start(system)
 rc = proc.wait(timeout=900) if proc is not None else None
-after = prebuild._in_cache(fn)
+after = prebuild.in_cache(fn)
 again = prebuild.start(system)  # cached now: no second helper
 t = np.linspace(0.0, 5.0, 101)
 X, st = system.integrate_batch(t, np.zeros((1, c.nx)), system.params(c), rtol=1e-8)

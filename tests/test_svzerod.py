@@ -446,9 +446,9 @@ def test_chamber_outflow_jacobian_resolves_the_valve():
     c, _ = _circuits(m, None)
     s = CompiledSystem.of(c)
     x0 = np.array([6.34375125e-03, 96.06182131239247, -9.221453883781882e-04])  # their start
-    br = c.breakpoints(0.0, 1.0, kinks=False)
+    br, kinks = c.jumps_and_kinks(0.0, 1.0)
     X, st = s.integrate(np.linspace(0.0, 1.0, 101), x0, s.params(c)[0], rtol=1e-7, breaks=br,
-                        kinks=sorted(set(c.breakpoints(0.0, 1.0)) - set(br)))
+                        kinks=kinks)
     assert st["status"] == 0 and st["steps"] < 1500, st
     assert X[-1, 1] == pytest.approx(96.06181015, abs=5e-6)  # their dt/1000 solution after one cycle
 

@@ -463,8 +463,7 @@ def _compiled_range(system, c, P, tpts, x, rtol, atol, h0, max_step, stats, ts, 
 
     # steps end on every breakpoint; where a waveform only changes its slope (a pwl table's
     # times) its value is continuous and the integrator needs no new evaluation there
-    breaks = c.breakpoints(tpts[0], tpts[-1], kinks=False)
-    kinks = sorted(set(c.breakpoints(tpts[0], tpts[-1])) - set(breaks))
+    breaks, kinks = c.jumps_and_kinks(tpts[0], tpts[-1])
     budget = PIECE_STEPS
     while True:
         check_interrupted()

@@ -40,7 +40,7 @@ def start(system):
         return None
     _decided.add(name)
     fn = system.mod.local_jacobian_into
-    if os.environ.get("HEMOCIRCUIT_PREBUILD", "1") == "0" or fn.overloads or _in_cache(fn):
+    if os.environ.get("HEMOCIRCUIT_PREBUILD", "1") == "0" or fn.overloads or in_cache(fn):
         return None
     _helpers[:] = [p for p in _helpers if p.poll() is None]
     job = pickle.dumps({"module": str(system.mod.__file__), "lay": system.lay, "nx": int(system.scales.size),
@@ -57,7 +57,7 @@ def start(system):
     return proc
 
 
-def _in_cache(dispatcher) -> bool:
+def in_cache(dispatcher) -> bool:
     """True when numba's on-disk cache holds some compilation of ``dispatcher`` (its index
     file exists; numba keeps one per function).  True as well when that cannot be told (another
     numba's internals): then no helper starts, as before there was one."""

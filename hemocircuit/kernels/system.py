@@ -83,7 +83,7 @@ class CompiledSystem:
         """True when :meth:`nodal_outputs` runs without compiling: it is compiled in this process
         or in numba's cache (the prebuild helper and the background builder put it there)."""
         fn = self.mod.nodal_outputs
-        return bool(fn.overloads) or prebuild._in_cache(fn)
+        return bool(fn.overloads) or prebuild.in_cache(fn)
 
     def jacobian(self, t, x, P, local=True):
         """State Jacobian d(dx/dt)/dx (nx, nx) at (t, x) for one parameter row P (slots,):
