@@ -61,6 +61,9 @@ class PeriodicOrbit(Result):
         return bool(np.all(np.abs(nt) < 1.0))
 
 
+ORBIT_POINTS = 401  # output points of one period of an orbit, both ends included
+
+
 def _flow(circuit, X0, T, t0=0.0, rtol=1e-9, n_out=2):
     """phi over time T for a batch of starting states X0 (n, nx) of the SAME circuit."""
     n = X0.shape[0]
@@ -86,9 +89,18 @@ def _laws(circuit):
     return np.array(rows).reshape(-1, circuit.nx)
 
 
-def shoot(circuit, x_guess, T_guess, forced=False, rtol=1e-9, tol=1e-8, max_iter=25, rel_step=1e-6, progress=None):
-    """Newton shooting from (x_guess, T_guess).  Returns a PeriodicOrbit.  ``progress``: a bar
-    of the Newton iterations (with the residual) on stderr (:mod:`hemocircuit.progress`).
+def shoot(circuit, x_guess, T_guess, forced=False, rtol=1e-9, tol=1e-8, max_iter=25, rel_step=1e-6, progress=None,
+          method="newton", memory=4, multipliers=True):
+    """Shooting from (x_guess, T_guess).  Returns a PeriodicOrbit.  ``progress``: a bar
+    of the iterations (with the residual) on stderr (:mod:`hemocircuit.progress`).
+
+    ``method``: 'newton' (the monodromy by finite differences at every iteration: nx + 1
+    periods integrated as one batch) or, for ``forced`` only, 'anderson': quasi-Newton
+    shooting on x = phi_T(x) by Anderson acceleration (a multisecant Broyden update from the
+    last ``memory`` periods; Walker & Ni, SIAM J. Numer. Anal. 49 (2011) 1715), one period per
+    iteration and no monodromy.  A conserved volume is kept exactly (each update is an affine
+    combination of phi values).  ``multipliers``: with 'anderson', compute the monodromy once
+    at the orbit for the Floquet multipliers (nx + 1 periods); False leaves them empty.
 
     A Newton update that puts a state below its hard limit (a closed valve's flow below 0) is
     projected onto the limit: no state of the system lies below it, and from there the
@@ -98,7 +110,62 @@ def shoot(circuit, x_guess, T_guess, forced=False, rtol=1e-9, tol=1e-8, max_iter
     docs/svzerod.md "Limitations") its last iterate may be far from its best."""
     from ..progress import bar
     with bar(max_iter, "shooting", unit="iteration", progress=progress) as b:
+        if method == "anderson":
+            if not forced:
+                raise HemocircuitError("shooting method 'anderson' needs a forced orbit (fixed period); "
+                                       "use method='newton' for a limit cycle")
+            return _shoot_anderson(circuit, x_guess, float(T_guess), rtol, tol, max_iter, rel_step, memory,
+                                   multipliers, b)
+        if method != "newton":
+            raise HemocircuitError(f"shooting method {method!r}: choose 'newton' or 'anderson'")
         return _shoot(circuit, x_guess, T_guess, forced, rtol, tol, max_iter, rel_step, b)
+
+
+def _shoot_anderson(c, x_guess, T, rtol, tol, max_iter, rel_step, memory, multipliers, pbar):
+    """Anderson-accelerated fixed-point shooting (type II, mixing 1): with f_k = (phi(x_k) - x_k)/S
+    and g_k = phi(x_k)/S, x_{k+1} = S (g_k - dG gamma), gamma = argmin |f_k - dF gamma| over the
+    differences of the last ``memory`` iterates.  The residual is max |f_k| (scaled, as Newton's)."""
+    started = clock()
+    if c.B != 1:
+        raise HemocircuitError("periodic orbits are computed one parameter set at a time")
+    S = c.state_scales
+    limits = c.hard_limits()
+    x = np.asarray(x_guess, dtype=float).copy()
+    F, G = [], []
+    best, converged = None, False
+    for it in range(1, max_iter + 1):
+        # each period on the orbit's output grid: the converged iterate's run is the orbit
+        g, r = _flow(c, x[None], np.array([T]), rtol=rtol, n_out=ORBIT_POINTS)
+        g = g[0]
+        f = (g - x) / S
+        res = float(np.max(np.abs(f)))
+        pbar.update_to(it, residual=f"{res:.2e}")
+        if best is None or res < best[0]:
+            best = (res, x.copy(), r)
+        if res < tol:
+            converged = True
+            break
+        F.append(f)
+        G.append(g / S)
+        del F[:-(memory + 1)], G[:-(memory + 1)]
+        if len(F) == 1:
+            x = g
+        else:
+            dF = np.diff(np.array(F), axis=0).T
+            dG = np.diff(np.array(G), axis=0).T
+            gamma = np.linalg.lstsq(dF, F[-1], rcond=None)[0]
+            x = (G[-1] - dG @ gamma) * S
+        for li, bound, _ in limits:  # as Newton's updates: no state lies below its hard limit
+            x[li] = max(x[li], bound)
+    res, x, run = best
+    M = None
+    if multipliers:
+        Mb, _ = dense_jacobian(lambda rows: _flow(c, rows, np.full(rows.shape[0], T), rtol=rtol)[0],
+                               x[None], S, steps=flow_steps(S, rel_step))
+        M = Mb[0]
+    return _orbit(c, x, T, M, converged, it, res, True, len(_laws(c)), started, run=run,
+                  settings={"forced": True, "method": "anderson", "memory": memory, "T_guess": T, "rtol": rtol,
+                   "atol": rtol, "tol": tol, "max_iter": max_iter, "rel_step": rel_step})
 
 
 def _shoot(circuit, x_guess, T_guess, forced, rtol, tol, max_iter, rel_step, pbar):
@@ -156,18 +223,26 @@ def _shoot(circuit, x_guess, T_guess, forced, rtol, tol, max_iter, rel_step, pba
                 raise SolverError("shooting: the period became non-positive; give a better initial guess")
     if not converged and best is not None:
         res_norm, x0, T, M = best
-    # one more integration for the orbit itself (dense) and the final multipliers
-    _, r = _flow(c, x0[None], np.array([T]), rtol=rtol, n_out=401)
+    return _orbit(c, x0, T, M, converged, it, res_norm, forced, len(L), started,
+                  settings={"forced": forced, "method": "newton", "T_guess": float(T_guess), "rtol": rtol, "atol": rtol,
+                   "tol": tol, "max_iter": max_iter, "rel_step": rel_step})
+
+
+def _orbit(c, x0, T, M, converged, it, res_norm, forced, n_laws, started, settings, run=None):
+    """The PeriodicOrbit from its start x0: the integration of the orbit itself on
+    ORBIT_POINTS (``run``, when already made from x0, else one more) and the multipliers of the
+    monodromy M (none when M is None)."""
+    r = run if run is not None else _flow(c, x0[None], np.array([T]), rtol=settings["rtol"], n_out=ORBIT_POINTS)[1]
     t = r.t[0]
     xs = r.x[0]
     cols = c.outputs(t, xs)
     orb = PeriodicOrbit(x0, T, t, xs, np.linalg.eigvals(M) if M is not None else np.zeros(0), converged, it,
                         res_norm, forced, cols, c.column_units())
-    orb.n_laws = len(L)
+    orb.n_laws = n_laws
     orb.metadata["measures"] = {"period": T, "converged": converged, "iterations": it, "residual": res_norm,
-                                "nontrivial_multipliers": orb.nontrivial_multipliers, "orbitally_stable": orb.stable}
-    return stamp(orb, "periodic", circuit, {"forced": forced, "T_guess": float(T_guess), "rtol": rtol, "atol": rtol,
-                                            "tol": tol, "max_iter": max_iter, "rel_step": rel_step}, started)
+                                "nontrivial_multipliers": orb.nontrivial_multipliers,
+                                "orbitally_stable": orb.stable if M is not None else None}
+    return stamp(orb, "periodic", c, settings, started)
 
 
 def guess_from_run(circuit, output=None, t_settle=400.0, dt=0.05, kick=1e-3, rtol=1e-6):
