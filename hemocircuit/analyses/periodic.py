@@ -239,7 +239,8 @@ def _orbit(c, x0, T, M, converged, it, res_norm, forced, n_laws, started, settin
     orb = PeriodicOrbit(x0, T, t, xs, np.linalg.eigvals(M) if M is not None else np.zeros(0), converged, it,
                         res_norm, forced, cols, c.column_units())
     orb.n_laws = n_laws
-    orb.metadata["measures"] = {"period": T, "converged": converged, "iterations": it, "residual": res_norm,
+    orb.metadata["measures"] = {"period": T, "converged": converged, "method": settings["method"],
+                                "iterations": it, "residual": res_norm,
                                 "nontrivial_multipliers": orb.nontrivial_multipliers,
                                 "orbitally_stable": orb.stable if M is not None else None}
     return stamp(orb, "periodic", c, settings, started)
@@ -382,7 +383,8 @@ def cmd_periodic(args):
         return report_grid(args, computed(args, compute_periodic))
     orb, output, interest = _periodic(args, _load(args)[0])
     y = orb[output]
-    print(f"{'converged' if orb.converged else 'NOT converged'} after {orb.iterations} Newton iterations "
+    print(f"{'converged' if orb.converged else 'NOT converged'} after {orb.iterations} iterations of "
+          f"{orb.metadata['measures']['method'].capitalize()} shooting "
           f"(residual {orb.residual:.2e}); period {orb.period:.6g} s")
     print(f"{orb.label(output)}: min {y.min():.6g}, max {y.max():.6g}, time average {orb.time_average(output):.6g}")
     mu = orb.nontrivial_multipliers
