@@ -57,6 +57,9 @@ class PeriodicOrbit(Result):
 
     @property
     def stable(self):
+        """True / False; None when no multipliers were computed (shoot(multipliers=False))."""
+        if self.multipliers.size == 0:
+            return None
         nt = self.nontrivial_multipliers
         return bool(np.all(np.abs(nt) < 1.0))
 
@@ -99,7 +102,7 @@ def shoot(circuit, x_guess, T_guess, forced=False, rtol=1e-9, tol=1e-8, max_iter
     shooting on x = phi_T(x) by Anderson acceleration (a multisecant Broyden update from the
     last ``memory`` periods; Walker & Ni, SIAM J. Numer. Anal. 49 (2011) 1715), one period per
     iteration and no monodromy.  A conserved volume is kept exactly (each update is an affine
-    combination of phi values).  ``multipliers``: with 'anderson', compute the monodromy once
+    combination of phi values), unless the projection onto a hard limit moves a state it counts.  ``multipliers``: with 'anderson', compute the monodromy once
     at the orbit for the Floquet multipliers (nx + 1 periods); False leaves them empty.
 
     A Newton update that puts a state below its hard limit (a closed valve's flow below 0) is
@@ -109,6 +112,8 @@ def shoot(circuit, x_guess, T_guess, forced=False, rtol=1e-9, tol=1e-8, max_iter
     (closedLoopHeart_singleVessel: residuals between 1e-4 and 1e-8, cause not found,
     docs/svzerod.md "Limitations") its last iterate may be far from its best."""
     from ..progress import bar
+    if circuit.B != 1:
+        raise HemocircuitError("periodic orbits are computed one parameter set at a time")
     with bar(max_iter, "shooting", unit="iteration", progress=progress) as b:
         if method == "anderson":
             if not forced:
@@ -126,8 +131,6 @@ def _shoot_anderson(c, x_guess, T, rtol, tol, max_iter, rel_step, memory, multip
     and g_k = phi(x_k)/S, x_{k+1} = S (g_k - dG gamma), gamma = argmin |f_k - dF gamma| over the
     differences of the last ``memory`` iterates.  The residual is max |f_k| (scaled, as Newton's)."""
     started = clock()
-    if c.B != 1:
-        raise HemocircuitError("periodic orbits are computed one parameter set at a time")
     S = c.state_scales
     limits = c.hard_limits()
     x = np.asarray(x_guess, dtype=float).copy()
@@ -171,8 +174,6 @@ def _shoot_anderson(c, x_guess, T, rtol, tol, max_iter, rel_step, memory, multip
 def _shoot(circuit, x_guess, T_guess, forced, rtol, tol, max_iter, rel_step, pbar):
     started = clock()
     c = circuit
-    if c.B != 1:
-        raise HemocircuitError("periodic orbits are computed one parameter set at a time")
     nx = c.nx
     S = c.state_scales
     x0 = np.asarray(x_guess, dtype=float).copy()
@@ -242,7 +243,7 @@ def _orbit(c, x0, T, M, converged, it, res_norm, forced, n_laws, started, settin
     orb.metadata["measures"] = {"period": T, "converged": converged, "method": settings["method"],
                                 "iterations": it, "residual": res_norm,
                                 "nontrivial_multipliers": orb.nontrivial_multipliers,
-                                "orbitally_stable": orb.stable if M is not None else None}
+                                "orbitally_stable": orb.stable}
     return stamp(orb, "periodic", c, settings, started)
 
 
