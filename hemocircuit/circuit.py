@@ -1142,8 +1142,10 @@ class Circuit:
         import sys
 
         # only where compiled engines are in use already: never import numba or write an
-        # engine module for outputs alone
-        if self.sparse or not any(name.startswith("hemocircuit_engine_") for name in sys.modules):
+        # engine module for outputs alone (codegen keeps the engine modules this process loaded;
+        # a lookup, not a scan of sys.modules: a frequency response asks once per block)
+        codegen = sys.modules.get("hemocircuit.kernels.codegen")
+        if self.sparse or codegen is None or not codegen.loaded_any():
             return None
         from .kernels.system import CompiledSystem
 

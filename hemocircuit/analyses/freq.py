@@ -76,13 +76,20 @@ def _run_chunk(job):
 
 
 def _warm(job):
-    """A zero-length integration of a chunk's members as the chunk makes it (execution.
-    run_chunks' ``warm``): loads the compiled integrator into the parent, whose forked workers
-    inherit it.  Same argument kinds as in the chunk (a grid per member, h_max per member):
-    numba keeps one specialisation per argument types, read-only flags included."""
+    """A zero-length integration of a chunk's members as the chunk makes it, and one block's
+    worth of output rows (execution.run_chunks' ``warm``): loads the compiled integrator and
+    the compiled nodal outputs into the parent, whose forked workers inherit them instead of
+    each loading them from numba's cache on every call.  Same argument kinds as in the chunk
+    (a grid per member, h_max per member): numba keeps one specialisation per argument
+    types, read-only flags included."""
     bc, _, X0, _, opt = job
-    return partial(integrate, bc, X0, np.zeros((bc.B, 1)), rtol=opt["rtol"], atol=opt["rtol"], h_max=np.ones(bc.B),
-                   method=METHOD)
+    return partial(_warm_run, bc, X0, opt)
+
+
+def _warm_run(bc, X0, opt):
+    integrate(bc, X0, np.zeros((bc.B, 1)), rtol=opt["rtol"], atol=opt["rtol"], h_max=np.ones(bc.B), method=METHOD)
+    rows = max(2, opt["n_periods"]) * SAMPLES
+    _block_outputs(bc, [0], np.zeros((1, rows)), np.repeat(np.asarray(X0[:1], dtype=float)[:, None, :], rows, axis=1))
 
 
 def _run_chunk_members(job):
@@ -235,9 +242,11 @@ def frequency_response(circuit, freqs, outputs=None, input=None, step=0.1, ampli
                 else np.full((bc.B, len(outputs)), np.nan)
             before.update({idx[j]: {"error": e} for j, e in enumerate(errors) if e is not None})
             good = [j for j, e in enumerate(errors) if e is None]
-            # interleaved chunks, a few per worker: frequencies (and grid points) of unequal
-            # cost spread over all of them, so the workers finish together
-            n = 2 * (workers or default_workers()) if scheduler != "serial" else 1
+            # interleaved chunks, one per worker: frequencies (and grid points) of unequal cost
+            # spread over all of them, so the workers finish together.  One each, not a few:
+            # every chunk pays a block's Python overhead per block it runs (benchmarks/
+            # bench_peers.py --only freq: 30 x 2 runs on 2 workers, 4 chunks 0.30-0.34 s, 2 chunks 0.26-0.29 s)
+            n = (workers or default_workers()) if scheduler != "serial" else 1
             for chunk in split(good, n, interleave=True):
                 jobs.append((bc.subset(chunk), [descr[idx[j]] for j in chunk], X0[chunk], y0[chunk], opt))
                 where.append([idx[j] for j in chunk])  # bc.subset pickles without caches

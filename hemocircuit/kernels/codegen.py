@@ -36,6 +36,11 @@ _loaded: dict[str, object] = {}
 STALE_DAYS = 7
 
 
+def loaded_any() -> bool:
+    """True when this process has loaded an engine module (it runs compiled code already)."""
+    return bool(_loaded)
+
+
 def cache_dir() -> Path:
     d = Path(os.environ.get("HEMOCIRCUIT_CACHE_DIR") or Path.home() / ".cache" / "hemocircuit") / "kernels"
     d.mkdir(parents=True, exist_ok=True)
