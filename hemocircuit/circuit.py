@@ -1221,10 +1221,11 @@ def assemble(netlist: Netlist) -> Circuit:
     return c
 
 
-def load(path: str, values: dict | None = None, allow_paths=None) -> Circuit:
+def load(path: str, values: dict | None = None, allow_paths=None, svzerod_units=None) -> Circuit:
     """Load, validate and assemble a netlist file; optionally apply {ID.PARAM: value}.
-    ``allow_paths``: more folders its files may read (see hemocircuit.access)."""
-    return assemble(load_netlist(path, allow_paths)).with_values(values or {})
+    ``allow_paths``: more folders its files may read (see hemocircuit.access);
+    ``svzerod_units``: the unit system of an svZeroDSolver JSON model (netlist.load_netlist)."""
+    return assemble(load_netlist(path, allow_paths, svzerod_units)).with_values(values or {})
 
 
 # the common analyses as methods (c.simulate(), c.operating_point(), ...)

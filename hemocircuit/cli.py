@@ -44,7 +44,7 @@ def _unit_spacing(v):
     return f"{m.group(1)} {m.group(2)}" if m else v
 
 
-def load_circuit(netlist, sets=None, protocol=None, allow_paths=None):
+def load_circuit(netlist, sets=None, protocol=None, allow_paths=None, svzerod_units=None):
     """The one way every command gets its circuit: netlist, then ``--set``, then ``--protocol``.
 
     ``sets``: {ID.NAME: value} (``--set``): structural options (``art.ca_order``, values as YAML
@@ -53,6 +53,7 @@ def load_circuit(netlist, sets=None, protocol=None, allow_paths=None):
     checked against the circuit; its ``initial`` settings and its events at t = 0 are applied
     last (they win over ``--set``, as they would in ``simulate``).  ``allow_paths``: more
     folders the netlist may read files from (``--allow-path``, see hemocircuit.access).
+    ``svzerod_units`` (``--svzerod-units``): the unit system of an svZeroDSolver JSON model.
     Returns (circuit, protocol or None).  The protocol's timed events are left to the commands
     that run them (tran, compare --tran), which pass it on stripped of ``initial`` (see
     :func:`events_only`).  Errors in ``--set`` name the ``--set`` option, with close matches.
@@ -65,7 +66,7 @@ def load_circuit(netlist, sets=None, protocol=None, allow_paths=None):
     from .protocol import Protocol
 
     try:
-        c = load(str(netlist), allow_paths=allow_paths)
+        c = load(str(netlist), allow_paths=allow_paths, svzerod_units=svzerod_units)
     except NetlistError as exc:
         given = os.path.abspath(str(netlist))
         if exc.file and os.path.abspath(str(exc.file)) != given:  # an error in a base netlist: say which
@@ -104,7 +105,7 @@ def _load(args, uses_events=False):
     """load_circuit() from the parsed arguments (netlist, --set, --protocol, --allow-path) of any
     command; ``--show`` names are checked against the circuit's columns."""
     c, proto = load_circuit(args.netlist, _sets(getattr(args, "set", None)), getattr(args, "protocol", None),
-                            getattr(args, "allow_path", None))
+                            getattr(args, "allow_path", None), getattr(args, "svzerod_units", None))
     later = [ev for ev in proto.events if ev.at > 0] if proto is not None else []
     if later and not uses_events:
         print(f"note: {args.command} applies the protocol's 'initial' settings and its events at t = 0; its "
@@ -379,6 +380,11 @@ def build_parser(command=None):
         sp.add_argument("--allow-path", action="append", metavar="DIR",
                         help="let the netlist read files (extends, tables) in DIR too; by default only its "
                              "project folder and the bundled netlists (repeatable)")
+        # no choices= here: the importer checks the name against its UNIT_SYSTEMS (importing it
+        # for --help would cost start-up time)
+        sp.add_argument("--svzerod-units", metavar="SYSTEM",
+                        help="for an svZeroDSolver JSON model: the unit system of its numbers, cgs (default, "
+                             "their convention; SI when the model says m^3), mmHg (mmHg, mL, s) or SI")
         sp.add_argument("--quiet", action="store_true", help="no progress bars (and, for ac, no table)")
         if grid:
             sp.add_argument("--grid", action="append", metavar="ID.PARAM=V1,V2,...",

@@ -210,13 +210,19 @@ def read_json_file(path, what="netlist"):
         raise NetlistError("the JSON is too deeply nested to read", file=path) from None
 
 
-def _read_yaml(path):
+def _read_yaml(path, svzerod_units=None):
+    """The mapping of a netlist file; an svZeroDSolver JSON model through the importer, in
+    ``svzerod_units`` (None: the importer's guess, cgs unless the model says m^3)."""
     if str(path).lower().endswith(".json"):
         data = read_json_file(path)
         from .svzerod.importer import is_svzerod_model, netlist_of
 
         if is_svzerod_model(data):  # an svZeroDSolver model: read through the importer
-            return netlist_of(data, path)
+            return netlist_of(data, path, svzerod_units)
+    if svzerod_units is not None:
+        raise NetlistError(f"a unit system for svZeroDSolver numbers ({svzerod_units!r}) was given, but this is "
+                           "a hemocircuit netlist, whose quantities carry their units: drop --svzerod-units",
+                           file=path)
     data = read_yaml_file(path)  # a netlist (JSON is YAML; its ${name} references resolved)
     if not isinstance(data, dict):
         raise NetlistError("a netlist is a YAML mapping with at least 'elements' (or 'extends')", file=path)
@@ -256,11 +262,11 @@ def _element_list(items, path, access, what="elements"):
     return out
 
 
-def _load_raw(path, chain, access):
+def _load_raw(path, chain, access, svzerod_units=None):
     path = os.path.abspath(path)
     if path in chain:
         raise NetlistError(f"'extends' cycle: {' -> '.join(chain + [path])}", file=path)
-    data = _read_yaml(path)
+    data = _read_yaml(path, svzerod_units)
     base_dir = os.path.dirname(path)
     params = data.get("parameters") or {}
     if not isinstance(params, dict):
@@ -442,13 +448,15 @@ def _resolve_parameters(params, path):
     return done
 
 
-def load_netlist(path: str, allow_paths=None) -> Netlist:
+def load_netlist(path: str, allow_paths=None, svzerod_units=None) -> Netlist:
     """Read a netlist file (following ``extends``), substitute parameters, check ids are unique.
 
     Files named inside (``extends``, table ``file:``) must lie in the allowed folders (see
-    :mod:`hemocircuit.access`); ``allow_paths`` adds folders."""
+    :mod:`hemocircuit.access`); ``allow_paths`` adds folders.  ``svzerod_units``: the unit
+    system of an svZeroDSolver JSON model's numbers (hemocircuit.svzerod.importer.UNIT_SYSTEMS;
+    an error for a hemocircuit netlist)."""
     access = Access.for_netlist(path, allow_paths)
-    raw = _load_raw(path, [], access)
+    raw = _load_raw(path, [], access, svzerod_units)
     limits.check_elements(len(raw["elements"]), path)
     params = _resolve_parameters(dict(raw["parameters"]), path)
     seen = {}

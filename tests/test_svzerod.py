@@ -43,6 +43,32 @@ def test_stenosis_is_quadratic(tmp_path):
     assert op["P(IN__v)"] * mmHg == pytest.approx(Pd + Rbc * Q + (R + S * Q) * Q, rel=1e-10)
 
 
+def test_cli_reads_their_json_in_the_unit_system_given(tmp_path, capsys):
+    """``--svzerod-units mmHg``: the model's numbers are mmHg, mL, s, so the operating point is
+    the closed form of test_stenosis_is_quadratic in mmHg itself; the default (cgs) reads the
+    same numbers as dyn/cm^2.  A hemocircuit netlist or an unknown system: a clear error."""
+    import json
+
+    from hemocircuit.cli import main
+
+    R, S, Rbc, Pd, Q = 100.0, 30.0, 1000.0, 500.0, 5.0
+    cfg = _model({"R_poiseuille": R, "stenosis_coefficient": S},
+                 {"bc_name": "OUT", "bc_type": "RESISTANCE", "bc_values": {"R": Rbc, "Pd": Pd}})
+    p = tmp_path / "m.json"
+    p.write_text(json.dumps(cfg))
+    out = tmp_path / "op.json"
+    for units, scale in (("mmHg", 1.0), (None, 1333.22387415)):
+        args = ["op", str(p), "--out", str(out)] + (["--svzerod-units", units] if units else [])
+        assert main(args) in (0, None)
+        vals = json.loads(out.read_text())["values"]
+        assert vals["P(IN__v) [mmHg]"] * scale == pytest.approx(Pd + Rbc * Q + (R + S * Q) * Q, rel=1e-10)
+    capsys.readouterr()
+    for args, says in ((["op", str(p), "--svzerod-units", "furlong"], "unknown unit system 'furlong'"),
+                       (["op", os.path.join(os.path.dirname(__file__), "..", "netlists", "payne06.yaml"),
+                         "--svzerod-units", "mmHg"], "drop --svzerod-units")):
+        assert main(args) == 2 and says in capsys.readouterr().err
+
+
 def test_rcr_and_coronary_steady_states(tmp_path):
     """Steady: capacitors carry no flow, P = Q (Rp + Rd) + Pd and Q (Ra1 + Ra2 + Rv1) + P_v."""
     mmHg = 1333.22387415

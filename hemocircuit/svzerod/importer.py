@@ -820,12 +820,12 @@ def guess_units(cfg) -> str:
     return "SI" if re.search(r"m\^3|m\*\*3", text) else "cgs"
 
 
-def netlist_of(cfg: dict, path=None) -> dict:
-    """The hemocircuit netlist (dict) of a parsed svZeroDSolver model, in the units
-    :func:`guess_units` finds: what netlist loading uses for a ``.json`` model, so every
-    command accepts their JSON directly."""
+def netlist_of(cfg: dict, path=None, units=None) -> dict:
+    """The hemocircuit netlist (dict) of a parsed svZeroDSolver model, in ``units`` (a key of
+    UNIT_SYSTEMS; default the system :func:`guess_units` finds): what netlist loading uses for
+    a ``.json`` model, so every command accepts their JSON directly (``--svzerod-units``)."""
     name = os.path.splitext(os.path.basename(path))[0] if path else None
-    model = import_svzerod(cfg, units=guess_units(cfg), name=name, source=path)
+    model = import_svzerod(cfg, units=units or guess_units(cfg), name=name, source=path)
     return model.netlist
 
 
