@@ -287,19 +287,25 @@ def test_written_rows_follow_their_counter(tmp_path):
 def test_their_rcr_rule_sets_the_cycles(tmp_path):
     """use_cycle_to_cycle_error with an RCR (Rd C = 2 s, T = 1 s, 1 %): their solver runs
     ceil(-2 ln 0.01) = 10 cycles instead of the 2 given (from the circuit's values: --set C
-    to 4e-3 gives 19); without it the 2 stay."""
-    from hemocircuit.svzerod.output import _circuits, apply_their_cycle_rule
+    to 4e-3 gives 19); without it the 2 stay.  The model given is never changed: a run, the
+    written file and the conformance runner take a copy with the count."""
+    from hemocircuit.svzerod.conformance import simulate_case
+    from hemocircuit.svzerod.output import _circuits, simulate_svzerod, their_cycles
 
     bc = {"bc_name": "OUT", "bc_type": "RCR", "bc_values": {"Rp": 100.0, "C": 2e-3, "Rd": 1000.0, "Pd": 0.0}}
     path = _rc_model(tmp_path, bc, {"R_poiseuille": 100.0}, sim={"use_cycle_to_cycle_error": True})
     model = import_svzerod(path)
-    assert apply_their_cycle_rule(model, _circuits(model)[0]) == math.ceil(-2.0 * math.log(0.01)) == 10
+    assert their_cycles(model, _circuits(model)[0]).n_cycles == math.ceil(-2.0 * math.log(0.01)) == 10
     c = _circuits(model, {"OUT.C": "4e-3 mL/(dyn/cm**2)"})[0]
-    assert apply_their_cycle_rule(model, c) == math.ceil(-4.0 * math.log(0.01)) == 19
+    assert their_cycles(model, c).n_cycles == math.ceil(-4.0 * math.log(0.01)) == 19
+    _, res = simulate_svzerod(model)
+    assert res.metadata["svzerod_run"] == {"cycles": 10, "extra_cycles": 0} and res.t[-1] == pytest.approx(10.0)
+    res, _, _, _ = simulate_case(model)
+    assert model.n_cycles == 2 and model.sim == import_svzerod(path).sim  # the caller's model as imported
     cfg = json.load(open(path))
     cfg["simulation_parameters"]["use_cycle_to_cycle_error"] = False
     model = import_svzerod(cfg)
-    assert apply_their_cycle_rule(model, _circuits(model)[0]) == 2
+    assert their_cycles(model, _circuits(model)[0]).n_cycles == 2
 
 
 def test_stateless_model_rows_and_zero_derivatives(tmp_path):

@@ -337,7 +337,7 @@ def _forced_by_period(args, c, output):
     from ..svzerod import cycles
 
     T = cycles.time_period(c)
-    svz = _svzerod_model(args.netlist)
+    svz = _svzerod_model(args.netlist, getattr(args, "svzerod_units", None))
     if svz is not None:
         model, cfg = svz
         from ..cli import _sets
@@ -357,8 +357,9 @@ def _forced_by_period(args, c, output):
     return orb
 
 
-def _svzerod_model(path):
-    """(SvzModel, their config) when ``path`` is an svZeroDSolver JSON model, else None."""
+def _svzerod_model(path, units=None):
+    """(SvzModel, their config) when ``path`` is an svZeroDSolver JSON model, else None;
+    ``units``: --svzerod-units (default the importer's guess)."""
     import json
 
     if not str(path).endswith(".json"):
@@ -368,7 +369,7 @@ def _svzerod_model(path):
         cfg = json.load(fh)
     if not is_svzerod_model(cfg):
         return None
-    return import_svzerod(path, units=guess_units(cfg)), cfg
+    return import_svzerod(path, units=units or guess_units(cfg)), cfg
 
 
 def compute_periodic(args, sets):

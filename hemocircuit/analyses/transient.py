@@ -519,11 +519,13 @@ def cmd_tran_svzerod(args):
     if not is_svzerod_model(cfg):
         raise HemocircuitError(f"--svzerod-output: {args.netlist} is not an svZeroDSolver JSON model "
                                "(simulation_parameters and blocks)")
-    model = import_svzerod(args.netlist, units=guess_units(cfg))
+    model = import_svzerod(args.netlist, units=getattr(args, "svzerod_units", None) or guess_units(cfg))
     c, res = simulate_svzerod(model, sets=_sets(args.set), start=args.svzerod_start, cfg=cfg)
     path = write_svzerod_output(args.svzerod_output, model, c, res, cfg)
     layout = "per variable" if model.sim.get("output_variable_based") else "per block"
-    print(f"{model.n_cycles} cycles of {model.period:g} s, {model.points} points per cycle; solver {res.stats}")
+    ran = res.metadata["svzerod_run"]  # their rule's count and extra cycles (the model is left as given)
+    extra = f" (+{ran['extra_cycles']} by their cycle-to-cycle criterion)" if ran["extra_cycles"] else ""
+    print(f"{ran['cycles']} cycles{extra} of {model.period:g} s, {model.points} points per cycle; solver {res.stats}")
     print(f"wrote {path} (their result layout, {layout}, units {model.units['P']}, {model.units['Q']})")
     args.computed_result = res
     save_outputs(args, res)

@@ -143,7 +143,7 @@ def simulate_case(model, rtol=None, timed_runs=1, atol=None, cfg=None):
 
     With ``use_cycle_to_cycle_error`` (``cfg``: their JSON configuration, for their vessel
     caps) the cycles are theirs (Solver.cpp): with an RCR the count of their eq. 21
-    (output.apply_their_cycle_rule, set in ``model.sim``); otherwise the given cycles, then one
+    (output.their_cycles); otherwise the given cycles, then one
     more at a time until their criterion holds at the caps (cycles.cycle_means/cycle_errors
     on the last two cycles), and with ``output_all_cycles`` the rows of those extra cycles are
     written as theirs are: times i dt, i = 1 .. N-1, in each (their extra-cycle loop restarts
@@ -164,9 +164,9 @@ def simulate_case(model, rtol=None, timed_runs=1, atol=None, cfg=None):
         write_netlist(model.mean_netlist, os.path.join(d, "mean.yaml"))
         c = load(os.path.join(d, "m.yaml"))
         cm = load(os.path.join(d, "mean.yaml"))
-    from .output import apply_their_cycle_rule, runs_extra_cycles
+    from .output import runs_extra_cycles, their_cycles
 
-    apply_their_cycle_rule(model, c)
+    model = their_cycles(model, c)  # a copy with their cycle count: the caller's model is left as it is
     extra_rule = runs_extra_cycles(model, c)
     if extra_rule and cfg is None:
         raise HemocircuitError(f"{model.name}: use_cycle_to_cycle_error needs the model's configuration (cfg) "
@@ -222,8 +222,8 @@ def _with_their_extra_cycles(model, cfg, c, res, rtol, atol):
     extra-cycle loop writes none), so ``res`` is kept (its metadata says how many ran)."""
     from .output import their_extra_cycles
 
-    ext = their_extra_cycles(model, cfg, c, res, rtol, atol)
-    extra = res.metadata["conformance"]["extra_cycles"] = model.sim["_extra_cycles"]
+    ext, extra = their_extra_cycles(model, cfg, c, res, rtol, atol)
+    res.metadata["conformance"]["extra_cycles"] = extra
     if not (extra and model.sim.get("output_all_cycles")):
         return res
     N = model.points

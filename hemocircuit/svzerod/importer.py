@@ -82,6 +82,13 @@ class SvzModel:
     def n_cycles(self):
         return int(self.sim["number_of_cardiac_cycles"])
 
+    def with_sim(self, **changes) -> "SvzModel":
+        """A copy with these simulation settings changed (this model is left as it is: runs
+        derive the settings they used, e.g. their cycle count, without touching the caller's)."""
+        import dataclasses
+
+        return dataclasses.replace(self, sim={**self.sim, **changes})
+
     @property
     def points(self):
         return int(self.sim["number_of_time_pts_per_cardiac_cycle"])

@@ -197,9 +197,19 @@ def _rates(model, circuit, t, x, t_start):
     return {k: side * (-3 * g[0][k] + 4 * g[1][k] - g[2][k]) / (2 * h) for k in g[0]}
 
 
+def ran_model(model, res):
+    """``model`` with the cycles the run ``res`` of :func:`simulate_svzerod` made (their rule's
+    count, their extra cycles: ``res.metadata['svzerod_run']``), whose rows are written."""
+    run = res.metadata.get("svzerod_run") if hasattr(res, "metadata") else None
+    if not run:
+        return model
+    return model.with_sim(number_of_cardiac_cycles=run["cycles"], _extra_cycles=run["extra_cycles"])
+
+
 def result_table(model, circuit, res, cfg):
     """Their DataFrame as {column: list} (row order theirs) from our run ``res`` (on their
-    step grid from t = 0)."""
+    step grid from t = 0; the cycles it made, :func:`ran_model`)."""
+    model = ran_model(model, res)
     steps, t_rows = written_steps(model)
     dt = model.period / (model.points - 1)
     k = np.rint(np.asarray(res.t) / dt).astype(int)
@@ -313,13 +323,15 @@ def simulate_svzerod(model, sets=None, rtol=None, start="operating-point", cfg=N
     from .conformance import case_rtol
 
     c, cm = _circuits(model, sets)
-    apply_their_cycle_rule(model, c)
+    model = their_cycles(model, c)  # a copy: the caller's model keeps its settings
     x0 = start_state(model, c, start, mean_circuit=cm)
     dt = model.period / (model.points - 1)
     if c.nx == 0:  # no states: the outputs are algebraic functions of time
         t = np.arange(0, (model.points - 1) * model.n_cycles + 1) * dt
         x = np.zeros((t.size, 0))
-        return c, TransientResult(t, x, c.outputs(t, x), c.column_units(), c.state_names)
+        res = TransientResult(t, x, c.outputs(t, x), c.column_units(), c.state_names)
+        res.metadata["svzerod_run"] = {"cycles": model.n_cycles, "extra_cycles": 0}
+        return c, res
     atol = None
     if rtol is None:  # the conformance runner's: drift tolerances for a run that keeps its start
         from ..analyses.op import operating_point
@@ -329,15 +341,17 @@ def simulate_svzerod(model, sets=None, rtol=None, start="operating-point", cfg=N
         if keeps_its_start(model, cm, operating_point(cm).x):
             rtol, atol = DRIFT_RTOL, DRIFT_ATOL
     res = simulate(c, model.n_cycles * model.period, dt=dt, x0=x0, rtol=rtol, atol=atol, progress=False)
+    extra = 0
     if cfg is not None and runs_extra_cycles(model, c):
-        res = their_extra_cycles(model, cfg, c, res, rtol, atol)
+        res, extra = their_extra_cycles(model, cfg, c, res, rtol, atol)
+    res.metadata["svzerod_run"] = {"cycles": model.n_cycles, "extra_cycles": extra}
     return c, res
 
 
 def runs_extra_cycles(model, circuit):
     """True when their solver runs extra cycles until its criterion holds: with
     ``use_cycle_to_cycle_error`` and no RCR boundary condition (with one it runs the count of
-    :func:`apply_their_cycle_rule` instead), and states to integrate."""
+    :func:`their_cycles` instead), and states to integrate."""
     from .cycles import rcr_time_constants
 
     return bool(model.sim.get("use_cycle_to_cycle_error")) and circuit.nx > 0 and not rcr_time_constants(circuit)
@@ -346,8 +360,8 @@ def runs_extra_cycles(model, circuit):
 def their_extra_cycles(model, cfg, c, res, rtol=None, atol=None, max_extra=1000):
     """Their extra cycles without an RCR (Solver.cpp run_integration): while their criterion
     fails on the last two cycles (cycles.cycle_means, cycle_errors at their vessel caps), one
-    more cycle from the state reached.  Returns the run extended by them (t continuing);
-    ``model.sim['_extra_cycles']`` records how many, so :func:`written_steps` writes their
+    more cycle from the state reached.  Returns (the run extended by them, t continuing; how
+    many), so that :func:`written_steps` of ``model.with_sim(_extra_cycles=...)`` writes their
     rows of them (with output_all_cycles: times restarting at dt in each, as theirs)."""
     from ..analyses.transient import TransientResult, simulate
     from .cycles import cycle_errors, cycle_means, their_tolerance, vessel_caps
@@ -380,28 +394,27 @@ def their_extra_cycles(model, cfg, c, res, rtol=None, atol=None, max_extra=1000)
         for q in quantities:
             cols[q].append(np.asarray(r.columns[q])[fr])
         extra += 1
-    model.sim["_extra_cycles"] = extra
     if not extra:
-        return res
+        return res, 0
     t, x = np.concatenate(ts), np.concatenate(xs)
     out = TransientResult(t, x, c.outputs(t, x), c.column_units(), c.state_names, stats=res.stats)
     out.metadata.update({k: v for k, v in res.metadata.items() if k != "solver"})
-    return out
+    return out, extra
 
 
-def apply_their_cycle_rule(model, circuit):
+def their_cycles(model, circuit):
     """With ``use_cycle_to_cycle_error`` and an RCR boundary condition their solver replaces
     the number of cycles by ceil(-tau_max/T ln tol) (Solver.cpp constructor, their eq. 21):
-    the same here (model.sim changed), so the written rows are theirs.  Without an RCR they
-    run extra cycles until their criterion holds (:func:`their_extra_cycles`; their rows of
-    them only with output_all_cycles).  Returns the number of cycles."""
+    returns ``model`` with that count (a copy; ``model`` itself unchanged), so the written
+    rows are theirs.  Without an RCR they run extra cycles until their criterion holds
+    (:func:`their_extra_cycles`; their rows of them only with output_all_cycles)."""
     from .cycles import pfaller_cycles, rcr_time_constants, their_tolerance
 
     if model.sim.get("use_cycle_to_cycle_error"):
         n = pfaller_cycles(rcr_time_constants(circuit), model.period, their_tolerance(model.sim))
         if n is not None:
-            model.sim["number_of_cardiac_cycles"] = n
-    return model.n_cycles
+            return model.with_sim(number_of_cardiac_cycles=n)
+    return model
 
 
 def write_svzerod_output(path, model, circuit, res, cfg=None):
@@ -416,11 +429,11 @@ def write_svzerod_output(path, model, circuit, res, cfg=None):
 
 def svzerod_output(model_path, out_path, rtol=None, start="operating-point", units=None, sets=None):
     """Import ``model_path`` (their JSON), run it with their semantics and write their result
-    layout to ``out_path``.  Returns (model, circuit, result)."""
+    layout to ``out_path``.  Returns (the model with the cycles the run made, circuit, result)."""
     from .importer import guess_units, import_svzerod
 
     cfg = _read_config(model_path)
     model = import_svzerod(model_path, units=units or guess_units(cfg))
     c, res = simulate_svzerod(model, sets=sets, rtol=rtol, start=start, cfg=cfg)
     write_svzerod_output(out_path, model, c, res, cfg)
-    return model, c, res
+    return ran_model(model, res), c, res
