@@ -614,7 +614,7 @@ def jacobian(t, x, P, lay, scales, local):
 def compile_local_jacobian(t, x, P, lay, scales):
     """Never run: compiled by signature in a second process (kernels.prebuild) while the first
     compiles the integrator, so that local_jacobian_into -- a fifth of a first compile -- is in
-    numba's cache when the integrator reaches it.  Its arguments have the types integrate()
+    numba's cache when the integrator reaches it.  Its arguments have the types integrate_batch
     passes (x, J, xt new C arrays, P a row of the parameter matrix, analytic a bool)."""
     nx = x.shape[0]
     work = make_work(lay)
@@ -716,11 +716,15 @@ def hermite_root(y0, d0, y1, d1):
     return hi
 
 
-# inlined into integrate_batch, its one caller (see jacobian_into): one level less to compile
-@njit(cache=True, nogil=True, inline="always")
-def integrate(t_out, x0, P, lay, scales, lim_i, lim_b, lim_r, breaks, bjump, rtol, atol, h0, hmax, max_steps, tab,
-              out):
-    """Integrate from t_out[0] to t_out[-1], writing the states at every t_out into out (T, nx).
+@njit(cache=True, nogil=True)
+def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, breaks_all, bjump_all, rtol, atol, h0,
+                    hmax_all, max_steps, tab):
+    """Integrate each member m from t_out[m, 0] to t_out[m, -1], writing its states at every t_out[m] into
+    out[m] (t_out (B, T), X0 (B, nx), P (B, nP), hmax (B,), breaks and bjump (B, K): each member's
+    breakpoints, padded with +inf) -> (out (B, T, nx), stats (B, 6): status, t reached, steps, rejected
+    steps, f evaluations, limit events).  One member's run:
+
+    Integrate from t_out[0] to t_out[-1], writing the states at every t_out into out (T, nx).
 
     Hard limits (lim_i, lim_b, lim_r): state lim_i[k] may not fall below lim_b[k]; at the
     crossing (located on the step's cubic Hermite interpolant) the state is put on the bound
@@ -731,302 +735,304 @@ def integrate(t_out, x0, P, lay, scales, lim_i, lim_b, lim_r, breaks, bjump, rto
     f are continuous, the step ends but f(t-) serves as f(t+) (one evaluation less per kink);
     where f does not jump the Jacobian is kept (tab[5] = 1).
     ``tab``: the method (hemocircuit.kernels.tableaus.packed).
-    Returns (status, t reached, steps, rejected steps, f evaluations, limit events);
+    Its stats row: (status, t reached, steps, rejected steps, f evaluations, limit events);
     status 0 done, -1 step size too small, -2 step limit, -3 non-finite state or singular system.
-    """
-    nx = x0.shape[0]
-    T = t_out.shape[0]
-    ns = int(tab[0])
-    GAMMA = tab[1]
-    q = tab[2]
-    JAC_REUSE = int(tab[3])
-    ev_restart = tab[4] != 0.0
-    soft_kinks = tab[5] != 0.0
-    autonomous = tab[6] != 0.0  # no waveform or time-dependent element: df/dt = 0
-    local_jac = int(tab[7])  # element-local Jacobian (local_jacobian_into) where it applies: 1 analytic parts, 2 FD
-    oA = 8  # offsets of A, G (ns x ns, row major), b, e, c, d, reuse (ns) in tab
-    oG = oA + ns * ns
-    oB = oG + ns * ns
-    oE = oB + ns
-    oC = oE + ns
-    oD = oC + ns
-    oR = oD + ns
-    oH = oR + ns
-    nd = int(tab[oH])  # dense-output rows (0: cubic Hermite), H at oH + 1 (nd x ns)
-    predictive = tab[oH + 1 + nd * ns] != 0.0  # step-size controller (tableaus.CONTROLLERS)
-    work = make_work(lay)
-    jw = make_jac_work(lay)
-    x = x0.copy()
-    f = np.empty(nx)
-    fn = np.empty(nx)
-    xn = np.empty(nx)
-    xs = np.empty(nx)
-    gs = np.empty(nx)
-    err = np.empty(nx)
-    K = np.empty((ns, nx))
-    Dd = np.zeros((max(nd, 1), nx))
-    fr = np.empty(nx)
-    J = np.zeros((nx, nx))
-    ft = np.zeros(nx)
-    W = np.empty((nx, nx))
-    piv = np.empty(nx, dtype=np.int64)
-    xt = np.empty(nx)
-    ftmp = np.empty(nx)
-    xh = np.empty(nx)
-    t = t_out[0]
-    t_end = t_out[-1]
-    for i in range(nx):
-        out[0, i] = x[i]
-    k_out = 1
-    nfev = 1
-    prepare_static(t, x, P, lay, work)
-    if not rhs_into(t, x, P, lay, work, f):
-        return -3, t, 0, 0, nfev, 0
-    h = h0
-    age = JAC_REUSE
-    nsteps = 0
-    nrej = 0
-    nev = 0
-    ib = 0
-    while ib < breaks.shape[0] and breaks[ib] <= t:
-        ib += 1
-    status = 0
-    nrej_run = 0
-    err_prev = 1.0
-    h_prev = 0.0  # the last accepted step (predictive controller; 0 before the first)
-    while t < t_end and k_out < T:
-        if nsteps >= max_steps:
-            status = -2
-            break
-        tb = t_end
-        if ib < breaks.shape[0] and breaks[ib] < t_end:
-            tb = breaks[ib]
-        if age >= JAC_REUSE:
-            nj = jacobian_into(t, x, f, P, lay, work, jw, scales, J, ft, xt, ftmp, autonomous, local_jac)
-            if nj < 0:
-                status = -3
-                break
-            nfev += nj
-            age = 0
-        hh = min(h, hmax)
-        at_break = False
-        tlim = np.inf  # stages never sample a source on the far side of a breakpoint
-        if t + hh >= tb - 1e-12 * max(1.0, abs(tb)):
-            hh = tb - t
-            at_break = True
-            tlim = tb - 1e-13 * max(1.0, abs(tb))
-            if hh <= 1e-12 * max(1.0, abs(tb)):  # already there (to rounding): cross it
-                t = tb
-                if tb < t_end:
-                    ib += 1
-                nfev += 1
-                if not rhs_into(t, x, P, lay, work, f):
-                    status = -3
-                    break
-                age = JAC_REUSE
-                continue
-        for i in range(nx):
-            for j in range(nx):
-                W[i, j] = -GAMMA * hh * J[i, j]
-            W[i, i] += 1.0
-        if not lu_factor(W, piv, nx):
-            h = 0.25 * hh
-            age = JAC_REUSE
-            nrej += 1
-            nsteps += 1
-            if h < 1e-14 * max(1.0, abs(t)):
-                status = -1
-                break
-            continue
-        good = True
-        for s in range(ns):
-            for i in range(nx):
-                xs[i] = x[i]
-                gs[i] = 0.0
-            for j in range(s):
-                a_sj = tab[oA + s * ns + j]
-                g_sj = tab[oG + s * ns + j]
-                if a_sj != 0.0:
-                    for i in range(nx):
-                        xs[i] += a_sj * K[j, i]
-                if g_sj != 0.0:
-                    for i in range(nx):
-                        gs[i] += g_sj * K[j, i]
-            if s == 0:
-                for i in range(nx):
-                    fn[i] = f[i]
-            elif tab[oR + s] == 0.0:  # else: same point as stage s-1, fn holds its f
-                nfev += 1
-                if not rhs_into(min(t + tab[oC + s] * hh, tlim), xs, P, lay, work, fn):
-                    good = False
-                    break
-            d_s = tab[oD + s]
-            for i in range(nx):
-                acc = 0.0
-                for j in range(nx):
-                    acc += J[i, j] * gs[j]
-                K[s, i] = hh * fn[i] + hh * acc + hh * hh * d_s * ft[i]
-            lu_apply(W, piv, K[s], nx)
-        enorm = np.inf
-        if good:
-            enorm = 0.0
-            for i in range(nx):
-                xi = x[i]
-                e = 0.0
-                for s in range(ns):
-                    xi += tab[oB + s] * K[s, i]
-                    e += tab[oE + s] * K[s, i]
-                xn[i] = xi
-                sc = atol[i] + rtol * max(abs(x[i]), abs(xn[i]))
-                enorm += (e / sc) ** 2
-            enorm = np.sqrt(enorm / nx)
-            if not np.isfinite(enorm):
-                enorm = np.inf
-        nsteps += 1
-        if enorm <= 1.0:
-            # step-size control (tableaus.CONTROLLERS): Gustafsson's predictive rule or his PI rule
-            en = max(enorm, 1e-10)
-            if predictive:
-                fac = min(6.0, max(0.2, 0.9 * en ** (-1.0 / q)))
-                if h_prev > 0.0:
-                    fac = min(fac, max(0.2, min(6.0, 0.9 * (hh / h_prev) * (err_prev / (en * en)) ** (1.0 / q))))
-                h_prev = hh
-                err_prev = max(en, 1e-2)
-            else:
-                fac = 0.9 * en ** (-0.7 / q) * err_prev ** (0.4 / q)
-                fac = min(5.0, max(0.2, fac))
-                err_prev = max(en, 1e-4)
-            if nrej_run > 0:  # just after a rejection: no growth (Hairer & Wanner's facmax = 1)
-                fac = min(fac, 1.0)
-            tn = tb if at_break else t + hh
-            nfev += 1
-            ok = rhs_into(min(tn, tlim), xn, P, lay, work, fn)  # left limit at a breakpoint
-            # hard limits: end the step at the earliest crossing
-            s_hit = 2.0
-            k_hit = -1
-            held = False
-            for k in range(lim_i.shape[0]):
-                li = lim_i[k]
-                if xn[li] < lim_b[k] and x[li] <= lim_b[k]:
-                    # already on the bound (just reset): hold it there, as the floor means,
-                    # instead of locating the same crossing again at s ~ 0 every step
-                    xn[li] = lim_b[k]
-                    if lim_r[k] >= 0:
-                        xn[lim_r[k]] = max(xn[lim_r[k]], 0.0)
-                    held = True
-                    continue
-                if xn[li] < lim_b[k] and x[li] > lim_b[k]:
-                    sk = hermite_root(x[li] - lim_b[k], f[li] * hh, xn[li] - lim_b[k], fn[li] * hh)
-                    if sk < s_hit:
-                        s_hit, k_hit = sk, k
-            h_full = hh
-            if k_hit >= 0:
-                hermite(x, f, xn, fn, hh, s_hit, xh)
-                for i in range(nx):
-                    xn[i] = xh[i]
-                xn[lim_i[k_hit]] = lim_b[k_hit]
-                if lim_r[k_hit] >= 0:
-                    xn[lim_r[k_hit]] = max(xn[lim_r[k_hit]], 0.0)
-                hh = s_hit * hh
-                tn = t + hh
-                at_break = False
-                nfev += 1
-                ok = rhs_into(tn, xn, P, lay, work, fn)
-                age = JAC_REUSE
-                nev += 1
-            elif held:
-                nfev += 1
-                ok = rhs_into(min(tn, tlim), xn, P, lay, work, fn)
-            if not ok:
-                status = -3
-                break
-            # dense output: the method's own where it has one and the step is whole (no
-            # bound hit or hold changed its end), else cubic Hermite of (t, x, f), (tn, xn, fn)
-            own = nd > 0 and k_hit < 0 and not held
-            if own and k_out < T and t_out[k_out] <= tn + 1e-12 * max(1.0, abs(tn)):
-                for m in range(nd):
-                    for i in range(nx):
-                        acc = 0.0
-                        for s in range(ns):
-                            acc += tab[oH + 1 + m * ns + s] * K[s, i]
-                        Dd[m, i] = acc
-            while k_out < T and t_out[k_out] <= tn + 1e-12 * max(1.0, abs(tn)):
-                sfrac = (t_out[k_out] - t) / hh if hh > 0 else 1.0
-                sfrac = min(1.0, max(0.0, sfrac))
-                if own:
-                    stage_dense(x, xn, Dd, nd, sfrac, xh)
-                else:
-                    hermite(x, f, xn, fn, hh, sfrac, xh)
-                for i in range(nx):
-                    out[k_out, i] = xh[i]
-                k_out += 1
-            t = tn
-            for i in range(nx):
-                x[i] = xn[i]
-                f[i] = fn[i]
-            h = hh * fac if not at_break else max(h, hh * fac)
-            if k_hit >= 0 and ev_restart:
-                # restart after the reset from the step that reached the bound: the shortened
-                # step (s_hit x hh, often tiny) says nothing about the dynamics after the reset
-                h = max(h, h_full * fac)
-            if at_break and tb < t_end and bjump[ib] == 0.0:  # a kink: f is continuous here
-                ib += 1
-            elif at_break and tb < t_end:  # the source may jump here: continue from its right limit
-                ib += 1
-                nfev += 1
-                if not rhs_into(t, x, P, lay, work, fr):
-                    status = -3
-                    break
-                jump = not soft_kinks
-                for i in range(nx):
-                    # a jump of f that moves x by more than 1e-3 of its tolerance over the next
-                    # step is a value discontinuity (new Jacobian); less is a slope-only kink
-                    if abs(fr[i] - f[i]) * h > 1e-3 * (atol[i] + rtol * abs(x[i])):
-                        jump = True
-                    f[i] = fr[i]
-                if jump:
-                    age = JAC_REUSE
-            age += 1
-            nrej_run = 0
-        else:
-            nrej += 1
-            if np.isfinite(enorm):
-                fac = 0.9 * enorm ** (-1.0 / q)
-                h = hh * min(0.5, max(0.2, fac))
-            else:
-                h = 0.25 * hh
-            nrej_run += 1
-            if nrej_run >= 2 and age > 0:  # a second rejection in a row: the Jacobian is stale
-                age = JAC_REUSE
-            if h < 1e-14 * max(1.0, abs(t)):
-                status = -1
-                break
-    for k in range(k_out, T):
-        for i in range(nx):
-            out[k, i] = np.nan
-    return status, t, nsteps, nrej, nfev, nev
 
-
-@njit(cache=True, nogil=True)
-def integrate_batch(t_out, X0, P, lay, scales, lim_i, lim_b, lim_r, breaks, bjump, rtol, atol, h0, hmax, max_steps,
-                    tab):
-    """integrate() for each member: t_out (B, T), X0 (B, nx), P (B, nP), hmax (B,), breaks and
-    bjump (B, K): each member's breakpoints, padded with +inf (bjump 1 where a source may jump,
-    0 at a slope-only kink) -> (out (B, T, nx), stats (B, 6) as integrate's return values)."""
+    One function, not a per-member function called (or inlined) here: numba's IR inlining deep-copies
+    the callee's blocks, each with a copy of the whole scope (5.6 s of a first compilation), and a
+    separate function is compiled, linked and code-generated once more (docs/performance.md, session 11)."""
     B = X0.shape[0]
-    out = np.empty((B, t_out.shape[1], X0.shape[1]))
+    out_all = np.empty((B, t_out_all.shape[1], X0.shape[1]))
     stats = np.zeros((B, 6))
-    for m in range(B):
-        status, t, steps, rej, nfev, nev = integrate(t_out[m], X0[m], P[m], lay, scales, lim_i, lim_b, lim_r,
-                                                     breaks[m], bjump[m], rtol, atol, h0, hmax[m], max_steps, tab,
-                                                     out[m])
-        stats[m, 0] = status
-        stats[m, 1] = t
-        stats[m, 2] = steps
-        stats[m, 3] = rej
-        stats[m, 4] = nfev
-        stats[m, 5] = nev
-    return out, stats
+    for mb in range(B):
+        t_out = t_out_all[mb]
+        x0 = X0[mb]
+        P = P_all[mb]
+        breaks = breaks_all[mb]
+        bjump = bjump_all[mb]
+        hmax = hmax_all[mb]
+        out = out_all[mb]
+        nx = x0.shape[0]
+        T = t_out.shape[0]
+        ns = int(tab[0])
+        GAMMA = tab[1]
+        q = tab[2]
+        JAC_REUSE = int(tab[3])
+        ev_restart = tab[4] != 0.0
+        soft_kinks = tab[5] != 0.0
+        autonomous = tab[6] != 0.0  # no waveform or time-dependent element: df/dt = 0
+        local_jac = int(tab[7])  # element-local Jacobian (local_jacobian_into) where it applies: 1 analytic parts, 2 FD
+        oA = 8  # offsets of A, G (ns x ns, row major), b, e, c, d, reuse (ns) in tab
+        oG = oA + ns * ns
+        oB = oG + ns * ns
+        oE = oB + ns
+        oC = oE + ns
+        oD = oC + ns
+        oR = oD + ns
+        oH = oR + ns
+        nd = int(tab[oH])  # dense-output rows (0: cubic Hermite), H at oH + 1 (nd x ns)
+        predictive = tab[oH + 1 + nd * ns] != 0.0  # step-size controller (tableaus.CONTROLLERS)
+        work = make_work(lay)
+        jw = make_jac_work(lay)
+        x = x0.copy()
+        f = np.empty(nx)
+        fn = np.empty(nx)
+        xn = np.empty(nx)
+        xs = np.empty(nx)
+        gs = np.empty(nx)
+        err = np.empty(nx)
+        K = np.empty((ns, nx))
+        Dd = np.zeros((max(nd, 1), nx))
+        fr = np.empty(nx)
+        J = np.zeros((nx, nx))
+        ft = np.zeros(nx)
+        W = np.empty((nx, nx))
+        piv = np.empty(nx, dtype=np.int64)
+        xt = np.empty(nx)
+        ftmp = np.empty(nx)
+        xh = np.empty(nx)
+        t = t_out[0]
+        t_end = t_out[-1]
+        for i in range(nx):
+            out[0, i] = x[i]
+        k_out = 1
+        nfev = 1
+        prepare_static(t, x, P, lay, work)
+        if not rhs_into(t, x, P, lay, work, f):
+            stats[mb, 0] = -3.0  # as a run that stops here: rows after the first not written
+            stats[mb, 1] = t
+            stats[mb, 4] = nfev
+            continue
+        h = h0
+        age = JAC_REUSE
+        nsteps = 0
+        nrej = 0
+        nev = 0
+        ib = 0
+        while ib < breaks.shape[0] and breaks[ib] <= t:
+            ib += 1
+        status = 0
+        nrej_run = 0
+        err_prev = 1.0
+        h_prev = 0.0  # the last accepted step (predictive controller; 0 before the first)
+        while t < t_end and k_out < T:
+            if nsteps >= max_steps:
+                status = -2
+                break
+            tb = t_end
+            if ib < breaks.shape[0] and breaks[ib] < t_end:
+                tb = breaks[ib]
+            if age >= JAC_REUSE:
+                nj = jacobian_into(t, x, f, P, lay, work, jw, scales, J, ft, xt, ftmp, autonomous, local_jac)
+                if nj < 0:
+                    status = -3
+                    break
+                nfev += nj
+                age = 0
+            hh = min(h, hmax)
+            at_break = False
+            tlim = np.inf  # stages never sample a source on the far side of a breakpoint
+            if t + hh >= tb - 1e-12 * max(1.0, abs(tb)):
+                hh = tb - t
+                at_break = True
+                tlim = tb - 1e-13 * max(1.0, abs(tb))
+                if hh <= 1e-12 * max(1.0, abs(tb)):  # already there (to rounding): cross it
+                    t = tb
+                    if tb < t_end:
+                        ib += 1
+                    nfev += 1
+                    if not rhs_into(t, x, P, lay, work, f):
+                        status = -3
+                        break
+                    age = JAC_REUSE
+                    continue
+            for i in range(nx):
+                for j in range(nx):
+                    W[i, j] = -GAMMA * hh * J[i, j]
+                W[i, i] += 1.0
+            if not lu_factor(W, piv, nx):
+                h = 0.25 * hh
+                age = JAC_REUSE
+                nrej += 1
+                nsteps += 1
+                if h < 1e-14 * max(1.0, abs(t)):
+                    status = -1
+                    break
+                continue
+            good = True
+            for s in range(ns):
+                for i in range(nx):
+                    xs[i] = x[i]
+                    gs[i] = 0.0
+                for j in range(s):
+                    a_sj = tab[oA + s * ns + j]
+                    g_sj = tab[oG + s * ns + j]
+                    if a_sj != 0.0:
+                        for i in range(nx):
+                            xs[i] += a_sj * K[j, i]
+                    if g_sj != 0.0:
+                        for i in range(nx):
+                            gs[i] += g_sj * K[j, i]
+                if s == 0:
+                    for i in range(nx):
+                        fn[i] = f[i]
+                elif tab[oR + s] == 0.0:  # else: same point as stage s-1, fn holds its f
+                    nfev += 1
+                    if not rhs_into(min(t + tab[oC + s] * hh, tlim), xs, P, lay, work, fn):
+                        good = False
+                        break
+                d_s = tab[oD + s]
+                for i in range(nx):
+                    acc = 0.0
+                    for j in range(nx):
+                        acc += J[i, j] * gs[j]
+                    K[s, i] = hh * fn[i] + hh * acc + hh * hh * d_s * ft[i]
+                lu_apply(W, piv, K[s], nx)
+            enorm = np.inf
+            if good:
+                enorm = 0.0
+                for i in range(nx):
+                    xi = x[i]
+                    e = 0.0
+                    for s in range(ns):
+                        xi += tab[oB + s] * K[s, i]
+                        e += tab[oE + s] * K[s, i]
+                    xn[i] = xi
+                    sc = atol[i] + rtol * max(abs(x[i]), abs(xn[i]))
+                    enorm += (e / sc) ** 2
+                enorm = np.sqrt(enorm / nx)
+                if not np.isfinite(enorm):
+                    enorm = np.inf
+            nsteps += 1
+            if enorm <= 1.0:
+                # step-size control (tableaus.CONTROLLERS): Gustafsson's predictive rule or his PI rule
+                en = max(enorm, 1e-10)
+                if predictive:
+                    fac = min(6.0, max(0.2, 0.9 * en ** (-1.0 / q)))
+                    if h_prev > 0.0:
+                        fac = min(fac, max(0.2, min(6.0, 0.9 * (hh / h_prev) * (err_prev / (en * en)) ** (1.0 / q))))
+                    h_prev = hh
+                    err_prev = max(en, 1e-2)
+                else:
+                    fac = 0.9 * en ** (-0.7 / q) * err_prev ** (0.4 / q)
+                    fac = min(5.0, max(0.2, fac))
+                    err_prev = max(en, 1e-4)
+                if nrej_run > 0:  # just after a rejection: no growth (Hairer & Wanner's facmax = 1)
+                    fac = min(fac, 1.0)
+                tn = tb if at_break else t + hh
+                nfev += 1
+                ok = rhs_into(min(tn, tlim), xn, P, lay, work, fn)  # left limit at a breakpoint
+                # hard limits: end the step at the earliest crossing
+                s_hit = 2.0
+                k_hit = -1
+                held = False
+                for k in range(lim_i.shape[0]):
+                    li = lim_i[k]
+                    if xn[li] < lim_b[k] and x[li] <= lim_b[k]:
+                        # already on the bound (just reset): hold it there, as the floor means,
+                        # instead of locating the same crossing again at s ~ 0 every step
+                        xn[li] = lim_b[k]
+                        if lim_r[k] >= 0:
+                            xn[lim_r[k]] = max(xn[lim_r[k]], 0.0)
+                        held = True
+                        continue
+                    if xn[li] < lim_b[k] and x[li] > lim_b[k]:
+                        sk = hermite_root(x[li] - lim_b[k], f[li] * hh, xn[li] - lim_b[k], fn[li] * hh)
+                        if sk < s_hit:
+                            s_hit, k_hit = sk, k
+                h_full = hh
+                if k_hit >= 0:
+                    hermite(x, f, xn, fn, hh, s_hit, xh)
+                    for i in range(nx):
+                        xn[i] = xh[i]
+                    xn[lim_i[k_hit]] = lim_b[k_hit]
+                    if lim_r[k_hit] >= 0:
+                        xn[lim_r[k_hit]] = max(xn[lim_r[k_hit]], 0.0)
+                    hh = s_hit * hh
+                    tn = t + hh
+                    at_break = False
+                    nfev += 1
+                    ok = rhs_into(tn, xn, P, lay, work, fn)
+                    age = JAC_REUSE
+                    nev += 1
+                elif held:
+                    nfev += 1
+                    ok = rhs_into(min(tn, tlim), xn, P, lay, work, fn)
+                if not ok:
+                    status = -3
+                    break
+                # dense output: the method's own where it has one and the step is whole (no
+                # bound hit or hold changed its end), else cubic Hermite of (t, x, f), (tn, xn, fn)
+                own = nd > 0 and k_hit < 0 and not held
+                if own and k_out < T and t_out[k_out] <= tn + 1e-12 * max(1.0, abs(tn)):
+                    for m in range(nd):
+                        for i in range(nx):
+                            acc = 0.0
+                            for s in range(ns):
+                                acc += tab[oH + 1 + m * ns + s] * K[s, i]
+                            Dd[m, i] = acc
+                while k_out < T and t_out[k_out] <= tn + 1e-12 * max(1.0, abs(tn)):
+                    sfrac = (t_out[k_out] - t) / hh if hh > 0 else 1.0
+                    sfrac = min(1.0, max(0.0, sfrac))
+                    if own:
+                        stage_dense(x, xn, Dd, nd, sfrac, xh)
+                    else:
+                        hermite(x, f, xn, fn, hh, sfrac, xh)
+                    for i in range(nx):
+                        out[k_out, i] = xh[i]
+                    k_out += 1
+                t = tn
+                for i in range(nx):
+                    x[i] = xn[i]
+                    f[i] = fn[i]
+                h = hh * fac if not at_break else max(h, hh * fac)
+                if k_hit >= 0 and ev_restart:
+                    # restart after the reset from the step that reached the bound: the shortened
+                    # step (s_hit x hh, often tiny) says nothing about the dynamics after the reset
+                    h = max(h, h_full * fac)
+                if at_break and tb < t_end and bjump[ib] == 0.0:  # a kink: f is continuous here
+                    ib += 1
+                elif at_break and tb < t_end:  # the source may jump here: continue from its right limit
+                    ib += 1
+                    nfev += 1
+                    if not rhs_into(t, x, P, lay, work, fr):
+                        status = -3
+                        break
+                    jump = not soft_kinks
+                    for i in range(nx):
+                        # a jump of f that moves x by more than 1e-3 of its tolerance over the next
+                        # step is a value discontinuity (new Jacobian); less is a slope-only kink
+                        if abs(fr[i] - f[i]) * h > 1e-3 * (atol[i] + rtol * abs(x[i])):
+                            jump = True
+                        f[i] = fr[i]
+                    if jump:
+                        age = JAC_REUSE
+                age += 1
+                nrej_run = 0
+            else:
+                nrej += 1
+                if np.isfinite(enorm):
+                    fac = 0.9 * enorm ** (-1.0 / q)
+                    h = hh * min(0.5, max(0.2, fac))
+                else:
+                    h = 0.25 * hh
+                nrej_run += 1
+                if nrej_run >= 2 and age > 0:  # a second rejection in a row: the Jacobian is stale
+                    age = JAC_REUSE
+                if h < 1e-14 * max(1.0, abs(t)):
+                    status = -1
+                    break
+        for k in range(k_out, T):
+            for i in range(nx):
+                out[k, i] = np.nan
+        stats[mb, 0] = status
+        stats[mb, 1] = t
+        stats[mb, 2] = nsteps
+        stats[mb, 3] = nrej
+        stats[mb, 4] = nfev
+        stats[mb, 5] = nev
+    return out_all, stats
+
 
 # --- Variable-order BDF (NDF) integrator: the method of scipy's solve_ivp 'BDF' (Shampine &
 # Reichelt 1997, SIAM J Sci Comput 18:1; quasi-constant step with the difference array D,
@@ -1119,314 +1125,322 @@ def bdf_newton(t_new, ypred, c, psi, W, piv, scale, tol, P, lay, work, y, d, f, 
     return -BDF_NEWTON_MAXITER
 
 
-@njit(cache=True, nogil=True, inline="always")
-def integrate_bdf(t_out, x0, P, lay, scales, lim_i, lim_b, lim_r, breaks, rtol, atol, h0, hmax, max_steps, local_jac,
-                  out):
-    """As ``integrate`` (same arguments except the tableau, same outputs and status codes),
+@njit(cache=True, nogil=True)
+def integrate_batch_bdf(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, breaks_all, rtol, atol, h0, hmax_all,
+                        max_steps, local_jac):
+    """integrate_batch with the variable-order BDF method, each member on its own (breaks (B, K)):
+    (out (B, T, nx), stats (B, 6)).  (A separate entry point, not a method flag of integrate_batch:
+    numba compiles, per process, only the integrator used; one function, as integrate_batch.)
+    One member's run:
+
+    As integrate_batch's (same arguments except the tableau, same outputs and status codes),
     with the variable-order BDF method.  Breakpoints end a step exactly and restart the
     method at order 1 (the source may jump there); a hard limit crossed within a step is
     located on the step's interpolating polynomial, the state put on the bound (its rate
     state reset to max(., 0)) and the method restarted from there with the same step size;
     a state held on its bound keeps a constant history (its differences zeroed)."""
-    nx = x0.shape[0]
-    T = t_out.shape[0]
-    work = make_work(lay)
-    jw = make_jac_work(lay)
-    x = x0.copy()
-    f = np.empty(nx)
-    fp = np.empty(nx)
-    J = np.zeros((nx, nx))
-    W = np.empty((nx, nx))
-    piv = np.empty(nx, dtype=np.int64)
-    D = np.zeros((BDF_MAX_ORDER + 3, nx))
-    R = np.zeros((BDF_MAX_ORDER + 1, BDF_MAX_ORDER + 1))
-    U = np.zeros((BDF_MAX_ORDER + 1, BDF_MAX_ORDER + 1))
-    tmp = np.zeros((BDF_MAX_ORDER + 1, nx))
-    pw = np.zeros(BDF_MAX_ORDER)
-    ypred = np.empty(nx)
-    psi = np.empty(nx)
-    ynew = np.empty(nx)
-    d = np.empty(nx)
-    dy = np.empty(nx)
-    scale = np.empty(nx)
-    yq = np.empty(nx)
-    xt = np.empty(nx)
-    ftmp = np.empty(nx)
-    ft = np.zeros(nx)
-    gam = np.zeros(BDF_MAX_ORDER + 2)
-    alp = np.zeros(BDF_MAX_ORDER + 2)
-    ecst = np.zeros(BDF_MAX_ORDER + 2)
-    kappa = np.array([0.0, -0.1850, -1.0 / 9.0, -0.0823, -0.0415, 0.0])
-    for k in range(1, BDF_MAX_ORDER + 1):
-        gam[k] = gam[k - 1] + 1.0 / k
-    for k in range(BDF_MAX_ORDER + 1):
-        alp[k] = (1.0 - kappa[k]) * gam[k]
-        ecst[k] = kappa[k] * gam[k] + 1.0 / (k + 1)
-    newton_tol = max(10.0 * 2.220446049250313e-16 / rtol, min(0.03, np.sqrt(rtol)))
-    t = t_out[0]
-    t_end = t_out[-1]
-    for i in range(nx):
-        out[0, i] = x[i]
-    k_out = 1
-    prepare_static(t, x, P, lay, work)
-    nfev = 1
-    if not rhs_into(t, x, P, lay, work, f):
-        return -3, t, 0, 0, nfev, 0
-    nj = jacobian_into(t, x, f, P, lay, work, jw, scales, J, ft, xt, ftmp, True, local_jac)
-    if nj < 0:
-        return -3, t, 0, 0, nfev, 0
-    nfev += nj
-    jac_current = True
-    h = min(h0, hmax)
-    restart = True
-    order = 1
-    n_equal = 0
-    lu_valid = False
-    nsteps = 0
-    nrej = 0
-    nev = 0
-    error_norm = 1.0
-    safety = 0.9
-    ib = 0
-    while ib < breaks.shape[0] and breaks[ib] <= t:
-        ib += 1
-    status = 0
-    while t < t_end and k_out < T:
-        if nsteps >= max_steps:
-            status = -2
-            break
-        if restart:  # order 1 from (t, x, f): the start, after a breakpoint or a reset at a bound
-            for k in range(D.shape[0]):
-                for i in range(nx):
-                    D[k, i] = 0.0
-            for i in range(nx):
-                D[0, i] = x[i]
-                D[1, i] = h * f[i]
-            order = 1
-            n_equal = 0
-            lu_valid = False
-            restart = False
-        tb = t_end
-        if ib < breaks.shape[0] and breaks[ib] < t_end:
-            tb = breaks[ib]
-        min_step = 10.0 * (np.nextafter(t, np.inf) - t)
-        if h > hmax:
-            bdf_change_D(D, order, hmax / h, R, U, tmp)
-            h = hmax
-            n_equal = 0
-            lu_valid = False
-        elif h < min_step:
-            bdf_change_D(D, order, min_step / h, R, U, tmp)
-            h = min_step
-            n_equal = 0
-            lu_valid = False
-        accepted = False
-        n_iter = 0
-        t_new = t
-        h_free = h  # the step before a breakpoint shortens it: the restart after takes it up again
-        while not accepted:
-            if h < min_step:
-                status = -1
-                break
-            t_new = t + h
-            if t_new >= tb - 1e-12 * max(1.0, abs(tb)):
-                t_new = tb
-                bdf_change_D(D, order, (t_new - t) / h, R, U, tmp)
-                n_equal = 0
-                lu_valid = False
-            h = t_new - t
-            for i in range(nx):
-                acc = 0.0
-                ps = 0.0
-                for k in range(order + 1):
-                    acc += D[k, i]
-                for k in range(1, order + 1):
-                    ps += D[k, i] * gam[k]
-                ypred[i] = acc
-                psi[i] = ps / alp[order]
-                scale[i] = atol[i] + rtol * abs(acc)
-            c = h / alp[order]
-            n_iter = 0
-            while True:
-                if not lu_valid:
-                    for i in range(nx):
-                        for j in range(nx):
-                            W[i, j] = -c * J[i, j]
-                        W[i, i] += 1.0
-                    lu_valid = lu_factor(W, piv, nx)
-                if lu_valid:
-                    n_iter = bdf_newton(t_new, ypred, c, psi, W, piv, scale, newton_tol, P, lay, work, ynew, d,
-                                        fp, dy)
-                    nfev += abs(n_iter)
-                    if n_iter > 0:
-                        break
-                if jac_current:
-                    break
-                # Newton failed with an older Jacobian: a new one at the predicted state
-                nfev += 1
-                if not rhs_into(t_new, ypred, P, lay, work, ftmp):
-                    break
-                nj = jacobian_into(t_new, ypred, ftmp, P, lay, work, jw, scales, J, ft, xt, fp, True, local_jac)
-                if nj < 0:
-                    break
-                nfev += nj
-                jac_current = True
-                lu_valid = False
-            if n_iter <= 0:  # not converged: halve the step
-                h *= 0.5
-                bdf_change_D(D, order, 0.5, R, U, tmp)
-                n_equal = 0
-                lu_valid = False
-                nrej += 1
-                nsteps += 1
-                continue
-            safety = 0.9 * (2 * BDF_NEWTON_MAXITER + 1) / (2 * BDF_NEWTON_MAXITER + n_iter)
-            s = 0.0
-            for i in range(nx):
-                scale[i] = atol[i] + rtol * abs(ynew[i])
-                s += (ecst[order] * d[i] / scale[i]) ** 2
-            error_norm = np.sqrt(s / nx)
-            if error_norm > 1.0 or not np.isfinite(error_norm):
-                factor = BDF_MIN_FACTOR
-                if np.isfinite(error_norm):
-                    factor = max(BDF_MIN_FACTOR, safety * error_norm ** (-1.0 / (order + 1)))
-                h *= factor
-                bdf_change_D(D, order, factor, R, U, tmp)
-                n_equal = 0
-                nrej += 1
-                nsteps += 1
-            else:
-                accepted = True
-        if status != 0:
-            break
-        nsteps += 1
-        n_equal += 1
-        jac_current = False
-        # the differences of the new polynomial (scipy: D^{j+1} y_n = D^j y_n - D^j y_{n-1})
+    B = X0.shape[0]
+    out_all = np.empty((B, t_out_all.shape[1], X0.shape[1]))
+    stats = np.zeros((B, 6))
+    for mb in range(B):
+        t_out = t_out_all[mb]
+        x0 = X0[mb]
+        P = P_all[mb]
+        breaks = breaks_all[mb]
+        hmax = hmax_all[mb]
+        out = out_all[mb]
+        nx = x0.shape[0]
+        T = t_out.shape[0]
+        work = make_work(lay)
+        jw = make_jac_work(lay)
+        x = x0.copy()
+        f = np.empty(nx)
+        fp = np.empty(nx)
+        J = np.zeros((nx, nx))
+        W = np.empty((nx, nx))
+        piv = np.empty(nx, dtype=np.int64)
+        D = np.zeros((BDF_MAX_ORDER + 3, nx))
+        R = np.zeros((BDF_MAX_ORDER + 1, BDF_MAX_ORDER + 1))
+        U = np.zeros((BDF_MAX_ORDER + 1, BDF_MAX_ORDER + 1))
+        tmp = np.zeros((BDF_MAX_ORDER + 1, nx))
+        pw = np.zeros(BDF_MAX_ORDER)
+        ypred = np.empty(nx)
+        psi = np.empty(nx)
+        ynew = np.empty(nx)
+        d = np.empty(nx)
+        dy = np.empty(nx)
+        scale = np.empty(nx)
+        yq = np.empty(nx)
+        xt = np.empty(nx)
+        ftmp = np.empty(nx)
+        ft = np.zeros(nx)
+        gam = np.zeros(BDF_MAX_ORDER + 2)
+        alp = np.zeros(BDF_MAX_ORDER + 2)
+        ecst = np.zeros(BDF_MAX_ORDER + 2)
+        kappa = np.array([0.0, -0.1850, -1.0 / 9.0, -0.0823, -0.0415, 0.0])
+        for k in range(1, BDF_MAX_ORDER + 1):
+            gam[k] = gam[k - 1] + 1.0 / k
+        for k in range(BDF_MAX_ORDER + 1):
+            alp[k] = (1.0 - kappa[k]) * gam[k]
+            ecst[k] = kappa[k] * gam[k] + 1.0 / (k + 1)
+        newton_tol = max(10.0 * 2.220446049250313e-16 / rtol, min(0.03, np.sqrt(rtol)))
+        t = t_out[0]
+        t_end = t_out[-1]
         for i in range(nx):
-            D[order + 2, i] = d[i] - D[order + 1, i]
-            D[order + 1, i] = d[i]
-        for k in range(order, -1, -1):
-            for i in range(nx):
-                D[k, i] += D[k + 1, i]
-        # hard limits: the earliest crossing within the step, on its polynomial
-        t_hit = np.inf
-        k_hit = -1
-        for k in range(lim_i.shape[0]):
-            li = lim_i[k]
-            if D[0, li] < lim_b[k] and x[li] > lim_b[k]:
-                lo = t
-                hi = t_new
-                for _ in range(60):
-                    mid = 0.5 * (lo + hi)
-                    bdf_dense(D, order, t_new, h, mid, yq, pw)
-                    if yq[li] > lim_b[k]:
-                        lo = mid
-                    else:
-                        hi = mid
-                if hi < t_hit:
-                    t_hit, k_hit = hi, k
-        tn = t_new if k_hit < 0 else t_hit
-        while k_out < T and t_out[k_out] <= tn + 1e-12 * max(1.0, abs(tn)):
-            bdf_dense(D, order, t_new, h, min(t_out[k_out], tn), yq, pw)
-            for i in range(nx):
-                out[k_out, i] = yq[i]
-            k_out += 1
-        if k_hit >= 0:  # on the bound, its rate reset; restart from there with the same step
-            bdf_dense(D, order, t_new, h, t_hit, yq, pw)
-            for i in range(nx):
-                x[i] = yq[i]
-            x[lim_i[k_hit]] = lim_b[k_hit]
-            if lim_r[k_hit] >= 0:
-                x[lim_r[k_hit]] = max(x[lim_r[k_hit]], 0.0)
-            t = t_hit
-            nev += 1
-            nfev += 1
-            if not rhs_into(t, x, P, lay, work, f):
-                status = -3
-                break
-            restart = True
+            out[0, i] = x[i]
+        k_out = 1
+        prepare_static(t, x, P, lay, work)
+        nfev = 1
+        if not rhs_into(t, x, P, lay, work, f):
+            stats[mb, 0] = -3.0  # as a run that stops here: rows after the first not written
+            stats[mb, 1] = t
+            stats[mb, 4] = nfev
             continue
-        # a state held on its bound (already there, pushed below): constant, its rate reset
-        for k in range(lim_i.shape[0]):
-            li = lim_i[k]
-            if D[0, li] < lim_b[k] and x[li] <= lim_b[k]:
-                D[0, li] = lim_b[k]
-                for m in range(1, D.shape[0]):
-                    D[m, li] = 0.0
-                r = lim_r[k]
-                if r >= 0 and D[0, r] < 0.0:
-                    D[0, r] = 0.0
-                    for m in range(1, D.shape[0]):
-                        D[m, r] = 0.0
-        t = t_new
-        for i in range(nx):
-            x[i] = D[0, i]
-        if t >= tb - 1e-12 * max(1.0, abs(tb)) and tb < t_end:  # a breakpoint: restart from its right limit
-            t = tb
-            ib += 1
-            h = max(h, h_free)
-            nfev += 1
-            if not rhs_into(t, x, P, lay, work, f):
-                status = -3
-                break
-            restart = True
+        nj = jacobian_into(t, x, f, P, lay, work, jw, scales, J, ft, xt, ftmp, True, local_jac)
+        if nj < 0:
+            stats[mb, 0] = -3.0  # as a run that stops here: rows after the first not written
+            stats[mb, 1] = t
+            stats[mb, 4] = nfev
             continue
-        if n_equal < order + 1:
-            continue
-        # order and step size for the next step (scipy's rule)
-        em = np.inf
-        ep = np.inf
-        s_m = 0.0
-        s_p = 0.0
-        for i in range(nx):  # scale: that of the step's error test (atol + rtol |y_new|)
-            if order > 1:
-                s_m += (ecst[order - 1] * D[order, i] / scale[i]) ** 2
-            if order < BDF_MAX_ORDER:
-                s_p += (ecst[order + 1] * D[order + 2, i] / scale[i]) ** 2
-        if order > 1:
-            em = np.sqrt(s_m / nx)
-        if order < BDF_MAX_ORDER:
-            ep = np.sqrt(s_p / nx)
-        f_m = em ** (-1.0 / order) if em > 0.0 else np.inf
-        f_0 = error_norm ** (-1.0 / (order + 1)) if error_norm > 0.0 else np.inf
-        f_p = ep ** (-1.0 / (order + 2)) if ep > 0.0 else np.inf
-        best = f_0
-        delta = 0
-        if f_m > best:
-            best = f_m
-            delta = -1
-        if f_p > best:
-            best = f_p
-            delta = 1
-        order += delta
-        factor = min(BDF_MAX_FACTOR, safety * best)
-        h *= factor
-        bdf_change_D(D, order, factor, R, U, tmp)
+        nfev += nj
+        jac_current = True
+        h = min(h0, hmax)
+        restart = True
+        order = 1
         n_equal = 0
         lu_valid = False
-    for k in range(k_out, T):
-        for i in range(nx):
-            out[k, i] = np.nan
-    return status, t, nsteps, nrej, nfev, nev
+        nsteps = 0
+        nrej = 0
+        nev = 0
+        error_norm = 1.0
+        safety = 0.9
+        ib = 0
+        while ib < breaks.shape[0] and breaks[ib] <= t:
+            ib += 1
+        status = 0
+        while t < t_end and k_out < T:
+            if nsteps >= max_steps:
+                status = -2
+                break
+            if restart:  # order 1 from (t, x, f): the start, after a breakpoint or a reset at a bound
+                for k in range(D.shape[0]):
+                    for i in range(nx):
+                        D[k, i] = 0.0
+                for i in range(nx):
+                    D[0, i] = x[i]
+                    D[1, i] = h * f[i]
+                order = 1
+                n_equal = 0
+                lu_valid = False
+                restart = False
+            tb = t_end
+            if ib < breaks.shape[0] and breaks[ib] < t_end:
+                tb = breaks[ib]
+            min_step = 10.0 * (np.nextafter(t, np.inf) - t)
+            if h > hmax:
+                bdf_change_D(D, order, hmax / h, R, U, tmp)
+                h = hmax
+                n_equal = 0
+                lu_valid = False
+            elif h < min_step:
+                bdf_change_D(D, order, min_step / h, R, U, tmp)
+                h = min_step
+                n_equal = 0
+                lu_valid = False
+            accepted = False
+            n_iter = 0
+            t_new = t
+            h_free = h  # the step before a breakpoint shortens it: the restart after takes it up again
+            while not accepted:
+                if h < min_step:
+                    status = -1
+                    break
+                t_new = t + h
+                if t_new >= tb - 1e-12 * max(1.0, abs(tb)):
+                    t_new = tb
+                    bdf_change_D(D, order, (t_new - t) / h, R, U, tmp)
+                    n_equal = 0
+                    lu_valid = False
+                h = t_new - t
+                for i in range(nx):
+                    acc = 0.0
+                    ps = 0.0
+                    for k in range(order + 1):
+                        acc += D[k, i]
+                    for k in range(1, order + 1):
+                        ps += D[k, i] * gam[k]
+                    ypred[i] = acc
+                    psi[i] = ps / alp[order]
+                    scale[i] = atol[i] + rtol * abs(acc)
+                c = h / alp[order]
+                n_iter = 0
+                while True:
+                    if not lu_valid:
+                        for i in range(nx):
+                            for j in range(nx):
+                                W[i, j] = -c * J[i, j]
+                            W[i, i] += 1.0
+                        lu_valid = lu_factor(W, piv, nx)
+                    if lu_valid:
+                        n_iter = bdf_newton(t_new, ypred, c, psi, W, piv, scale, newton_tol, P, lay, work, ynew, d,
+                                            fp, dy)
+                        nfev += abs(n_iter)
+                        if n_iter > 0:
+                            break
+                    if jac_current:
+                        break
+                    # Newton failed with an older Jacobian: a new one at the predicted state
+                    nfev += 1
+                    if not rhs_into(t_new, ypred, P, lay, work, ftmp):
+                        break
+                    nj = jacobian_into(t_new, ypred, ftmp, P, lay, work, jw, scales, J, ft, xt, fp, True, local_jac)
+                    if nj < 0:
+                        break
+                    nfev += nj
+                    jac_current = True
+                    lu_valid = False
+                if n_iter <= 0:  # not converged: halve the step
+                    h *= 0.5
+                    bdf_change_D(D, order, 0.5, R, U, tmp)
+                    n_equal = 0
+                    lu_valid = False
+                    nrej += 1
+                    nsteps += 1
+                    continue
+                safety = 0.9 * (2 * BDF_NEWTON_MAXITER + 1) / (2 * BDF_NEWTON_MAXITER + n_iter)
+                s = 0.0
+                for i in range(nx):
+                    scale[i] = atol[i] + rtol * abs(ynew[i])
+                    s += (ecst[order] * d[i] / scale[i]) ** 2
+                error_norm = np.sqrt(s / nx)
+                if error_norm > 1.0 or not np.isfinite(error_norm):
+                    factor = BDF_MIN_FACTOR
+                    if np.isfinite(error_norm):
+                        factor = max(BDF_MIN_FACTOR, safety * error_norm ** (-1.0 / (order + 1)))
+                    h *= factor
+                    bdf_change_D(D, order, factor, R, U, tmp)
+                    n_equal = 0
+                    nrej += 1
+                    nsteps += 1
+                else:
+                    accepted = True
+            if status != 0:
+                break
+            nsteps += 1
+            n_equal += 1
+            jac_current = False
+            # the differences of the new polynomial (scipy: D^{j+1} y_n = D^j y_n - D^j y_{n-1})
+            for i in range(nx):
+                D[order + 2, i] = d[i] - D[order + 1, i]
+                D[order + 1, i] = d[i]
+            for k in range(order, -1, -1):
+                for i in range(nx):
+                    D[k, i] += D[k + 1, i]
+            # hard limits: the earliest crossing within the step, on its polynomial
+            t_hit = np.inf
+            k_hit = -1
+            for k in range(lim_i.shape[0]):
+                li = lim_i[k]
+                if D[0, li] < lim_b[k] and x[li] > lim_b[k]:
+                    lo = t
+                    hi = t_new
+                    for _ in range(60):
+                        mid = 0.5 * (lo + hi)
+                        bdf_dense(D, order, t_new, h, mid, yq, pw)
+                        if yq[li] > lim_b[k]:
+                            lo = mid
+                        else:
+                            hi = mid
+                    if hi < t_hit:
+                        t_hit, k_hit = hi, k
+            tn = t_new if k_hit < 0 else t_hit
+            while k_out < T and t_out[k_out] <= tn + 1e-12 * max(1.0, abs(tn)):
+                bdf_dense(D, order, t_new, h, min(t_out[k_out], tn), yq, pw)
+                for i in range(nx):
+                    out[k_out, i] = yq[i]
+                k_out += 1
+            if k_hit >= 0:  # on the bound, its rate reset; restart from there with the same step
+                bdf_dense(D, order, t_new, h, t_hit, yq, pw)
+                for i in range(nx):
+                    x[i] = yq[i]
+                x[lim_i[k_hit]] = lim_b[k_hit]
+                if lim_r[k_hit] >= 0:
+                    x[lim_r[k_hit]] = max(x[lim_r[k_hit]], 0.0)
+                t = t_hit
+                nev += 1
+                nfev += 1
+                if not rhs_into(t, x, P, lay, work, f):
+                    status = -3
+                    break
+                restart = True
+                continue
+            # a state held on its bound (already there, pushed below): constant, its rate reset
+            for k in range(lim_i.shape[0]):
+                li = lim_i[k]
+                if D[0, li] < lim_b[k] and x[li] <= lim_b[k]:
+                    D[0, li] = lim_b[k]
+                    for m in range(1, D.shape[0]):
+                        D[m, li] = 0.0
+                    r = lim_r[k]
+                    if r >= 0 and D[0, r] < 0.0:
+                        D[0, r] = 0.0
+                        for m in range(1, D.shape[0]):
+                            D[m, r] = 0.0
+            t = t_new
+            for i in range(nx):
+                x[i] = D[0, i]
+            if t >= tb - 1e-12 * max(1.0, abs(tb)) and tb < t_end:  # a breakpoint: restart from its right limit
+                t = tb
+                ib += 1
+                h = max(h, h_free)
+                nfev += 1
+                if not rhs_into(t, x, P, lay, work, f):
+                    status = -3
+                    break
+                restart = True
+                continue
+            if n_equal < order + 1:
+                continue
+            # order and step size for the next step (scipy's rule)
+            em = np.inf
+            ep = np.inf
+            s_m = 0.0
+            s_p = 0.0
+            for i in range(nx):  # scale: that of the step's error test (atol + rtol |y_new|)
+                if order > 1:
+                    s_m += (ecst[order - 1] * D[order, i] / scale[i]) ** 2
+                if order < BDF_MAX_ORDER:
+                    s_p += (ecst[order + 1] * D[order + 2, i] / scale[i]) ** 2
+            if order > 1:
+                em = np.sqrt(s_m / nx)
+            if order < BDF_MAX_ORDER:
+                ep = np.sqrt(s_p / nx)
+            f_m = em ** (-1.0 / order) if em > 0.0 else np.inf
+            f_0 = error_norm ** (-1.0 / (order + 1)) if error_norm > 0.0 else np.inf
+            f_p = ep ** (-1.0 / (order + 2)) if ep > 0.0 else np.inf
+            best = f_0
+            delta = 0
+            if f_m > best:
+                best = f_m
+                delta = -1
+            if f_p > best:
+                best = f_p
+                delta = 1
+            order += delta
+            factor = min(BDF_MAX_FACTOR, safety * best)
+            h *= factor
+            bdf_change_D(D, order, factor, R, U, tmp)
+            n_equal = 0
+            lu_valid = False
+        for k in range(k_out, T):
+            for i in range(nx):
+                out[k, i] = np.nan
+        stats[mb, 0] = status
+        stats[mb, 1] = t
+        stats[mb, 2] = nsteps
+        stats[mb, 3] = nrej
+        stats[mb, 4] = nfev
+        stats[mb, 5] = nev
+    return out_all, stats
 
 
-@njit(cache=True, nogil=True)
-def integrate_batch_bdf(t_out, X0, P, lay, scales, lim_i, lim_b, lim_r, breaks, rtol, atol, h0, hmax, max_steps,
-                        local_jac):
-    """integrate_bdf() for each member, as integrate_batch (breaks (B, K)).  (A separate entry point, not a
-    method flag of integrate_batch: numba compiles, per process, only the integrator used.)"""
-    B = X0.shape[0]
-    out = np.empty((B, t_out.shape[1], X0.shape[1]))
-    stats = np.zeros((B, 6))
-    for m in range(B):
-        status, t, steps, rej, nfev, nev = integrate_bdf(t_out[m], X0[m], P[m], lay, scales, lim_i, lim_b, lim_r,
-                                                         breaks[m], rtol, atol, h0, hmax[m], max_steps, local_jac,
-                                                         out[m])
-        stats[m, 0] = status
-        stats[m, 1] = t
-        stats[m, 2] = steps
-        stats[m, 3] = rej
-        stats[m, 4] = nfev
-        stats[m, 5] = nev
-    return out, stats
