@@ -183,6 +183,9 @@ nf = system.mod.nodal_outputs
 print(json.dumps({"before": before, "rc": rc, "after": after, "again": again is None,
                   "loaded_not_compiled": fn.stats.cache_hits and not fn.stats.cache_misses,
                   "outputs_loaded": nf.stats.cache_hits and not nf.stats.cache_misses,
+                  # prebuild.before_integrator compiled these by signature before the integrator:
+                  # one specialisation each means the integrator used those, not new ones
+                  "specialisations": [len(system.mod.rhs_into.overloads), len(system.mod.prepare_static.overloads)],
                   "V": X[0, :, c.state_names.index("C1.V")].tolist(), "Q": out["Q(R1)"].tolist(),
                   "status": float(st[0, 0])}))
 """
@@ -192,7 +195,9 @@ def test_prebuild_helper_compiles_the_jacobian_for_the_integrator(tmp_path):
     """kernels.prebuild in a fresh cache: the helper process compiles local_jacobian_into (and
     the outputs' nodal_outputs) into numba's cache with the callers' argument types, so the
     integrator and Circuit.outputs load them instead of compiling them (numba's cache hit, no
-    miss), starts no second helper once it is cached, and the run is right (R-C charging,
+    miss); this process compiles the nodal solve and right-hand side by signature first
+    (before_integrator), with the types the integrator calls them with; no second helper
+    starts once it is cached, and the run is right (R-C charging,
     V = C P (1 - exp(-t/RC)), Q = P/R exp(-t/RC))."""
     import json
 
@@ -204,6 +209,7 @@ def test_prebuild_helper_compiles_the_jacobian_for_the_integrator(tmp_path):
     r = json.loads(out.stdout.strip().splitlines()[-1])
     assert r["before"] is False and r["rc"] == 0 and r["after"] is True and r["again"] is True
     assert r["loaded_not_compiled"] and r["outputs_loaded"], r
+    assert r["specialisations"] == [1, 1], r
     t = np.linspace(0.0, 5.0, 101)
     assert r["status"] == 0
     assert np.max(np.abs(np.array(r["V"]) - 0.5 * 80.0 * (1 - np.exp(-t)))) < 2e-7 * 40.0

@@ -1,16 +1,19 @@
 """Compile part of a new engine in a second process while the first compiles the rest.
 
 A first compilation of an engine is one numba compilation of the integrator, which types and
-lowers every function it calls, one after the other, on one core (docs/performance.md: 21 s
-for the vasomotion engine, of which the element-local Jacobian ``local_jacobian_into`` 4.9 s).
+lowers every function it calls, one after the other, on one core (docs/performance.md,
+session 11: 34 s for the vasomotion engine on one core, of which the element-local Jacobian
+``local_jacobian_into`` 7.8 s, the nodal solve and right-hand side ~10 s, the integrator's own
+body ~9 s).
 Numba caches each function on its own: when the integrator reaches a callee that is already
 in the cache for the same argument types, it loads it instead of compiling it.  So
 :func:`start` launches ``python -m hemocircuit.kernels.prebuild`` (the job on its stdin), which compiles
 ``local_jacobian_into`` (through the never-run ``compile_local_jacobian``, whose arguments have
-the integrator's types) while this process compiles the right-hand side and the nodal solve,
-which the integrator reaches first; then ``nodal_outputs`` (the outputs of a long run), which
-this process reaches only after the integration.  If the helper is late or fails, the integrator compiles
-the function itself, as without it: the helper only ever saves time.
+the integrator's types) while this process compiles the right-hand side and the nodal solve
+(:func:`before_integrator`, by signature) and then waits for it before compiling the
+integrator itself.  The helper goes on with ``nodal_outputs`` (the outputs of a long run),
+which this process reaches only after the integration.  If the helper fails or is later than
+WAIT_S, the integrator compiles the function itself, as without it.
 """
 from __future__ import annotations
 
@@ -27,6 +30,11 @@ import numpy as np
 #: module, whatever the systems and calls), and the helpers' processes (kept to be reaped)
 _decided: set = set()
 _helpers: list = []
+#: engine module name -> its helper, until :func:`before_integrator` has split the first compile
+_pending: dict = {}
+#: how long the integrator's first compile waits for the helper's local Jacobian at most [s]
+#: (about twice what compiling it here takes on the slowest machine measured)
+WAIT_S = 60.0
 
 
 def start(system):
@@ -54,7 +62,41 @@ def start(system):
     except OSError:
         return None
     _helpers.append(proc)
+    _pending[name] = proc
     return proc
+
+
+def before_integrator(system):
+    """Just before the first call of a compiled integrator in this process, when :func:`start`
+    launched a helper for its engine: compile the nodal solve and the right-hand side here
+    (``prepare_static`` and ``rhs_into``, by the signatures the integrators call them with),
+    then wait while the helper is running until its ``local_jacobian_into`` is in numba's cache
+    (at most WAIT_S), so that the integrator loads it instead of compiling it a second time.
+    Without this the integrator reaches the Jacobian in its own typing order (make_work,
+    prepare_static, rhs_into, local_jacobian_into) and compiled it itself whenever the helper was
+    seconds late (docs/performance.md, session 11).  Once per engine module and process."""
+    import time
+
+    proc = _pending.pop(system.mod.__name__, None)
+    if proc is None:
+        return
+    mod = system.mod
+    try:
+        import numba
+
+        work = mod.make_work.py_func(system.lay)  # the scratch tuple's types, as make_work's compiled twin
+        x, P = np.empty(int(system.scales.size)), np.empty(int(system.layout.n_params))
+        P.setflags(write=False)  # a row of the integrators' read-only parameter matrix
+        t, vx, lay = numba.float64, numba.typeof(x), numba.typeof(system.lay)
+        sig_w = (t, vx, numba.typeof(P), lay, numba.typeof(work))
+        mod.prepare_static.compile(sig_w)
+        mod.rhs_into.compile(sig_w + (vx,))
+    except Exception:  # noqa: BLE001 - only a head start: the integrator compiles what is missing
+        pass
+    fn = mod.local_jacobian_into
+    end = time.monotonic() + WAIT_S
+    while proc.poll() is None and not in_cache(fn) and time.monotonic() < end:
+        time.sleep(0.05)
 
 
 def in_cache(dispatcher) -> bool:

@@ -128,6 +128,7 @@ class CompiledSystem:
         method = method or tableaus.DEFAULT
         brk, jump = member_breaks(B, breaks, kinks)
         prebuild.start(self)  # a first compile: part of it in a second process
+        prebuild.before_integrator(self)  # ... and the rest here, before the integrator needs it
         if method == tableaus.BDF:
             unknown = set(tab_options) - {"local_jacobian"}
             if unknown:
