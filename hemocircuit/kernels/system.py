@@ -115,7 +115,7 @@ class CompiledSystem:
 
     def integrate_batch(self, t_out, X0, P, rtol=1e-6, atol=None, breaks=(), h0=1e-3, hmax=np.inf,
                         max_steps=10_000_000, method=None, kinks=(), **tab_options):
-        """integrate() for every member: t_out (T,) or (B, T), X0 (B, nx), P (B, slots), hmax
+        """The compiled integrator for every member: t_out (T,) or (B, T), X0 (B, nx), P (B, slots), hmax
         scalar or (B,); ``breaks`` and ``kinks`` one sequence for every member, or a list of B
         sequences (each member's own).
         Returns (X (B, T, nx), stats (B, 6): status, t, steps, rejected, nfev, limit events)."""
