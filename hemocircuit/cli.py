@@ -101,11 +101,18 @@ def events_only(proto):
     return None if proto is None else dataclasses.replace(proto, initial={})
 
 
+def circuit_of_args(args, sets, netlist=None):
+    """load_circuit() of ``netlist`` (default the command's) with the loader options of the
+    parsed arguments (--protocol, --allow-path, --svzerod-units) and ``sets``: the one way
+    every command and every --grid member gets its circuit.  Returns (circuit, protocol)."""
+    return load_circuit(netlist if netlist is not None else args.netlist, sets, getattr(args, "protocol", None),
+                        getattr(args, "allow_path", None), getattr(args, "svzerod_units", None))
+
+
 def _load(args, uses_events=False):
-    """load_circuit() from the parsed arguments (netlist, --set, --protocol, --allow-path) of any
-    command; ``--show`` names are checked against the circuit's columns."""
-    c, proto = load_circuit(args.netlist, _sets(getattr(args, "set", None)), getattr(args, "protocol", None),
-                            getattr(args, "allow_path", None), getattr(args, "svzerod_units", None))
+    """load_circuit() from the parsed arguments (netlist, --set, --protocol, --allow-path,
+    --svzerod-units) of any command; ``--show`` names are checked against the circuit's columns."""
+    c, proto = circuit_of_args(args, _sets(getattr(args, "set", None)))
     later = [ev for ev in proto.events if ev.at > 0] if proto is not None else []
     if later and not uses_events:
         print(f"note: {args.command} applies the protocol's 'initial' settings and its events at t = 0; its "
@@ -182,7 +189,7 @@ def computed(args, compute):
         return compute(args, sets)
     from . import grid
     first = getattr(args, "netlist", None) or args.netlists[0]
-    circuit, _ = load_circuit(first, sets, getattr(args, "protocol", None), getattr(args, "allow_path", None))
+    circuit, _ = circuit_of_args(args, sets, first)
     return grid.run(compute, args, circuit, sets, workers=getattr(args, "workers", None))
 
 
@@ -205,7 +212,7 @@ def partial_path(path):
 
 def compute_op(args, sets):
     """One --grid member (:func:`computed`)."""
-    c, _ = load_circuit(args.netlist, sets, args.protocol, getattr(args, "allow_path", None))
+    c, _ = circuit_of_args(args, sets)
     return c.operating_point()
 
 
@@ -227,7 +234,7 @@ def _dc(args, c):
 
 def compute_dc(args, sets):
     """One --grid member (:func:`computed`)."""
-    return _dc(args, load_circuit(args.netlist, sets, args.protocol, getattr(args, "allow_path", None))[0])
+    return _dc(args, circuit_of_args(args, sets)[0])
 
 
 def cmd_dc(args):
@@ -253,7 +260,7 @@ def _range_spacing(r):
 
 def compute_tran(args, sets):
     """One run (a --grid member, :func:`computed`)."""
-    c, proto = load_circuit(args.netlist, sets, args.protocol, getattr(args, "allow_path", None))
+    c, proto = circuit_of_args(args, sets)
     t_end = float(_unit_to(args.t_end, "s")) if args.t_end else None
     dt = float(_unit_to(args.dt, "s")) if args.dt else None
     ic = _assignments(args.ic, "--ic", "ID.STATE=VALUE", "Cv.V=20mL")

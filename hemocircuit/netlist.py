@@ -210,19 +210,18 @@ def read_json_file(path, what="netlist"):
         raise NetlistError("the JSON is too deeply nested to read", file=path) from None
 
 
-def _read_yaml(path, svzerod_units=None):
+def _read_yaml(path, svzerod=None):
     """The mapping of a netlist file; an svZeroDSolver JSON model through the importer, in
-    ``svzerod_units`` (None: the importer's guess, cgs unless the model says m^3)."""
+    ``svzerod['units']`` (None: the importer's guess, cgs unless the model says m^3; the dict
+    records in 'used' that a model was read with it)."""
     if str(path).lower().endswith(".json"):
         data = read_json_file(path)
         from .svzerod.importer import is_svzerod_model, netlist_of
 
         if is_svzerod_model(data):  # an svZeroDSolver model: read through the importer
-            return netlist_of(data, path, svzerod_units)
-    if svzerod_units is not None:
-        raise NetlistError(f"a unit system for svZeroDSolver numbers ({svzerod_units!r}) was given, but this is "
-                           "a hemocircuit netlist, whose quantities carry their units: drop --svzerod-units",
-                           file=path)
+            if svzerod is not None:
+                svzerod["used"] = True
+            return netlist_of(data, path, (svzerod or {}).get("units"))
     data = read_yaml_file(path)  # a netlist (JSON is YAML; its ${name} references resolved)
     if not isinstance(data, dict):
         raise NetlistError("a netlist is a YAML mapping with at least 'elements' (or 'extends')", file=path)
@@ -262,11 +261,11 @@ def _element_list(items, path, access, what="elements"):
     return out
 
 
-def _load_raw(path, chain, access, svzerod_units=None):
+def _load_raw(path, chain, access, svzerod=None):
     path = os.path.abspath(path)
     if path in chain:
         raise NetlistError(f"'extends' cycle: {' -> '.join(chain + [path])}", file=path)
-    data = _read_yaml(path, svzerod_units)
+    data = _read_yaml(path, svzerod)
     base_dir = os.path.dirname(path)
     params = data.get("parameters") or {}
     if not isinstance(params, dict):
@@ -285,7 +284,7 @@ def _load_raw(path, chain, access, svzerod_units=None):
         if not isinstance(parent, str):
             raise NetlistError("'extends' must be a file name", file=path)
         ppath = access.resolve(parent, base_dir, "'extends'", {"file": path})
-        base = _load_raw(ppath, chain + [path], access)
+        base = _load_raw(ppath, chain + [path], access, svzerod)
         elements = copy.deepcopy(base["elements"])
         merged_params = {**base["parameters"], **params}
         constraints = base["constraints"] + constraints
@@ -456,7 +455,12 @@ def load_netlist(path: str, allow_paths=None, svzerod_units=None) -> Netlist:
     system of an svZeroDSolver JSON model's numbers (hemocircuit.svzerod.importer.UNIT_SYSTEMS;
     an error for a hemocircuit netlist)."""
     access = Access.for_netlist(path, allow_paths)
-    raw = _load_raw(path, [], access, svzerod_units)
+    svzerod = None if svzerod_units is None else {"units": svzerod_units, "used": False}
+    raw = _load_raw(path, [], access, svzerod)
+    if svzerod is not None and not svzerod["used"]:
+        raise NetlistError(f"a unit system for svZeroDSolver numbers ({svzerod_units!r}) was given, but neither "
+                           "this netlist nor a netlist it extends is an svZeroDSolver JSON model (hemocircuit "
+                           "quantities carry their units): drop --svzerod-units", file=path)
     limits.check_elements(len(raw["elements"]), path)
     params = _resolve_parameters(dict(raw["parameters"]), path)
     seen = {}

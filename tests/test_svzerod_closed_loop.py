@@ -94,3 +94,25 @@ def test_anderson_shooting_finds_the_orbit_in_few_periods(example, orbit):
         shoot(c, x0, model.period, forced=False, method="anderson", progress=False)
     with pytest.raises(HemocircuitError, match="choose 'newton' or 'anderson'"):
         shoot(c, x0, model.period, forced=True, method="broyden", progress=False)
+
+
+@pytest.mark.parametrize("method", [None, "bdf"])
+def test_a_start_on_the_valves_bounds_is_held_not_crossed(method):
+    """From the operating point the heart's four valve flows sit on their hard limit 0 to
+    rounding (3.4e-16 mL/s).  Such a state counts as on its bound (engine_template.
+    LIMIT_ON_BOUND x atol): held, not "crossed" at s ~ 0 by every step.  Before, every step was
+    a limit event advancing t by ~1e-21 s, and `tran MODEL.json` hit the 10-million-step limit
+    at t = 3.8e-11 s after 3 minutes.  Now 0.1 s takes a few dozen steps, and no valve flow
+    goes below its bound."""
+    import hemocircuit as hc
+    from hemocircuit.kernels.system import CompiledSystem
+
+    c = hc.load(MODEL, svzerod_units="mmHg")
+    x = np.atleast_2d(c.operating_point().x)[0]
+    limits = c.hard_limits()
+    assert len(limits) == 4 and all(0.0 < x[i] - b < 1e-12 for i, b, _ in limits)
+    system = CompiledSystem.of(c)
+    X, st = system.integrate_batch(np.linspace(0.0, 0.1, 11), x[None], system.params(c), rtol=1e-6,
+                                   max_steps=20_000, method=method)
+    assert st[0, 0] == 0 and st[0, 1] == pytest.approx(0.1) and st[0, 2] < 500, st[0]
+    assert all(np.all(X[0, :, i] >= b) for i, b, _ in limits)

@@ -225,8 +225,8 @@ def _ac(args, c):
 
 def compute_ac(args, sets):
     """One --grid member (:func:`hemocircuit.cli.computed`)."""
-    from ..cli import load_circuit
-    return _ac(args, load_circuit(args.netlist, sets, args.protocol, getattr(args, "allow_path", None))[0])
+    from ..cli import circuit_of_args
+    return _ac(args, circuit_of_args(args, sets)[0])
 
 
 def cmd_ac(args):

@@ -151,11 +151,11 @@ def register_cli(sub, common):
 
 def compute_compare(args, sets):
     """The comparison on the netlists with ``sets`` applied (also one --grid member)."""
-    from ..cli import _range_spacing, _unit_to, events_only, load_circuit
+    from ..cli import _range_spacing, _unit_to, circuit_of_args, events_only
 
     circuits, proto = [], None
     for path in args.netlists:
-        c, proto = load_circuit(path, sets, args.protocol, args.allow_path)
+        c, proto = circuit_of_args(args, sets, path)
         circuits.append(c)
     if args.tran:
         t_end = float(_unit_to(args.t_end, "s")) if args.t_end else None

@@ -17,15 +17,16 @@ def default_out(spec_path):
 
 
 def fit(netlist, spec, out=None, sets=None, protocol=None, settings=None, workers=None, plot=True,
-        progress=False):
+        progress=False, svzerod_units=None):
     """Fit ``spec`` (path of a fit spec) on ``netlist``; write the report into ``out`` (default
     :func:`default_out`).  ``settings`` override the spec's settings (starts, seed, max_nfev,
-    ...).  Returns (problem, result dict, {kind: path written})."""
+    ...); ``svzerod_units``: the unit system of an svZeroDSolver JSON netlist.  Returns
+    (problem, result dict, {kind: path written})."""
     from ..fitting import load_problem
     from ..fitting.optimizer import fit_problem
     from ..fitting.report import write
 
-    problem = load_problem(netlist, spec, sets, protocol)
+    problem = load_problem(netlist, spec, sets, protocol, svzerod_units)
     result = fit_problem(problem, settings, workers=workers, progress=progress)
     paths = write(problem, result, out or default_out(spec), plot_png=plot)
     return problem, result, paths
@@ -38,7 +39,8 @@ def cmd_fit(args):
     settings = {k: v for k, v in (("starts", args.starts), ("seed", args.seed), ("max_nfev", args.max_nfev))
                 if v is not None}
     problem, result, paths = fit(args.netlist, args.spec, args.out, _sets(args.set), args.protocol, settings,
-                                 args.workers, plot=not args.no_plot, progress=args.progress)
+                                 args.workers, plot=not args.no_plot, progress=args.progress,
+                                 svzerod_units=getattr(args, "svzerod_units", None))
     print(text(problem, result))
     for kind, path in paths.items():
         print(f"wrote {kind}: {path}")

@@ -374,8 +374,8 @@ def _svzerod_model(path, units=None):
 
 def compute_periodic(args, sets):
     """One --grid member (:func:`hemocircuit.cli.computed`)."""
-    from ..cli import load_circuit
-    return _periodic(args, load_circuit(args.netlist, sets, args.protocol, getattr(args, "allow_path", None))[0])[0]
+    from ..cli import circuit_of_args
+    return _periodic(args, circuit_of_args(args, sets)[0])[0]
 
 
 def cmd_periodic(args):

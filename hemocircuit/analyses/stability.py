@@ -444,8 +444,8 @@ def _stability(args, c):
 
 def compute_stability(args, sets):
     """One --grid member (:func:`hemocircuit.cli.computed`)."""
-    from ..cli import load_circuit
-    return _stability(args, load_circuit(args.netlist, sets, args.protocol, getattr(args, "allow_path", None))[0])
+    from ..cli import circuit_of_args
+    return _stability(args, circuit_of_args(args, sets)[0])
 
 
 def cmd_stability(args):

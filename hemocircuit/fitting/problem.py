@@ -329,12 +329,12 @@ def _yaml_literal(v):
     return yaml.safe_load(v) if isinstance(v, str) else v
 
 
-def load_problem(netlist_path, spec_path, sets=None, protocol=None) -> FitProblem:
-    """The fit problem of a netlist and a fit spec.  ``sets`` ({ID.PARAM: value}) and
-    ``protocol`` (its 'initial' settings) are applied to the netlist as in every command
-    (hemocircuit.cli.load_circuit)."""
+def load_problem(netlist_path, spec_path, sets=None, protocol=None, svzerod_units=None) -> FitProblem:
+    """The fit problem of a netlist and a fit spec.  ``sets`` ({ID.PARAM: value}), ``protocol``
+    (its 'initial' settings) and ``svzerod_units`` (an svZeroDSolver JSON's unit system) are
+    applied to the netlist as in every command (hemocircuit.cli.load_circuit)."""
     from ..cli import load_circuit
 
     spec = load_spec(spec_path)
-    circuit, _ = load_circuit(str(netlist_path), sets, protocol)
+    circuit, _ = load_circuit(str(netlist_path), sets, protocol, svzerod_units=svzerod_units)
     return FitProblem(spec, circuit, netlist_path)

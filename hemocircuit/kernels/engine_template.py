@@ -381,6 +381,10 @@ def nodal_outputs_into(T, X, P, lay, work, dx, U, F):
     return -1
 
 
+#: a state within this many times its atol above its hard limit counts as on it (held there,
+#: not located as a crossing): 1e-3 atol, far below any error the step control admits
+LIMIT_ON_BOUND = 1e-3
+
 # --- Rosenbrock(-W) integrator.  The tableau is a run-time argument (``tab``, packed by
 # hemocircuit.kernels.tableaus: RODAS5P by default, ROS34PW2, ROS34PW3, RODAS4), so choosing a
 # method never recompiles.
@@ -928,7 +932,12 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
                 held = False
                 for k in range(lim_i.shape[0]):
                     li = lim_i[k]
-                    if xn[li] < lim_b[k] and x[li] <= lim_b[k]:
+                    # within LIMIT_ON_BOUND x atol of the bound counts as on it: a state that sits
+                    # there to rounding (an operating point's closed valve, Q = 3e-16 mL/s) would
+                    # otherwise be "crossed" at s ~ 0 by every step, which then advances t by
+                    # ~1e-21 s (closedLoopHeart_singleVessel: 10 million steps, 3 minutes)
+                    on_bound = x[li] <= lim_b[k] + LIMIT_ON_BOUND * atol[li]
+                    if xn[li] < lim_b[k] and on_bound:
                         # already on the bound (just reset): hold it there, as the floor means,
                         # instead of locating the same crossing again at s ~ 0 every step
                         xn[li] = lim_b[k]
@@ -936,7 +945,7 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
                             xn[lim_r[k]] = max(xn[lim_r[k]], 0.0)
                         held = True
                         continue
-                    if xn[li] < lim_b[k] and x[li] > lim_b[k]:
+                    if xn[li] < lim_b[k] and not on_bound:
                         sk = hermite_root(x[li] - lim_b[k], f[li] * hh, xn[li] - lim_b[k], fn[li] * hh)
                         if sk < s_hit:
                             s_hit, k_hit = sk, k
@@ -1341,7 +1350,8 @@ def integrate_batch_bdf(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, 
             k_hit = -1
             for k in range(lim_i.shape[0]):
                 li = lim_i[k]
-                if D[0, li] < lim_b[k] and x[li] > lim_b[k]:
+                # on the bound to LIMIT_ON_BOUND x atol: held below, not located (see integrate_batch)
+                if D[0, li] < lim_b[k] and x[li] > lim_b[k] + LIMIT_ON_BOUND * atol[li]:
                     lo = t
                     hi = t_new
                     for _ in range(60):
@@ -1377,7 +1387,7 @@ def integrate_batch_bdf(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, 
             # a state held on its bound (already there, pushed below): constant, its rate reset
             for k in range(lim_i.shape[0]):
                 li = lim_i[k]
-                if D[0, li] < lim_b[k] and x[li] <= lim_b[k]:
+                if D[0, li] < lim_b[k] and x[li] <= lim_b[k] + LIMIT_ON_BOUND * atol[li]:
                     D[0, li] = lim_b[k]
                     for m in range(1, D.shape[0]):
                         D[m, li] = 0.0
