@@ -562,7 +562,7 @@ def local_jacobian_into(t, x, P, lay, work, jw, scales, J, xt, analytic):
     return 0
 
 
-# inlined (numba IR) into integrate, its one caller: numba links a callee's machine code into
+# inlined (numba IR) into integrate_batch, its one caller: numba links a callee's machine code into
 # every caller and LLVM optimises it again there, so each call level costs compile time
 @njit(cache=True, nogil=True, inline="always")
 def jacobian_into(t, x, f0, P, lay, work, jw, scales, J, ft, xt, ftmp, autonomous, local):

@@ -98,7 +98,7 @@ class CompiledSystem:
         """States on the grid t_out (T,) from x0 at t_out[0] for one parameter row P (slots,).
         Steps end on ``breaks`` (where a source may jump) and on ``kinks`` (where only a
         source's slope jumps: its value, and so f, is continuous, so f is not re-evaluated).
-        ``method``: 'bdf' (engine_template.integrate_bdf, variable-order BDF; it restarts at
+        ``method``: 'bdf' (engine_template.integrate_batch_bdf, variable-order BDF; it restarts at
         kinks as at breaks) or a Rosenbrock tableau of hemocircuit.kernels.tableaus (None:
         tableaus.DEFAULT); ``tab_options`` go to the tableau's ``packed`` (the BDF method takes
         ``local_jacobian`` only).
@@ -122,7 +122,12 @@ class CompiledSystem:
         X0 = np.ascontiguousarray(X0, dtype=float)
         B = X0.shape[0]
         t_out = np.ascontiguousarray(np.broadcast_to(np.asarray(t_out, dtype=float), (B, np.shape(t_out)[-1])))
-        P = np.ascontiguousarray(np.broadcast_to(P, (B, P.shape[-1])), dtype=float)
+        P = np.ascontiguousarray(np.broadcast_to(P, (B, P.shape[-1])), dtype=float).view()
+        # read-only always (a view: the caller's array keeps its flag): numba specialises on
+        # the flag, and one parameter set broadcast to B > 1 rows, or B distinct rows, would
+        # otherwise be writable copies whose integrator compiles rhs_into, prepare_static and
+        # local_jacobian_into again instead of using the helper's and before_integrator's
+        P.setflags(write=False)
         atol_v = (rtol * 1e-3 if atol is None else atol) * self.scales
         hmax = np.ascontiguousarray(np.broadcast_to(np.asarray(hmax, dtype=float), (B,)))
         method = method or tableaus.DEFAULT

@@ -1,6 +1,6 @@
 """Rosenbrock(-W) tableaus for the compiled integrator, packed into one float64 array.
 
-The engine (engine_template.integrate) uses the classical form (Hairer & Wanner II, IV.7):
+The engine (engine_template.integrate_batch) uses the classical form (Hairer & Wanner II, IV.7):
 W = I - gamma h J and, for stages s = 1..ns,
 
     W k_s = h f(t + c_s h, x + sum_j A_sj k_j) + h J sum_j G_sj k_j + h^2 d_s f_t,
@@ -149,7 +149,7 @@ METHODS = {"ros34pw2": _ros34pw2, "ros34pw3": _ros34pw3, "rodas4": _rodas4, "rod
 #: accepted steps per Jacobian: W-methods stay consistent with an old one; RODAS-type need a
 #: fresh one more often (measured on the vasomotion run, docs/performance.md)
 JAC_REUSE = {"ros34pw2": 6, "ros34pw3": 6, "rodas4": 1, "rodas5p": 1}
-#: the variable-order BDF method (engine_template.integrate_bdf): no tableau, the engine's
+#: the variable-order BDF method (engine_template.integrate_batch_bdf): no tableau, the engine's
 #: other integrator
 BDF = "bdf"
 #: the engine's default method: RODAS5P (order 5, fresh element-local Jacobian each step).
@@ -163,7 +163,7 @@ BDF = "bdf"
 #: longer steps cost accuracy on that member, docs/performance.md).  So BDF is used where it is
 #: as accurate: the forced runs of ``freq``.
 DEFAULT = "rodas5p"
-#: step-size controllers (engine_template.integrate): "pi", Gustafsson's PI rule
+#: step-size controllers (engine_template.integrate_batch): "pi", Gustafsson's PI rule
 #: h_new = 0.9 h err^(-0.7/q) err_prev^(0.4/q); "predictive", Gustafsson's predictive rule as in
 #: Hairer & Wanner's RODAS/RADAU5 (IV.8 (8.21)): the smaller of the I rule 0.9 h err^(-1/q) and
 #: 0.9 h (h / h_prev) (err_prev / err^2)^(1/q), err_prev >= 1e-2; growth within [0.2, 6]
