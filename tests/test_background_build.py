@@ -215,3 +215,50 @@ def test_prebuild_helper_compiles_the_jacobian_for_the_integrator(tmp_path):
     assert np.max(np.abs(np.array(r["V"]) - 0.5 * 80.0 * (1 - np.exp(-t)))) < 2e-7 * 40.0
     # the flow through R = 2 mmHg s/mL: (80 mmHg - V/C) / R = 40 exp(-t) mL/s
     assert np.max(np.abs(np.array(r["Q"]) - 40.0 * np.exp(-t))) < 2e-7 * 40.0
+
+
+_BEFORE_SCRIPT = r"""
+import json, subprocess, sys, time
+import numpy as np
+import hemocircuit as hc
+from hemocircuit.kernels import prebuild
+from hemocircuit.kernels.system import CompiledSystem
+c = hc.load(sys.argv[1])
+system = CompiledSystem.of(c)
+mod = system.mod
+# a stand-in helper that compiles nothing and ends after 1 s: before_integrator must compile the
+# nodal solve and right-hand side here, then wait for it (the Jacobian never appears in the cache)
+proc = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(1.0)"])
+prebuild._pending[mod.__name__] = proc
+t0 = time.monotonic()
+prebuild.before_integrator(system)
+waited = time.monotonic() - t0
+compiled_here = [len(mod.prepare_static.overloads), len(mod.rhs_into.overloads), len(mod.local_jacobian_into.overloads)]
+prebuild.before_integrator(system)  # once per module: returns at once
+t = np.linspace(0.0, 5.0, 101)
+X, st = system.integrate_batch(t, np.zeros((1, c.nx)), system.params(c), rtol=1e-8)
+print(json.dumps({"compiled_here": compiled_here, "waited": waited, "helper_rc": proc.returncode,
+                  "after": [len(mod.prepare_static.overloads), len(mod.rhs_into.overloads)],
+                  "V": X[0, :, c.state_names.index("C1.V")].tolist(), "status": float(st[0, 0])}))
+"""
+
+
+def test_before_integrator_compiles_the_nodal_solve_here_and_waits_for_the_helper(tmp_path):
+    """kernels.prebuild.before_integrator, with a stand-in helper that compiles nothing and
+    ends after 1 s: it compiles prepare_static and rhs_into in this process (one
+    specialisation each, which the integrator then uses: still one each after the run), not
+    the local Jacobian (the helper's part), and waits while the helper runs (~1 s) since the
+    Jacobian never appears in the cache; the run is right (V = C P (1 - exp(-t/RC)))."""
+    import json
+
+    env = {**os.environ, "HEMOCIRCUIT_CACHE_DIR": str(tmp_path / "hc"), "NUMBA_CACHE_DIR": str(tmp_path / "nb"),
+           "HEMOCIRCUIT_ENGINE_TYPES": "used", "HEMOCIRCUIT_PREBUILD": "1"}
+    out = subprocess.run([sys.executable, "-c", _BEFORE_SCRIPT, os.path.join(TEST_NETLISTS, "base_rc.yaml")],
+                         env=env, capture_output=True, text=True, timeout=1200)
+    assert out.returncode == 0, out.stderr[-3000:]
+    r = json.loads(out.stdout.strip().splitlines()[-1])
+    assert r["compiled_here"] == [1, 1, 0], r
+    assert r["helper_rc"] == 0 and r["waited"] >= 0.5, r  # it waited for the helper to end
+    assert r["after"] == [1, 1] and r["status"] == 0, r
+    t = np.linspace(0.0, 5.0, 101)
+    assert np.max(np.abs(np.array(r["V"]) - 0.5 * 80.0 * (1 - np.exp(-t)))) < 2e-7 * 40.0
