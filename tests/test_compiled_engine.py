@@ -570,3 +570,22 @@ def test_run_from_a_later_start_has_no_repeated_time():
     res = c.simulate(1.7, t0=0.7, dt=0.1, engine="compiled")
     t = np.asarray(res.t)
     assert t[0] == 0.7 and t[-1] == 1.7 and len(t) == 11 and np.all(np.diff(t) > 0.09)
+
+
+@pytest.mark.parametrize("method", [None, "bdf"])
+def test_a_failed_member_has_nan_rows_and_the_others_run_as_alone(method):
+    """A member started from a non-finite state fails (its status says why) and every output row
+    after its start is NaN (engine_template.finish_member, the end of every member's run, failed
+    or not); the other member of the batch runs as alone (R-C charging, V = C P (1 - exp(-t/RC)))."""
+    from hemocircuit.kernels.system import STATUS
+
+    c = hc.load(os.path.join(TEST_NETLISTS, "base_rc.yaml"))
+    system = CompiledSystem.of(c)
+    t = np.linspace(0.0, 2.0, 21)
+    X, st = system.integrate_batch(t, np.array([[np.nan] * c.nx, [0.0] * c.nx]), system.params(c), rtol=1e-8,
+                                   method=method)
+    assert st[0, 0] < 0 and STATUS[int(st[0, 0])] and np.all(np.isnan(X[0, 1:])), st[0]
+    alone, _ = system.integrate_batch(t, np.zeros((1, c.nx)), system.params(c), rtol=1e-8, method=method)
+    assert st[1, 0] == 0 and np.array_equal(X[1], alone[0])
+    V = X[1, :, c.state_names.index("C1.V")]
+    assert np.max(np.abs(V - 0.5 * 80.0 * (1 - np.exp(-t)))) < 1e-6 * 40.0

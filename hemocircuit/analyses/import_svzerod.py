@@ -9,7 +9,8 @@ def register_cli(sub, common):
     sp = sub.add_parser("import-svzerod", help="convert an svZeroDSolver JSON model to a netlist")
     sp.add_argument("model", help="svZeroDSolver JSON model")
     sp.add_argument("-o", "--out", required=True, help="netlist YAML to write")
-    sp.add_argument("--units", default="cgs", help="unit system of their numbers: cgs (default) or mmHg")
+    sp.add_argument("--units", help="unit system of their numbers: cgs (default, their convention; SI when the "
+                                    "model says m^3), mmHg or SI")
     sp.set_defaults(func=cmd_import_svzerod)
 
 

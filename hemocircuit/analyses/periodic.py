@@ -364,12 +364,12 @@ def _svzerod_model(path, units=None):
 
     if not str(path).endswith(".json"):
         return None
-    from ..svzerod.importer import guess_units, import_svzerod, is_svzerod_model
+    from ..svzerod.importer import import_svzerod, is_svzerod_model
     with open(path) as fh:
         cfg = json.load(fh)
     if not is_svzerod_model(cfg):
         return None
-    return import_svzerod(path, units=units or guess_units(cfg)), cfg
+    return import_svzerod(cfg, units=units, source=path), cfg
 
 
 def compute_periodic(args, sets):

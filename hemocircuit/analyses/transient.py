@@ -502,7 +502,7 @@ def cmd_tran_svzerod(args):
 
     from ..cli import _sets, save_outputs
     from ..errors import HemocircuitError
-    from ..svzerod.importer import guess_units, import_svzerod, is_svzerod_model
+    from ..svzerod.importer import import_svzerod, is_svzerod_model
     from ..svzerod.output import simulate_svzerod, write_svzerod_output
 
     given = [f"--{k.replace('_', '-')}" for k in ("t_end", "dt", "ic", "protocol", "grid") if getattr(args, k, None)]
@@ -519,7 +519,7 @@ def cmd_tran_svzerod(args):
     if not is_svzerod_model(cfg):
         raise HemocircuitError(f"--svzerod-output: {args.netlist} is not an svZeroDSolver JSON model "
                                "(simulation_parameters and blocks)")
-    model = import_svzerod(args.netlist, units=getattr(args, "svzerod_units", None) or guess_units(cfg))
+    model = import_svzerod(cfg, units=getattr(args, "svzerod_units", None), source=args.netlist)
     c, res = simulate_svzerod(model, sets=_sets(args.set), start=args.svzerod_start, cfg=cfg)
     path = write_svzerod_output(args.svzerod_output, model, c, res, cfg)
     layout = "per variable" if model.sim.get("output_variable_based") else "per block"

@@ -385,6 +385,22 @@ def nodal_outputs_into(T, X, P, lay, work, dx, U, F):
 #: not located as a crossing): 1e-3 atol, far below any error the step control admits
 LIMIT_ON_BOUND = 1e-3
 
+
+@njit(cache=True, nogil=True, internal=True, _nrt=False)
+def finish_member(out, k_from, stats, m, status, t, nsteps, nrej, nfev, nev):
+    """The end of member m's run in both integrators: its output rows from k_from on NaN (not
+    reached: the run failed or stopped there) and its stats row (status, t reached, steps,
+    rejected steps, f evaluations, limit events)."""
+    for k in range(k_from, out.shape[0]):
+        for i in range(out.shape[1]):
+            out[k, i] = np.nan
+    stats[m, 0] = status
+    stats[m, 1] = t
+    stats[m, 2] = nsteps
+    stats[m, 3] = nrej
+    stats[m, 4] = nfev
+    stats[m, 5] = nev
+
 # --- Rosenbrock(-W) integrator.  The tableau is a run-time argument (``tab``, packed by
 # hemocircuit.kernels.tableaus: RODAS5P by default, ROS34PW2, ROS34PW3, RODAS4), so choosing a
 # method never recompiles.
@@ -739,8 +755,8 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
     f are continuous, the step ends but f(t-) serves as f(t+) (one evaluation less per kink);
     where f does not jump the Jacobian is kept (tab[5] = 1).
     ``tab``: the method (hemocircuit.kernels.tableaus.packed).
-    Its stats row: (status, t reached, steps, rejected steps, f evaluations, limit events);
-    status 0 done, -1 step size too small, -2 step limit, -3 non-finite state or singular system.
+    Its stats row (finish_member): (status, t reached, steps, rejected steps, f evaluations,
+    limit events), rows not reached NaN; status 0 done, -1 step size too small, -2 step limit, -3 non-finite state or singular system.
 
     One function, not a per-member function called (or inlined) here: numba's IR inlining deep-copies
     the callee's blocks, each with a copy of the whole scope (5.6 s of a first compilation), and a
@@ -803,9 +819,7 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
         nfev = 1
         prepare_static(t, x, P, lay, work)
         if not rhs_into(t, x, P, lay, work, f):
-            stats[mb, 0] = -3.0  # as a run that stops here: rows after the first not written
-            stats[mb, 1] = t
-            stats[mb, 4] = nfev
+            finish_member(out, 1, stats, mb, -3, t, 0, 0, nfev, 0)
             continue
         h = h0
         age = JAC_REUSE
@@ -1031,15 +1045,7 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
                 if h < 1e-14 * max(1.0, abs(t)):
                     status = -1
                     break
-        for k in range(k_out, T):
-            for i in range(nx):
-                out[k, i] = np.nan
-        stats[mb, 0] = status
-        stats[mb, 1] = t
-        stats[mb, 2] = nsteps
-        stats[mb, 3] = nrej
-        stats[mb, 4] = nfev
-        stats[mb, 5] = nev
+        finish_member(out, k_out, stats, mb, status, t, nsteps, nrej, nfev, nev)
     return out_all, stats
 
 
@@ -1201,15 +1207,11 @@ def integrate_batch_bdf(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, 
         prepare_static(t, x, P, lay, work)
         nfev = 1
         if not rhs_into(t, x, P, lay, work, f):
-            stats[mb, 0] = -3.0  # as a run that stops here: rows after the first not written
-            stats[mb, 1] = t
-            stats[mb, 4] = nfev
+            finish_member(out, 1, stats, mb, -3, t, 0, 0, nfev, 0)
             continue
         nj = jacobian_into(t, x, f, P, lay, work, jw, scales, J, ft, xt, ftmp, True, local_jac)
         if nj < 0:
-            stats[mb, 0] = -3.0  # as a run that stops here: rows after the first not written
-            stats[mb, 1] = t
-            stats[mb, 4] = nfev
+            finish_member(out, 1, stats, mb, -3, t, 0, 0, nfev, 0)
             continue
         nfev += nj
         jac_current = True
@@ -1442,15 +1444,7 @@ def integrate_batch_bdf(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, 
             bdf_change_D(D, order, factor, R, U, tmp)
             n_equal = 0
             lu_valid = False
-        for k in range(k_out, T):
-            for i in range(nx):
-                out[k, i] = np.nan
-        stats[mb, 0] = status
-        stats[mb, 1] = t
-        stats[mb, 2] = nsteps
-        stats[mb, 3] = nrej
-        stats[mb, 4] = nfev
-        stats[mb, 5] = nev
+        finish_member(out, k_out, stats, mb, status, t, nsteps, nrej, nfev, nev)
     return out_all, stats
 
 

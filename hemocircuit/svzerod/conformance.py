@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import HemocircuitError
-from .importer import guess_units, import_svzerod, write_netlist
+from .importer import import_svzerod, write_netlist
 
 VALVE_CHAMBER_TYPES = {"ValveTanh", "PiecewiseValve", "ChamberElastanceInductor", "LinearElastanceChamber",
                        "ChamberSphere", "ClosedLoopRCR", "ClosedLoopHeartAndPulmonary", "ClosedLoopCoronaryLeft",
@@ -319,8 +319,7 @@ def run_case(case_path, against="converged", timed_runs=1, rtol=None):
     r = CaseResult(name)
     r.theirs = their_times(os.path.join(folder, "README.md")).get(name, "")
     try:
-        with open(case_path) as fh:
-            model = import_svzerod(case_path, units=guess_units(json.load(fh)))
+        model = import_svzerod(case_path)
         r.types = model.block_types
         r.tol_p, r.tol_q = tolerances(name, model)
         with open(case_path) as fh:

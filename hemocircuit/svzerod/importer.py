@@ -777,10 +777,13 @@ def _read(path_or_cfg):
     return read_json_file(path, "svZeroDSolver model"), path
 
 
-def import_svzerod(path_or_cfg, units: str = "cgs", name=None, source=None) -> SvzModel:
+def import_svzerod(path_or_cfg, units: str | None = None, name=None, source=None) -> SvzModel:
     """Read an svZeroDSolver JSON model (a path or the parsed dict) into an :class:`SvzModel`.
-    ``name``/``source``: the model's name and file when a parsed dict is given."""
+    ``units``: a key of UNIT_SYSTEMS, or None for the one :func:`guess_units` finds (cgs, their
+    convention, unless the model says m^3).  ``name``/``source``: the model's name and file
+    when a parsed dict is given."""
     cfg, path = _read(path_or_cfg)
+    units = units or guess_units(cfg)
     path = path or source
     imp = _Importer(cfg, path, units)
     vessels = imp.run()
@@ -828,11 +831,11 @@ def guess_units(cfg) -> str:
 
 
 def netlist_of(cfg: dict, path=None, units=None) -> dict:
-    """The hemocircuit netlist (dict) of a parsed svZeroDSolver model, in ``units`` (a key of
-    UNIT_SYSTEMS; default the system :func:`guess_units` finds): what netlist loading uses for
-    a ``.json`` model, so every command accepts their JSON directly (``--svzerod-units``)."""
+    """The hemocircuit netlist (dict) of a parsed svZeroDSolver model, in ``units``
+    (:func:`import_svzerod`'s): what netlist loading uses for a ``.json`` model, so every
+    command accepts their JSON directly (``--svzerod-units``)."""
     name = os.path.splitext(os.path.basename(path))[0] if path else None
-    model = import_svzerod(cfg, units=units or guess_units(cfg), name=name, source=path)
+    model = import_svzerod(cfg, units=units, name=name, source=path)
     return model.netlist
 
 
@@ -844,7 +847,7 @@ def write_netlist(netlist: dict, out_path: str):
         yaml.safe_dump(netlist, fh, sort_keys=False, default_flow_style=None, width=120)
 
 
-def load_svzerod(path, units: str = "cgs", mean: bool = False):
+def load_svzerod(path, units: str | None = None, mean: bool = False):
     """The assembled Circuit of an svZeroDSolver JSON model (through a temporary netlist file,
     so it is exactly what ``import-svzerod`` writes).  ``mean``: time series at their means."""
     import tempfile

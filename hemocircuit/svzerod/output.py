@@ -430,10 +430,10 @@ def write_svzerod_output(path, model, circuit, res, cfg=None):
 def svzerod_output(model_path, out_path, rtol=None, start="operating-point", units=None, sets=None):
     """Import ``model_path`` (their JSON), run it with their semantics and write their result
     layout to ``out_path``.  Returns (the model with the cycles the run made, circuit, result)."""
-    from .importer import guess_units, import_svzerod
+    from .importer import import_svzerod
 
     cfg = _read_config(model_path)
-    model = import_svzerod(model_path, units=units or guess_units(cfg))
+    model = import_svzerod(model_path, units=units)
     c, res = simulate_svzerod(model, sets=sets, rtol=rtol, start=start, cfg=cfg)
     write_svzerod_output(out_path, model, c, res, cfg)
     return ran_model(model, res), c, res
