@@ -236,13 +236,18 @@ mod = system.mod
 # nodal solve and right-hand side here, then wait for it (the Jacobian never appears in the cache)
 proc = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(1.0)"])
 prebuild._pending[mod.__name__] = proc
+prebuild._decided.add(mod.__name__)  # and no real helper for the integrator below: it compiles everything here
 prebuild.before_integrator(system)
 rc_at_return = proc.returncode  # set by before_integrator's poll only if it saw the helper end
 compiled_here = [len(mod.prepare_static.overloads), len(mod.rhs_into.overloads), len(mod.local_jacobian_into.overloads)]
 prebuild.before_integrator(system)  # once per module: returns at once
 t = np.linspace(0.0, 5.0, 101)
 X, st = system.integrate_batch(t, np.zeros((1, c.nx)), system.params(c), rtol=1e-8)
-print(json.dumps({"compiled_here": compiled_here, "rc_at_return": rc_at_return,
+# the integrator compiled the helper's part itself here: the signatures the helper compiles by
+# are the ones its callers used, so the helper's work is loaded, not done again
+helper_sigs = [sig in fn.signatures for fn, sig in prebuild.helper_signatures(mod, system.lay, c.nx,
+                                                                              system.layout.n_params)]
+print(json.dumps({"compiled_here": compiled_here, "rc_at_return": rc_at_return, "helper_sigs": helper_sigs,
                   "after": [len(mod.prepare_static.overloads), len(mod.rhs_into.overloads)],
                   "V": X[0, :, c.state_names.index("C1.V")].tolist(), "status": float(st[0, 0])}))
 """
@@ -253,9 +258,12 @@ def test_before_integrator_compiles_the_nodal_solve_here_and_waits_for_the_helpe
     ends after 1 s: it compiles prepare_static and rhs_into in this process (one
     specialisation each, which the integrator then uses: still one each after the run), not
     the local Jacobian (the helper's part), and returns only once the helper has ended, since
-    the Jacobian never appears in the cache; the run is right (V = C P (1 - exp(-t/RC)))."""
+    the Jacobian never appears in the cache; the integrator then compiles the helper's part
+    itself, with the signatures the helper compiles by (prebuild.helper_signatures: else
+    the helper's work would be done twice); the run is right (V = C P (1 - exp(-t/RC)))."""
     r = _run_in_fresh_cache(_BEFORE_SCRIPT, tmp_path)
     assert r["compiled_here"] == [1, 1, 0], r
+    assert r["helper_sigs"] == [True] * 4, r  # elem_derivs_jac, elem_derivs, local_jacobian_into, make_jac_work
     assert r["rc_at_return"] == 0, r  # it returned after the helper ended, not before
     assert r["after"] == [1, 1] and r["status"] == 0, r
     t = np.linspace(0.0, 5.0, 101)

@@ -630,18 +630,6 @@ def jacobian(t, x, P, lay, scales, local):
     return J
 
 
-@njit(cache=True, nogil=True)
-def compile_local_jacobian(t, x, P, lay, scales):
-    """Never run: compiled by signature in a second process (kernels.prebuild) while the first
-    compiles the integrator, so that local_jacobian_into -- a fifth of a first compile -- is in
-    numba's cache when the integrator reaches it.  Its arguments have the types integrate_batch
-    passes (x, J, xt new C arrays, P a row of the parameter matrix, analytic a bool)."""
-    nx = x.shape[0]
-    work = make_work(lay)
-    jw = make_jac_work(lay)
-    return local_jacobian_into(t, x, P, lay, work, jw, scales, np.zeros((nx, nx)), np.empty(nx), nx > 0)
-
-
 @njit(cache=True, nogil=True, internal=True, _nrt=False)
 def lu_factor(W, piv, m):
     """In-place LU with partial pivoting of the leading m x m block of W; False if singular.

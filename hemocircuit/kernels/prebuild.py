@@ -7,13 +7,21 @@ session 11: 34 s for the vasomotion engine on one core, of which the element-loc
 body ~9 s).
 Numba caches each function on its own: when the integrator reaches a callee that is already
 in the cache for the same argument types, it loads it instead of compiling it.  So
-:func:`start` launches ``python -m hemocircuit.kernels.prebuild`` (the job on its stdin), which compiles
-``local_jacobian_into`` (through the never-run ``compile_local_jacobian``, whose arguments have
-the integrator's types) while this process compiles the right-hand side and the nodal solve
-(:func:`before_integrator`, by signature) and then waits for it before compiling the
-integrator itself.  The helper goes on with ``nodal_outputs`` (the outputs of a long run),
-which this process reaches only after the integration.  If the helper fails or is later than
-WAIT_S, the integrator compiles the function itself, as without it.
+:func:`start` launches ``python -m hemocircuit.kernels.prebuild`` (the job on its stdin), and
+the two processes split the first compile, each compiling what the other does not need first:
+
+* the helper: ``elem_derivs_jac`` and ``elem_derivs`` (the kernels only the Jacobian and the
+  right-hand side call), then ``local_jacobian_into``, which by then loads the nodal solve's
+  element kernels from this process's cache, then ``make_jac_work``; all by signature, the
+  scratch tuples typed from the Python twins of the makers;
+* this process (:func:`before_integrator`): ``prepare_static`` (the element kernels of the
+  nodal solve), ``rhs_into`` (loading ``elem_derivs`` from the helper's cache) and
+  ``make_work``; then it waits for the helper's part before compiling the integrator itself.
+
+Both parts take about 9 s of the vasomotion engine's ~30 s (docs/performance.md, session 12:
+the first run 21.4 -> 19.4 s).  The helper goes on with ``nodal_outputs`` (the outputs of a
+long run), which this process reaches only after the integration.  If the helper fails or is
+later than WAIT_S, the integrator compiles what is missing itself, as without it.
 """
 from __future__ import annotations
 
@@ -91,11 +99,14 @@ def before_integrator(system):
         sig_w = (t, vx, numba.typeof(P), lay, numba.typeof(work))
         mod.prepare_static.compile(sig_w)
         mod.rhs_into.compile(sig_w + (vx,))
+        # the integrators' scratch maker (the helper types the Jacobian's from the Python twin
+        # and compiles make_jac_work after it): here, while the helper still runs
+        mod.make_work.compile((lay,))
     except Exception:  # noqa: BLE001 - only a head start: the integrator compiles what is missing
         pass
-    fn = mod.local_jacobian_into
+    helpers = (mod.local_jacobian_into, mod.make_jac_work)  # the helper's part, in its order
     end = time.monotonic() + WAIT_S
-    while proc.poll() is None and not in_cache(fn) and time.monotonic() < end:
+    while proc.poll() is None and not all(in_cache(f) for f in helpers) and time.monotonic() < end:
         time.sleep(0.05)
 
 
@@ -109,6 +120,26 @@ def in_cache(dispatcher) -> bool:
         return True
 
 
+def helper_signatures(mod, lay, nx, n_params):
+    """[(dispatcher, signature)] the helper compiles, in its order: the argument types its
+    callers (local_jacobian_into, rhs_into, the integrators) pass, the scratch tuples typed
+    from the Python twins of make_work and make_jac_work (tested against the signatures the
+    integrator's own compilation leaves)."""
+    import numba
+
+    x, P = np.empty(nx), np.empty(n_params)
+    P.setflags(write=False)  # integrate_batch's P is a read-only view (np.broadcast_to) in a single run
+    vx, J = numba.typeof(x), numba.typeof(np.empty((1, 1)))
+    work, jw = mod.make_work.py_func(lay), mod.make_jac_work.py_func(lay)
+    ty = [numba.typeof(work[i]) for i in (9, 10, 7, 11, 12)]  # pl, xl, ul, il, dl as the callers pass them
+    elem = (numba.int64, ty[0], ty[1], ty[2], numba.float64, ty[3], ty[4])
+    return [(mod.elem_derivs_jac, elem + (numba.typeof(jw[14]), numba.typeof(jw[15]))),
+            (mod.elem_derivs, elem),
+            (mod.local_jacobian_into, (numba.float64, vx, numba.typeof(P), numba.typeof(lay), numba.typeof(work),
+                                       numba.typeof(jw), vx, J, vx, numba.boolean)),
+            (mod.make_jac_work, (numba.typeof(lay),))]
+
+
 def _run() -> int:
     import importlib.util
 
@@ -120,10 +151,13 @@ def _run() -> int:
     mod = importlib.util.module_from_spec(loader)
     sys.modules[path.stem] = mod
     loader.loader.exec_module(mod)
-    x, P = np.empty(spec["nx"]), np.empty(spec["nP"])
-    P.setflags(write=False)  # integrate_batch's P is a read-only view (np.broadcast_to) in a single run
-    sig = (numba.float64, numba.typeof(x), numba.typeof(P), numba.typeof(spec["lay"]), numba.typeof(x))
-    mod.compile_local_jacobian.compile(sig)
+    # first the element kernels only the Jacobian and the right-hand side call, while the first
+    # process compiles the ones the nodal solve calls (prepare_static), which the Jacobian then
+    # loads from the cache instead of compiling them at the same time; no make_work or
+    # make_jac_work before the Jacobian (1.6 s): the first process compiles make_work while it
+    # waits, this one make_jac_work last
+    for fn, sig in helper_signatures(mod, spec["lay"], spec["nx"], spec["nP"]):
+        fn.compile(sig)
     # then the outputs' nodal solve (CompiledSystem.nodal_outputs, with its argument types),
     # which this process's run reaches only after the integration
     v, m, P2 = numba.typeof(np.empty(1)), numba.typeof(np.empty((1, 1))), np.empty((1, spec["nP"]))
