@@ -35,6 +35,7 @@ class Inductor(Component):
     terminals = ("a", "b")
     parameters = {"L": Param("mmHg*s**2/mL", lower=0.0, lower_open=True, doc="inertance")}
     role = "flow"
+    matrix_params = ()  # A_loc = 0 (an imposed flow): L(r) of eq. inertia keeps the matrix constant
 
     def states(self):
         return (State("q", "mL/s", 10.0, "flow a -> b"),)

@@ -161,6 +161,13 @@ class Component:
     role: str = "conductive"
     #: True when A_loc does not depend on states or time (stamped once per parameter set)
     constant_matrix: bool = True
+    #: the parameters A_loc reads (None: every parameter).  A parameter given as an expression
+    #: of states (``L: "= ... art.r ..."``) varies with the states, so an element whose A_loc
+    #: reads one is re-stamped at every evaluation; one outside this tuple leaves a
+    #: ``constant_matrix`` element's A_loc constant (the inductor: A_loc = 0 whatever L is, so
+    #: the nodal matrix stays constant with eq. inertia's L(r)).  Checked for every type by
+    #: tests/test_component_contract.py.
+    matrix_params: tuple[str, ...] | None = None
     #: True when stamp() is affine in the pressures (no Newton iteration needed)
     linear_in_pressure: bool = True
     #: True when the element drives its branch from a time-dependent source value
@@ -202,6 +209,10 @@ class Component:
     @property
     def local_nodes(self) -> tuple[str, ...]:
         return tuple(self.terminals) + tuple(self.internal_nodes())
+
+    def matrix_reads(self, name: str) -> bool:
+        """True when A_loc may depend on parameter ``name`` (:attr:`matrix_params`)."""
+        return self.matrix_params is None or name in self.matrix_params
 
     def varies_in_time(self, p) -> bool:
         """True if the stamps of these parameter values change with time (sources with a sine)."""

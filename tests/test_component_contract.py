@@ -266,6 +266,47 @@ def test_one_batched_parameter_broadcasts(name, netlist_samples):
             assert set(comp.breakpoints(last, 0.0, 1e3)) <= set(comp.breakpoints(p, 0.0, 1e3)), where
 
 
+@pytest.mark.parametrize("name", NAMES)
+def test_the_matrix_reads_only_its_declared_parameters(name, netlist_samples):
+    """Component.matrix_params: A_loc does not change when any other parameter does (an
+    expression on such a parameter leaves the element's nodal matrix constant, so the circuit
+    and the compiled engine stamp it once per parameter set).  Every parameter moved by 30 %
+    in turn, where its bounds allow."""
+    cls = TYPES[name]
+    for comp, p1, x1, u1 in samples_of(cls, netlist_samples):
+        p, x, u = _batch(p1, x1, u1)
+        uu = None if comp.linear_in_pressure else u
+        A0 = np.array(np.broadcast_to(comp.stamp(p, x, uu, 0.0, None)[0], (B, E) + (u.shape[-1],) * 2))
+        for k, par in comp.parameters.items():
+            if comp.matrix_reads(k):
+                continue
+            moved = dict(p)
+            v = p[k] * 1.3 if np.all(p[k] != 0) else p[k] + 1.0
+            if par.upper is not None and np.any(v > par.upper):
+                v = p[k] * 0.7
+            moved[k] = v
+            A1 = np.broadcast_to(comp.stamp(moved, x, uu, 0.0, None)[0], A0.shape)
+            np.testing.assert_array_equal(A1, A0, err_msg=f"{name} {comp.opts}: A_loc reads {k}, "
+                                                          f"which matrix_params leaves out")
+
+
+def test_an_expression_on_a_parameter_the_matrix_does_not_read_keeps_it_constant():
+    """The inertia netlists' L(r) (eq. inertia) is an expression of the arteriole's states, but
+    the inductor's A_loc does not read L: its group stays constant in the circuit and in the
+    compiled layout (cm = 1), and the arteriole's matrix still varies (cm = 0)."""
+    import hemocircuit as hc
+    from hemocircuit.kernels.layout import build_layout
+
+    c = hc.load(ROOT / "netlists" / "vasomotion.yaml")
+    groups = {g.comp.type_name: g for g in c.groups}
+    assert groups["inductor"].exprs and groups["inductor"].constant
+    assert not groups["arteriole"].constant
+    lay = build_layout(c)
+    et_of = {eid: k for k, eid in enumerate(e for g in c.groups for e in g.ids)}
+    cm = lay.lay[-2]
+    assert cm[et_of["Lb"]] == 1 and cm[et_of["art"]] == 0
+
+
 @pytest.mark.parametrize("name", [n for n in NAMES if TYPES[n].drive is not None and TYPES[n].drive.has_sine])
 def test_sine_drive_breakpoints_follow_the_declared_parameters(name, netlist_samples):
     """A source's sine term switching on at its declared start is a breakpoint, and only
