@@ -296,13 +296,17 @@ def solve_nodes(t, x, Pe, lay, work):
 @njit(cache=True, nogil=True, internal=True, _nrt=False)
 def rhs_into(t, x, P, lay, work, dx):
     """dx/dt for states x at time t into dx.  Returns False on a singular nodal system
-    (dx is then NaN)."""
+    (dx is then NaN).  An empty dx: the nodal solve only (nodal_outputs_into: the outputs need
+    no derivatives, a third of an evaluation; the same compiled function, so no second
+    compilation of the inlined nodal solve)."""
     (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st) = lay
     Pe = effective_params(t, x, P, lay, work)
     if not solve_nodes(t, x, Pe, lay, work):
         for i in range(dx.shape[0]):
             dx[i] = np.nan
         return False
+    if dx.shape[0] == 0:
+        return True
     u, ul, pl, xl, il, dl = work[4], work[7], work[9], work[10], work[11], work[12]
     for e in range(et.shape[0]):
         if S[e] == 0:
@@ -346,7 +350,7 @@ def nodal_outputs(T, X, P, lay, U, F):
     local residual Al ul - bl (zero for an element with no local unknowns).  P (B, nP): row k
     belongs to member k // (m // B) (member-major rows, as Circuit.outputs lays them out).
     Returns -1, or the first row whose nodal system is singular or whose Newton fails."""
-    return nodal_outputs_into(T, X, P, lay, make_work(lay), np.empty(X.shape[1]), U, F)
+    return nodal_outputs_into(T, X, P, lay, make_work(lay), np.empty(0), U, F)  # no derivatives (rhs_into)
 
 
 @njit(cache=True, nogil=True, internal=True, _nrt=False)
@@ -354,7 +358,8 @@ def nodal_outputs_into(T, X, P, lay, work, dx, U, F):
     """nodal_outputs with the scratch arrays given (no allocation: compiled without reference
     counting, as rhs_into).  Through rhs_into, which leaves the effective parameters in work[0]
     and the nodal solution in work[4]: its compilation (the integrator's, from the cache) is
-    reused instead of typing the inlined nodal solve again (7 s of a first compilation)."""
+    reused instead of typing the inlined nodal solve again (7 s of a first compilation).  An
+    empty ``dx`` skips the derivatives there."""
     (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st) = lay
     Pe, u, Al, bl, ul, pl, xl, il = work[0], work[4], work[5], work[6], work[7], work[9], work[10], work[11]
     m = X.shape[0]
