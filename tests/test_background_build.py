@@ -248,6 +248,7 @@ X, st = system.integrate_batch(t, np.zeros((1, c.nx)), system.params(c), rtol=1e
 helper_sigs = [sig in fn.signatures for fn, sig in prebuild.helper_signatures(mod, system.lay, c.nx,
                                                                               system.layout.n_params)]
 print(json.dumps({"compiled_here": compiled_here, "rc_at_return": rc_at_return, "helper_sigs": helper_sigs,
+                  "finish_member_sigs": len(mod.finish_member.signatures),
                   "after": [len(mod.prepare_static.overloads), len(mod.rhs_into.overloads)],
                   "V": X[0, :, c.state_names.index("C1.V")].tolist(), "status": float(st[0, 0])}))
 """
@@ -263,7 +264,9 @@ def test_before_integrator_compiles_the_nodal_solve_here_and_waits_for_the_helpe
     the helper's work would be done twice); the run is right (V = C P (1 - exp(-t/RC)))."""
     r = _run_in_fresh_cache(_BEFORE_SCRIPT, tmp_path)
     assert r["compiled_here"] == [1, 1, 0], r
-    assert r["helper_sigs"] == [True] * 4, r  # elem_derivs_jac, elem_derivs, local_jacobian_into, make_jac_work
+    # elem_derivs_jac, elem_derivs, local_jacobian_into, make_jac_work, hermite_root, hermite,
+    # stage_dense, finish_member; and one finish_member for every call (no literal specialisation)
+    assert r["helper_sigs"] == [True] * 8 and r["finish_member_sigs"] == 1, r
     assert r["rc_at_return"] == 0, r  # it returned after the helper ended, not before
     assert r["after"] == [1, 1] and r["status"] == 0, r
     t = np.linspace(0.0, 5.0, 101)

@@ -810,23 +810,25 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
             out[0, i] = x[i]
         k_out = 1
         nfev = 1
-        prepare_static(t, x, P, lay, work)
-        if not rhs_into(t, x, P, lay, work, f):
-            finish_member(out, 1, stats, mb, -3, t, 0, 0, nfev, 0)
-            continue
-        h = h0
-        age = JAC_REUSE
         nsteps = 0
         nrej = 0
         nev = 0
+        status = 0
+        prepare_static(t, x, P, lay, work)
+        if not rhs_into(t, x, P, lay, work, f):
+            # no step (the loop below is skipped), and the one finish_member call at the end:
+            # a call with constants here would compile a second specialisation of it (numba
+            # types the constants as literals)
+            status = -3
+        h = h0
+        age = JAC_REUSE
         ib = 0
         while ib < breaks.shape[0] and breaks[ib] <= t:
             ib += 1
-        status = 0
         nrej_run = 0
         err_prev = 1.0
         h_prev = 0.0  # the last accepted step (predictive controller; 0 before the first)
-        while t < t_end and k_out < T:
+        while status == 0 and t < t_end and k_out < T:
             if nsteps >= max_steps:
                 status = -2
                 break

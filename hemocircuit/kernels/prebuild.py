@@ -12,8 +12,10 @@ the two processes split the first compile, each compiling what the other does no
 
 * the helper: ``elem_derivs_jac`` and ``elem_derivs`` (the kernels only the Jacobian and the
   right-hand side call), then ``local_jacobian_into``, which by then loads the nodal solve's
-  element kernels from this process's cache, then ``make_jac_work``; all by signature, the
-  scratch tuples typed from the Python twins of the makers;
+  element kernels from this process's cache, then ``make_jac_work`` and the Rosenbrock
+  integrator's small callees (``hermite_root``, ``hermite``, ``stage_dense``,
+  ``finish_member``); all by signature (:func:`helper_signatures`), the scratch tuples typed
+  from the Python twins of the makers;
 * this process (:func:`before_integrator`): ``prepare_static`` (the element kernels of the
   nodal solve), ``rhs_into`` (loading ``elem_derivs`` from the helper's cache) and
   ``make_work``; then it waits for the helper's part before compiling the integrator itself.
@@ -122,7 +124,7 @@ def in_cache(dispatcher) -> bool:
 
 def helper_signatures(mod, lay, nx, n_params):
     """[(dispatcher, signature)] the helper compiles, in its order: the argument types its
-    callers (local_jacobian_into, rhs_into, the integrators) pass, the scratch tuples typed
+    callers (local_jacobian_into, rhs_into, integrate_batch) pass, the scratch tuples typed
     from the Python twins of make_work and make_jac_work (tested against the signatures the
     integrator's own compilation leaves)."""
     import numba
@@ -137,7 +139,14 @@ def helper_signatures(mod, lay, nx, n_params):
             (mod.elem_derivs, elem),
             (mod.local_jacobian_into, (numba.float64, vx, numba.typeof(P), numba.typeof(lay), numba.typeof(work),
                                        numba.typeof(jw), vx, J, vx, numba.boolean)),
-            (mod.make_jac_work, (numba.typeof(lay),))]
+            (mod.make_jac_work, (numba.typeof(lay),)),
+            # the Rosenbrock integrator's own small callees (event location, dense output, the
+            # end of a member's run), which the first process reaches ~1 s into its compile
+            (mod.hermite_root, (numba.float64,) * 4),
+            (mod.hermite, (vx, vx, vx, vx, numba.float64, numba.float64, vx)),
+            (mod.stage_dense, (vx, vx, J, numba.int64, numba.float64, vx)),
+            (mod.finish_member, (J, numba.int64, J, numba.int64, numba.int64, numba.float64)
+             + (numba.int64,) * 4)]
 
 
 def _run() -> int:
