@@ -83,9 +83,7 @@ class Group:
         self.L = self.K + self.M
         self.observables = comp.observables()
         self.exprs = [(i, name, ex) for i, e in enumerate(elements) for name, ex in e.expressions.items()]
-        # an expression moves A_loc with the states only through a parameter A_loc reads
-        self.constant = (comp.constant_matrix and comp.linear_in_pressure
-                         and not any(comp.matrix_reads(name) for _, name, _ in self.exprs))
+        self.constant = comp.matrix_constant(name for _, name, _ in self.exprs)
         self.index = index  # position in the structure's groups
         self.base = self  # the structural group (a bound group points at it; lazy scatters live there)
 

@@ -214,6 +214,13 @@ class Component:
         """True when A_loc may depend on parameter ``name`` (:attr:`matrix_params`)."""
         return self.matrix_params is None or name in self.matrix_params
 
+    def matrix_constant(self, expression_params) -> bool:
+        """True when A_loc is stamped once per parameter set: a constant matrix, affine in the
+        pressures, and none of ``expression_params`` (those given as expressions of states)
+        read by A_loc.  The one rule for the circuit's groups and the compiled layout."""
+        return (self.constant_matrix and self.linear_in_pressure
+                and not any(self.matrix_reads(name) for name in expression_params))
+
     def varies_in_time(self, p) -> bool:
         """True if the stamps of these parameter values change with time (sources with a sine)."""
         return self.time_dependent

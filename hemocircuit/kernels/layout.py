@@ -104,8 +104,7 @@ def build_layout(circuit) -> Layout | None:
             elem_index[eid] = len(et)
             et.append(codes[(k.stamp, k.derivs, k.observe)])
             own = {name for j, name, _ in g.waves if j == i} | {name for j, name, _ in g.exprs if j == i}
-            const = g.comp.constant_matrix and g.comp.linear_in_pressure and not any(
-                g.comp.matrix_reads(name) for j, name, _ in g.exprs if j == i)
+            const = g.comp.matrix_constant(name for j, name, _ in g.exprs if j == i)
             cm.append(int(const))
             st.append(int(const and g.S == 0 and not own and not g.comp.time_dependent))
             L.append(g.L)
