@@ -19,6 +19,12 @@ Where their Python module ``pysvzerod`` is importable (built from their source; 
 dependency of this project), their solver is also timed here, in this process, on the same
 JSON (``pysvzerod.simulate``: one untimed call, then the median of ``--repeat``), and the
 ratios are to that side-by-side time ("here"); the README's figure stays in its column.
+
+``--matched`` (needs pysvzerod) adds their accuracy-matched time: their solver at 1, 2, 3, 5 and 7
+times the case's points per cycle (conformance.compare_their_rows against ``converged/``, by
+the runner's rules), the first that meets the case's tolerance, and our time over theirs
+there.  Where none does, their time at 10x (the converged run itself, so exact by
+construction) bounds what it needs from above and the 7x time from below.
 """
 from __future__ import annotations
 
@@ -62,6 +68,8 @@ def main(argv=None):
     ap.add_argument("--folder", default=os.path.join(HERE, "..", "..", "shared", "svzerod"))
     ap.add_argument("--repeat", type=int, default=7)
     ap.add_argument("--case", action="append")
+    ap.add_argument("--matched", action="store_true",
+                    help="also time their solver at finer steps, to the case's tolerance (needs pysvzerod)")
     args = ap.parse_args(argv)
     folder = os.path.abspath(args.folder)
     if not os.path.isdir(os.path.join(folder, "cases")):
@@ -74,6 +82,7 @@ def main(argv=None):
     print("load average %.1f %.1f %.1f" % os.getloadavg())
     print(f"{'case':30s} {'rtol':>6s} {'ours median':>12s} {'min':>9s} {'CPU':>9s} {'theirs':>12s} "
           f"{'here':>9s} {'wall x':>6s} {'CPU x':>6s} {'err P / Q vs converged':>22s} {'tol':>6s}")
+    matched = []
     for name in args.case or TIMED:
         path = os.path.join(folder, "cases", f"{name}.json")
         with open(path) as fh:
@@ -95,10 +104,52 @@ def main(argv=None):
         print(f"{name:30s} {rtol:6.0e} {wall:9.2f} ms {times[:, 0].min() * 1e3:6.2f} ms {cpu:6.2f} ms "
               f"{ref:>12s} {here_s:>9s} {wall / base:6.2f} {cpu / base:6.2f} {err:>22s} "
               f"{tolerances(name, model)[0]:6.0e}")
+        if args.matched and here is not None and os.path.isfile(conv):
+            matched.append((name, wall, matched_row(model, cfg, read_result(conv), args.repeat)))
+    if matched:
+        print_matched(matched)
     if "closedLoopHeart_singleVessel" in (args.case or TIMED):
         shooting_row(folder, theirs.get("closedLoopHeart_singleVessel", ""), args.repeat)
     print("load average %.1f %.1f %.1f" % os.getloadavg())
     return 0
+
+
+MULTIPLES = (1, 2, 3, 5, 7, 10)
+
+
+def matched_row(model, cfg, converged, repeat):
+    """[(multiple, their median wall time [ms], err P, err Q, meets the tolerance)] of their
+    solver at MULTIPLES of the case's points per cycle (N -> k (N - 1) + 1: every output time
+    of the case kept), against their converged rows."""
+    import pysvzerod
+    from hemocircuit.svzerod.conformance import compare_their_rows, parse_result, tolerances
+
+    tol_p, tol_q = tolerances(model.name, model)
+    n = cfg["simulation_parameters"]["number_of_time_pts_per_cardiac_cycle"]
+    rows = []
+    for k in MULTIPLES:
+        c = json.loads(json.dumps(cfg))
+        c["simulation_parameters"]["number_of_time_pts_per_cardiac_cycle"] = k * (n - 1) + 1
+        ms = time_theirs(c, repeat)
+        e_p, e_q = compare_their_rows(model, parse_result(json.loads(pysvzerod.simulate(c).to_json())), converged)
+        rows.append((k, ms, e_p, e_q, e_p <= tol_p and e_q <= tol_q))
+    return rows
+
+
+def print_matched(matched):
+    print("\ntheir solver at finer steps, against converged/ (x10 is the converged run itself)")
+    print(f"{'case':30s} " + " ".join(f"{'x%d ms / err P, Q' % k:>24s}" for k in MULTIPLES)
+          + f" {'matched':>16s} {'ours x':>7s}")
+    for name, ours, rows in matched:
+        cells = " ".join(f"{ms:7.1f} {e_p:7.1e} {e_q:7.1e}{'*' if ok else ' '}" for _, ms, e_p, e_q, ok in rows)
+        first = next((r for r in rows[:-1] if r[4]), None)
+        if first is not None:
+            m, ratio = f"x{first[0]}: {first[1]:.1f} ms", f"{ours / first[1]:.2f}"
+        else:  # between the last multiple that fails and the converged run
+            lo, hi = rows[-2][1], rows[-1][1]
+            m, ratio = f"{lo:.0f}-{hi:.0f} ms", f"{ours / hi:.2f}-{ours / lo:.2f}"
+        print(f"{name:30s} {cells} {m:>16s} {ratio:>7s}")
+    print("(* meets the case's tolerance)")
 
 
 def shooting_row(folder, their_text, repeat, tol=1e-5):
