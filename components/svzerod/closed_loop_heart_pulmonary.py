@@ -111,6 +111,14 @@ def _pressures(p, x, t):
 
 
 @jit
+def _pressures_rows(P, X, T, out):
+    """_pressures for every row of P (n, len(_P)), X (n, 10), T (n,) into out (n, 6): one
+    compiled call for an output table (a dispatch per row cost ~1.6 ms for a 401-row cycle)."""
+    for i in range(T.shape[0]):
+        out[i, 0], out[i, 1], out[i, 2], out[i, 3], out[i, 4], out[i, 5] = _pressures(P[i], X[i], T[i])
+
+
+@jit
 def _valve(dp, q):
     """1 open, 0 closed: closed on the hard limit Q = 0 while the pressure difference is <= 0
     (their dp <= 0 and Q <= 0 on a solution with Q >= 0); open below the bound (see above)."""
@@ -230,9 +238,10 @@ class ClosedLoopHeartAndPulmonary(Component):
                "V_RV": x[..., 2], "V_LV": x[..., 7]}
         if u is not None:
             shape, P, X, T = each_element(p, tuple(_P), x, t)
-            pr = np.zeros(shape + (6,))
-            for idx in np.ndindex(shape):
-                pr[idx] = _pressures(np.ascontiguousarray(P[idx]), np.ascontiguousarray(X[idx]), float(T[idx]))
+            pr = np.zeros((int(np.prod(shape)), 6))
+            _pressures_rows(np.ascontiguousarray(P.reshape(-1, len(_P))), np.ascontiguousarray(X.reshape(-1, 10)),
+                            np.ascontiguousarray(T.reshape(-1)), pr)
+            pr = pr.reshape(shape + (6,))
             out.update(P_RV=pr[..., 1], P_pul=pr[..., 2], P_LA=pr[..., 3], P_LV=pr[..., 4],
                        Q_in=u[..., 3], Q_out=-u[..., 4])
         return out
