@@ -50,7 +50,7 @@ class BatchResult:
 
 
 def integrate(circuit, x0, t_out, rtol=1e-5, atol=None, h0=1e-3, max_steps=500000, h_max=np.inf, engine="auto",
-              method=None):
+              method=None, controller=None):
     """Integrate every member of a batch circuit (B parameter sets) from x0 (B, nx) at the
     first output time and return the states on the output grid: t_out (T,) common to all, or
     (B, T), one grid per member (e.g. whole periods of each member's forcing frequency).
@@ -60,14 +60,16 @@ def integrate(circuit, x0, t_out, rtol=1e-5, atol=None, h0=1e-3, max_steps=50000
     engine: 'auto' runs the compiled kernel (hemocircuit.kernels, one member after another
     inside numba) when the circuit has one, 'numpy' this vectorised code (ROS34PW2).
     method: the compiled engine's method ('bdf' or a Rosenbrock tableau name; None:
-    hemocircuit.kernels.tableaus.DEFAULT)."""
+    hemocircuit.kernels.tableaus.DEFAULT); ``controller``: its step-size rule for a Rosenbrock
+    method (tableaus.CONTROLLERS; None: the method's own; the numpy engine has one rule)."""
     if engine not in ("auto", "numpy"):
         raise ValueError(f"engine {engine!r}: choose 'auto' or 'numpy'")
     if engine == "auto":
         from .kernels.system import CompiledSystem
         system = CompiledSystem.of(circuit)
         if system is not None:
-            return _integrate_compiled(system, circuit, x0, t_out, rtol, atol, h0, max_steps, h_max, method)
+            return _integrate_compiled(system, circuit, x0, t_out, rtol, atol, h0, max_steps, h_max, method,
+                                       controller)
     B, nx = np.shape(x0)
     assert circuit.B == B or circuit.B == 1
     t_out = np.asarray(t_out, dtype=float)
@@ -163,7 +165,7 @@ def integrate(circuit, x0, t_out, rtol=1e-5, atol=None, h0=1e-3, max_steps=50000
     return BatchResult(t_out, out, ok, message, {"steps": nsteps, "rejected": nrej})
 
 
-def _integrate_compiled(system, circuit, x0, t_out, rtol, atol, h0, max_steps, h_max, method=None):
+def _integrate_compiled(system, circuit, x0, t_out, rtol, atol, h0, max_steps, h_max, method=None, controller=None):
     from .kernels.system import STATUS
 
     B = np.shape(x0)[0]
@@ -175,7 +177,8 @@ def _integrate_compiled(system, circuit, x0, t_out, rtol, atol, h0, max_steps, h
     breaks, kinks = circuit.jumps_and_kinks(float(grid[:, 0].min()), float(grid[:, -1].max()),
                                             members=circuit.B > 1)
     out, st = system.integrate_batch(grid, x0, P, rtol=rtol, atol=atol, breaks=breaks, kinks=kinks, h0=h0,
-                                     hmax=h_max, max_steps=max_steps, method=method)
+                                     hmax=h_max, max_steps=max_steps, method=method,
+                                     **({} if controller is None else {"controller": controller}))
     ok = st[:, 0] == 0
     message = ["" if k else f"{STATUS[int(s)]} at t = {t:.6g} s" for k, s, t in zip(ok, st[:, 0], st[:, 1])]
     return BatchResult(t_out, out, ok, message, {"steps": int(st[:, 2].sum()), "rejected": int(st[:, 3].sum())})

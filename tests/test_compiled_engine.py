@@ -285,15 +285,15 @@ def test_rodas5p_dense_output_order():
 
 
 def test_step_size_controllers():
-    """Both controllers reach the RC closed form at rtol 1e-8 (the predictive one, RODAS5P's
-    default, in fewer steps here); an unknown one is an error naming the choices."""
+    """Every controller reaches the RC closed form at rtol 1e-8 (the predictive one, RODAS5P's
+    default, in fewer steps than PI here); an unknown one is an error naming the choices."""
     from hemocircuit.kernels import tableaus
 
     c = hc.load(os.path.join(TEST_NETLISTS, "base_rc.yaml"))
     system = CompiledSystem.of(c)
     t = np.linspace(0.0, 5.0, 101)
     steps = {}
-    for ctrl in ("pi", "predictive"):
+    for ctrl in ("pi", "predictive", "predictive-halving"):
         X, st = system.integrate_batch(t, np.zeros((1, c.nx)), system.params(c), rtol=1e-8, controller=ctrl)
         assert st[0, 0] == 0
         expect = 0.5 * 80.0 * (1 - np.exp(-t))
@@ -302,6 +302,28 @@ def test_step_size_controllers():
     assert steps["predictive"] < steps["pi"], steps
     with pytest.raises(ValueError, match="predictive"):
         tableaus.packed("rodas5p", controller="fast")
+
+
+def test_rejection_rule_of_the_predictive_controller():
+    """After a rejection the predictive controller takes Hairer & Wanner's 0.9 err^(-1/q) of the
+    step (at most 0.9 of it), predictive-halving at most half: on 300 s of vasomotion at rtol
+    1e-5 (a rejection mostly has err just above 1) the first rejects about half as often and
+    takes fewer steps, and both give the same oscillation to the tolerance's order."""
+    c = hc.load(os.path.join(NETLISTS, "vasomotion.yaml"))
+    system = CompiledSystem.of(c)
+    x0 = np.asarray(operating_point(c).x, float)
+    x0 = x0 + 1e-3 * c.state_scales * (c.state_names.index("art.Ca") == np.arange(c.nx))
+    t = np.linspace(0.0, 300.0, 3001)
+    out = {}
+    for ctrl in ("predictive", "predictive-halving"):
+        X, st = system.integrate_batch(t, x0[None], system.params(c), rtol=1e-5, atol=1e-5, controller=ctrl)
+        assert st[0, 0] == 0, ctrl
+        out[ctrl] = (X[0], st[0, 2], st[0, 3])
+    (Xp, steps_p, rej_p), (Xh, steps_h, rej_h) = out["predictive"], out["predictive-halving"]
+    assert rej_p < 0.7 * rej_h and steps_p < steps_h, (steps_p, rej_p, steps_h, rej_h)
+    lam = c.state_names.index("art.lambda")
+    assert np.ptp(Xp[2000:, lam]) > 0.05  # it oscillates (lambda swings by 0.56 here)
+    assert abs(np.ptp(Xp[2000:, lam]) - np.ptp(Xh[2000:, lam])) < 1e-2 * np.ptp(Xh[2000:, lam])
 
 
 @pytest.mark.parametrize("name", sorted(NOMINAL_ORDER))

@@ -65,6 +65,10 @@ class PeriodicOrbit(Result):
 
 
 ORBIT_POINTS = 401  # output points of one period of an orbit, both ends included
+#: the period map's step-size rule: a rejection at least halves the step, which makes phi(x)
+#: smoother in x than the transients' default (tableaus.CONTROLLERS: Anderson shooting of
+#: closedLoopHeart_singleVessel from 16 starts, 6.25 periods on average against 7.0)
+FLOW_CONTROLLER = "predictive-halving"
 
 
 def _flow(circuit, X0, T, t0=0.0, rtol=1e-9, n_out=2):
@@ -72,7 +76,7 @@ def _flow(circuit, X0, T, t0=0.0, rtol=1e-9, n_out=2):
     n = X0.shape[0]
     bc = circuit if n == 1 else circuit.batch(n)
     grid = t0 + np.linspace(0.0, 1.0, n_out)[None, :] * np.atleast_1d(T)[:, None] * np.ones((n, 1))
-    r = integrate(bc, X0, grid, rtol=rtol, atol=rtol)
+    r = integrate(bc, X0, grid, rtol=rtol, atol=rtol, controller=FLOW_CONTROLLER)
     if not np.all(r.ok):
         raise SolverError(f"shooting integration failed: {[m for m in r.message if m][:1]}")
     return r.x[:, -1, :], r

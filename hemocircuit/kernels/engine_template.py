@@ -784,7 +784,9 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
         oR = oD + ns
         oH = oR + ns
         nd = int(tab[oH])  # dense-output rows (0: cubic Hermite), H at oH + 1 (nd x ns)
-        predictive = tab[oH + 1 + nd * ns] != 0.0  # step-size controller (tableaus.CONTROLLERS)
+        ctrl = tab[oH + 1 + nd * ns]  # step-size controller (tableaus.CONTROLLERS)
+        predictive = ctrl != 0.0
+        cut_max = 0.9 if ctrl == 1.0 else 0.5  # the largest step after a rejection, of the rejected one
         work = make_work(lay)
         jw = make_jac_work(lay)
         x = x0.copy()
@@ -1031,7 +1033,7 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
                 nrej += 1
                 if np.isfinite(enorm):
                     fac = 0.9 * enorm ** (-1.0 / q)
-                    h = hh * min(0.5, max(0.2, fac))
+                    h = hh * min(cut_max, max(0.2, fac))
                 else:
                     h = 0.25 * hh
                 nrej_run += 1
