@@ -113,7 +113,8 @@ def _pressures(p, x, t):
 @jit
 def _pressures_rows(P, X, T, out):
     """_pressures for every row of P (n, len(_P)), X (n, 10), T (n,) into out (n, 6): one
-    compiled call for an output table (a dispatch per row cost ~1.6 ms for a 401-row cycle)."""
+    compiled call for an output table (a dispatch per row made the outputs of a 401-row cycle
+    2.6 ms instead of 1.3 ms)."""
     for i in range(T.shape[0]):
         out[i, 0], out[i, 1], out[i, 2], out[i, 3], out[i, 4], out[i, 5] = _pressures(P[i], X[i], T[i])
 
@@ -238,7 +239,7 @@ class ClosedLoopHeartAndPulmonary(Component):
                "V_RV": x[..., 2], "V_LV": x[..., 7]}
         if u is not None:
             shape, P, X, T = each_element(p, tuple(_P), x, t)
-            pr = np.zeros((int(np.prod(shape)), 6))
+            pr = np.empty((int(np.prod(shape)), 6))
             _pressures_rows(np.ascontiguousarray(P.reshape(-1, len(_P))), np.ascontiguousarray(X.reshape(-1, 10)),
                             np.ascontiguousarray(T.reshape(-1)), pr)
             pr = pr.reshape(shape + (6,))
