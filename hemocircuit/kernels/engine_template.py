@@ -552,6 +552,7 @@ def local_jacobian_into(t, x, P, lay, work, jw, scales, J, xt, analytic):
                 col[i] = 0.0
             for i in range(nx):
                 J[i, j] = 0.0
+            moved = False  # does x_j enter a stamp?  If not, du/dx_j = 0: no solve
             for e in range(E):
                 if e != e0 and not (observed and hasx[e] == 1):
                     continue
@@ -562,7 +563,10 @@ def local_jacobian_into(t, x, P, lay, work, jw, scales, J, xt, analytic):
                         acc = -bl[i]
                         for k in range(L[e]):
                             acc += Al[i, k] * ub[ui[eu[e] + k]]
-                        col[r] += (acc - rb[eu[e] + i]) / hj
+                        d = (acc - rb[eu[e] + i]) / hj
+                        if d != 0.0:
+                            col[r] += d
+                            moved = True
                 if S[e] > 0 and e == e0 and an[e] == 1:  # its own state: the kernel's partials
                     for i in range(S[e]):
                         J[ex[e] + i, j] += Jxs[ex[e] + i, j - ex[e0]]
@@ -573,12 +577,13 @@ def local_jacobian_into(t, x, P, lay, work, jw, scales, J, xt, analytic):
                     elem_derivs(et[e], pl, xl, ul, t, il, dl)
                     for i in range(S[e]):
                         J[ex[e] + i, j] += (dl[i] - Db[ex[e] + i]) / hj
-            lu_apply(A, piv, col, n)  # -du/dx_j
-            for i in range(nx):
-                acc = J[i, j]
-                for g in range(n):
-                    acc -= M[i, g] * col[g]
-                J[i, j] = acc
+            if moved:
+                lu_apply(A, piv, col, n)  # -du/dx_j
+                for i in range(nx):
+                    acc = J[i, j]
+                    for g in range(n):
+                        acc -= M[i, g] * col[g]
+                    J[i, j] = acc
             xt[j] = x[j]
     return 0
 
