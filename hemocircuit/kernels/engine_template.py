@@ -1005,6 +1005,10 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
                         hermite(x, f, xn, fn, hh, sfrac, xh)
                     for i in range(nx):
                         out[k_out, i] = xh[i]
+                    # a limited state's steps respect its bound; the interpolant between two of
+                    # them may dip below it by its error (the heart's valve flows: -2e-10 mL/s)
+                    for k in range(lim_i.shape[0]):
+                        out[k_out, lim_i[k]] = max(out[k_out, lim_i[k]], lim_b[k])
                     k_out += 1
                 t = tn
                 for i in range(nx):
@@ -1372,6 +1376,8 @@ def integrate_batch_bdf(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, 
                 bdf_dense(D, order, t_new, h, min(t_out[k_out], tn), yq, pw)
                 for i in range(nx):
                     out[k_out, i] = yq[i]
+                for k in range(lim_i.shape[0]):  # as integrate_batch's: on or above a bound
+                    out[k_out, lim_i[k]] = max(out[k_out, lim_i[k]], lim_b[k])
                 k_out += 1
             if k_hit >= 0:  # on the bound, its rate reset; restart from there with the same step
                 bdf_dense(D, order, t_new, h, t_hit, yq, pw)
