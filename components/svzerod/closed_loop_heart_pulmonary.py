@@ -43,6 +43,7 @@ import math
 import numpy as np
 
 from hemocircuit.component import Component, Observable, Param, State, Storage
+from hemocircuit.derivatives import FD_REL
 
 from ._common import batch_shape, C_UNIT, E_UNIT, L_UNIT, R_UNIT, each_element, jit, kernel_derivatives
 from .activation import activation_breakpoints, fourier_raw
@@ -67,6 +68,8 @@ _P = {"period": ("s", "cardiac period (their cardiac_cycle_period)"),
 _POSITIVE = {"period", "tpwave", "Tsa", "Lra_v", "Lrv_a", "Lla_v", "Llv_a", "Rpd", "Cp", "Cpa"}
 _NONNEG = {"Rra_v", "Rrv_a", "Rla_v", "Rlv_ao"}
 
+#: every state's scale [mL, mL/s]: the valve flows' sets the engine's difference step (heart_derivs_jac)
+Q_SCALE = 10.0
 _STATES = ("V_RA", "Q_RA", "V_RV", "Q_RV", "V_pul", "V_LA", "Q_LA", "V_LV", "Q_LV", "V_ao")
 (PERIOD, TSA, TPWAVE, ERV_S, ELV_S, IML, IMR, LRA_V, RRA_V, LRV_A, RRV_A, LLA_V, RLA_V, LLV_A, RLV_AO, VRV_U,
  VLV_U, RPD, CP, CPA, KXP_RA, KXV_RA, KXP_LA, KXV_LA, EMAX_RA, EMAX_LA, VASO_RA, VASO_LA) = range(len(_P))
@@ -144,7 +147,8 @@ def heart_stamp(p, x, u, t, iopt, A, b):
 
 
 @jit
-def heart_derivs(p, x, u, t, iopt, dx):
+def _heart(p, x, u, t, dx):
+    """dx/dt into dx; returns the valve positions (v_ra, v_rv, v_la, v_lv) for the partials."""
     P_ra, P_rv, P_pul, P_la, P_lv, P_ao = _pressures(p, x, t)
     q_ra, q_rv, q_la, q_lv = x[1], x[3], x[6], x[8]
     v_ra = _valve(P_ra - P_rv, q_ra)
@@ -161,6 +165,69 @@ def heart_derivs(p, x, u, t, iopt, dx):
     dx[7] = v_la * q_la - v_lv * q_lv
     dx[8] = v_lv * (P_lv - P_ao - p[RLV_AO] * q_lv) / p[LLV_A]
     dx[9] = v_lv * q_lv + u[4]
+    return v_ra, v_rv, v_la, v_lv, P_ra - P_rv, P_rv - P_pul, P_la - P_lv, P_lv - P_ao
+
+
+@jit
+def heart_derivs(p, x, u, t, iopt, dx):
+    _heart(p, x, u, t, dx)
+
+
+@jit
+def _atrium_slope(AA, Emax, Kxp, Kxv, Vaso, V):
+    """d P_atrium / d V of _atrium."""
+    return AA * Emax + Kxp * Kxv * math.exp((V - Vaso) * Kxv) * (1.0 - AA)
+
+
+@jit
+def _valve_row(Jx, i, q, v, dp, R, L, up, a_up, down, a_down):
+    """Row i (dQ/dt = v (P_up - P_down - R Q) / L) of a valve's flow Q = x[q]: the pressures'
+    slopes a_up, a_down in the states up, down while open.  The own column, d/dQ: -R/L while
+    open; for a closed valve (v = 0, Q = 0 on its bound) the forward difference quotient the
+    engine's element-local differences take, (dp - R h) / (L h) with h = FD_REL Q_SCALE (the
+    valve opens at Q = h): f jumps there, and this large entry is what has kept the
+    Rosenbrock stages of a closed valve at its bound (analytic -R/L, or 0, there: 50 % more
+    steps at rtol 1e-5, docs/performance.md)."""
+    Jx[i, up] = v * a_up / L
+    Jx[i, down] = -v * a_down / L
+    if v != 0.0:
+        Jx[i, q] = -R / L
+    else:
+        h = FD_REL * Q_SCALE
+        Jx[i, q] = (dp - R * h) / (L * h)
+
+
+@jit
+def heart_derivs_jac(p, x, u, t, iopt, dx, Jx, Ju):
+    """heart_derivs and its partials Jx (10, 10), Ju (10, 5) (the equations above).  A valve's
+    flow enters every balance through v Q, and v = 1 wherever Q > 0, so d(v Q)/dQ = 1 on the
+    feasible side Q >= 0, open or closed."""
+    v_ra, v_rv, v_la, v_lv, dp_ra, dp_rv, dp_la, dp_lv = _heart(p, x, u, t, dx)
+    for i in range(10):
+        for k in range(10):
+            Jx[i, k] = 0.0
+        for k in range(5):
+            Ju[i, k] = 0.0
+    AA, F = _activations(t, p)
+    a_ra = _atrium_slope(AA, p[EMAX_RA], p[KXP_RA], p[KXV_RA], p[VASO_RA], x[0])
+    a_la = _atrium_slope(AA, p[EMAX_LA], p[KXP_LA], p[KXV_LA], p[VASO_LA], x[5])
+    a_rv, a_lv = F * p[ERV_S], F * p[ELV_S]
+    a_pul, a_ao = 1.0 / p[CP], 1.0 / p[CPA]
+    Ju[0, 3] = 1.0  # dV_RA = Q_in - v_RA Q_RA
+    Jx[0, 1] = -1.0
+    _valve_row(Jx, 1, 1, v_ra, dp_ra, p[RRA_V], p[LRA_V], 0, a_ra, 2, a_rv)
+    Jx[2, 1], Jx[2, 3] = 1.0, -1.0  # dV_RV = v_RA Q_RA - v_RV Q_RV
+    _valve_row(Jx, 3, 3, v_rv, dp_rv, p[RRV_A], p[LRV_A], 2, a_rv, 4, a_pul)
+    Jx[4, 3] = 1.0  # dV_pul = v_RV Q_RV - (P_pul - P_LA) / Rpd
+    Jx[4, 4] = -a_pul / p[RPD]
+    Jx[4, 5] = a_la / p[RPD]
+    Jx[5, 3], Jx[5, 6] = 1.0, -1.0  # dV_LA = v_RV Q_RV - v_LA Q_LA
+    _valve_row(Jx, 6, 6, v_la, dp_la, p[RLA_V], p[LLA_V], 5, a_la, 7, a_lv)
+    Jx[7, 6], Jx[7, 8] = 1.0, -1.0  # dV_LV = v_LA Q_LA - v_LV Q_LV
+    _valve_row(Jx, 8, 8, v_lv, dp_lv, p[RLV_AO], p[LLV_A], 7, a_lv, 9, a_ao)
+    Jx[9, 8] = 1.0  # dV_ao = v_LV Q_LV - Q_out
+    Ju[9, 4] = 1.0
+    return 1
 
 
 @jit
@@ -186,7 +253,7 @@ class ClosedLoopHeartAndPulmonary(Component):
         return (("in", "ref", "pressure"), ("out", "ref", "pressure"))
 
     def states(self):
-        return tuple(State(s, "mL" if s[0] == "V" else "mL/s", 10.0, d) for s, d in zip(_STATES, (
+        return tuple(State(s, "mL" if s[0] == "V" else "mL/s", Q_SCALE, d) for s, d in zip(_STATES, (
             "right atrial volume", "right atrial outflow (tricuspid)", "right ventricular volume",
             "right ventricular outflow (pulmonary valve)", "pulmonary capacitor charge Cp P_pul",
             "left atrial volume", "left atrial outflow (mitral)", "left ventricular volume",
@@ -262,4 +329,5 @@ class ClosedLoopHeartAndPulmonary(Component):
 
     def kernel(self):
         from hemocircuit.kernels import Kernel
-        return Kernel(stamp=heart_stamp, derivs=heart_derivs, observe=heart_observe, observables=("V_heart", "V_ao", "V_RV", "V_LV"))
+        return Kernel(stamp=heart_stamp, derivs=heart_derivs, observe=heart_observe,
+                      observables=("V_heart", "V_ao", "V_RV", "V_LV"), derivs_jac=heart_derivs_jac)
