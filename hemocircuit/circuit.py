@@ -1187,7 +1187,16 @@ class Circuit:
     def jumps_and_kinks(self, t0, t1, members=False):
         """(jumps, kinks) in (t0, t1), what the integrators take as ``breaks`` and ``kinks``:
         where a source may jump (f is evaluated again there), and the other breakpoints, where
-        only a slope changes.  With ``members``: one list of each per member."""
+        only a slope changes.  With ``members``: one list of each per member.  Kept per window
+        on this (immutable) circuit: a shooting run asks for the same period at every iteration
+        (0.2 ms each for the heart's activation); callers get their own lists."""
+        jumps, kinks = self.cached(("jumps_and_kinks", float(t0), float(t1), bool(members)),
+                                   lambda: self._jumps_and_kinks(t0, t1, members))
+        if not members:
+            return list(jumps), list(kinks)
+        return [list(j) for j in jumps], [list(k) for k in kinks]
+
+    def _jumps_and_kinks(self, t0, t1, members):
         jumps = self.breakpoints(t0, t1, kinks=False, members=members)
         every = self.breakpoints(t0, t1, members=members)
         if not members:

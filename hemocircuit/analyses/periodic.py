@@ -170,7 +170,7 @@ def _shoot_anderson(c, x_guess, T, rtol, tol, max_iter, rel_step, memory, multip
         Mb, _ = dense_jacobian(lambda rows: _flow(c, rows, np.full(rows.shape[0], T), rtol=rtol)[0],
                                x[None], S, steps=flow_steps(S, rel_step))
         M = Mb[0]
-    return _orbit(c, x, T, M, converged, it, res, True, len(_laws(c)), started, run=run,
+    return _orbit(c, x, T, M, converged, it, res, True, len(c.law_specs), started, run=run,
                   settings={"forced": True, "method": "anderson", "memory": memory, "T_guess": T, "rtol": rtol,
                    "atol": rtol, "tol": tol, "max_iter": max_iter, "rel_step": rel_step})
 

@@ -53,8 +53,13 @@ class CompiledSystem:
         return cls(layout, engine_module(layout.kernels), circuit.state_scales, circuit.hard_limits())
 
     def params(self, circuit) -> np.ndarray:
-        """P (B, slots) of ``circuit`` (same structure as the one this system was built from)."""
-        return param_matrix(circuit, self.layout)
+        """P (B, slots) of ``circuit`` (same structure as the one this system was built from):
+        kept on the (immutable) circuit, since every integrate call asks for it (0.1 ms; a
+        shooting run makes one call per period); the caller gets its own writable copy (numba
+        specialises on the flag: a read-only P would compile rhs and jacobian again)."""
+        layout = self.layout
+        kept = circuit.cached(("param_matrix", id(layout)), lambda: (layout, param_matrix(circuit, layout)))
+        return kept[1].copy()
 
     def rhs(self, t, x, P):
         """dx/dt for x (nx,) or rows (m, nx); P (1 or m, slots)."""
@@ -180,13 +185,7 @@ def member_breaks(B, breaks, kinks=()):
 def merge_breaks(breaks, kinks=()):
     """(times (K,), jump flags (K,)): ``breaks`` and ``kinks`` sorted into one array, flag 1
     where a source may jump (a time in ``breaks``, whether or not also a kink), 0 at a kink."""
-    b = np.asarray(breaks, dtype=float).reshape(-1)
-    k = np.asarray(kinks, dtype=float).reshape(-1)
-    k = k[~np.isin(k, b)]
-    times = np.concatenate([b, k])
-    order = np.argsort(times, kind="stable")
-    jump = np.concatenate([np.ones(b.size), np.zeros(k.size)])
-    times, jump = times[order], jump[order]
-    keep = np.ones(times.size, bool)  # one entry per time
-    keep[1:] = times[1:] != times[:-1]
-    return np.ascontiguousarray(times[keep]), np.ascontiguousarray(jump[keep])
+    # sets, not np.isin and argsort: a call's few times cost 0.1 ms that way, once per integrate call
+    jumps = {float(v) for v in np.asarray(breaks, dtype=float).reshape(-1)}
+    times = sorted(jumps.union(float(v) for v in np.asarray(kinks, dtype=float).reshape(-1)))
+    return np.array(times, dtype=float), np.array([1.0 if v in jumps else 0.0 for v in times])
