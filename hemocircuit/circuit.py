@@ -1187,11 +1187,16 @@ class Circuit:
     def jumps_and_kinks(self, t0, t1, members=False):
         """(jumps, kinks) in (t0, t1), what the integrators take as ``breaks`` and ``kinks``:
         where a source may jump (f is evaluated again there), and the other breakpoints, where
-        only a slope changes.  With ``members``: one list of each per member.  Kept per window
-        on this (immutable) circuit: a shooting run asks for the same period at every iteration
-        (0.2 ms each for the heart's activation); callers get their own lists."""
-        jumps, kinks = self.cached(("jumps_and_kinks", float(t0), float(t1), bool(members)),
-                                   lambda: self._jumps_and_kinks(t0, t1, members))
+        only a slope changes.  With ``members``: one list of each per member.  The last
+        window's are kept on this (immutable) circuit: a shooting run asks for the same period
+        at every iteration (0.2 ms each for the heart's activation), a transient for a new
+        window each time (one entry, so a long-lived circuit does not grow); callers get their
+        own lists."""
+        key = (float(t0), float(t1), bool(members))
+        last = self._memo.get("jumps_and_kinks")
+        if last is None or last[0] != key:
+            last = self._memo["jumps_and_kinks"] = (key, self._jumps_and_kinks(t0, t1, members))
+        jumps, kinks = last[1]
         if not members:
             return list(jumps), list(kinks)
         return [list(j) for j in jumps], [list(k) for k in kinks]

@@ -122,9 +122,9 @@ def test_heart_partials_give_the_jacobian_of_element_differences(example, orbit)
     """The heart's analytic partials (closed_loop_heart_pulmonary.heart_derivs_jac) give the
     integrator the Jacobian it had from element-local differences, at every 10th row of the
     orbit (valves open and closed: a closed valve's flow sits exactly on its bound 0, where f
-    jumps and the partial in that flow is the forward quotient at the engine's step) and 1 %
-    off it (every valve open), to 2e-5 of each column's scale; with 1e-3 of the rows' spread
-    added to a volume, the partials change as the differences do."""
+    jumps and the partial in that flow is the forward quotient at the engine's step, ~1e11 /s,
+    while the balances' v Q terms keep the partial 1) and 1 % (+ 1e-3) off it (every valve
+    open), entry by entry to 1e-5 of (|entry| + 1 /s): the differences' error is ~1.6e-6."""
     from hemocircuit.kernels.system import CompiledSystem
 
     _, orb = orbit
@@ -139,6 +139,5 @@ def test_heart_partials_give_the_jacobian_of_element_differences(example, orbit)
         closed += int(np.sum(x[q] == 0.0))
         J_an = system.jacobian(t, x, P, local=1)
         J_fd = system.jacobian(t, x, P, local=2)
-        col = np.maximum(np.max(np.abs(J_fd), axis=0), 1e-300)
-        assert np.max(np.abs(J_an - J_fd) / col) < 2e-5, (t, x)
+        assert np.all(np.abs(J_an - J_fd) <= 1e-5 * (np.abs(J_fd) + 1.0)), (t, x, J_an - J_fd)
     assert closed >= 20  # the closed branch is exercised

@@ -409,7 +409,7 @@ def finish_member(out, k_from, stats, m, status, t, nsteps, nrej, nfev, nev):
 # --- Rosenbrock(-W) integrator.  The tableau is a run-time argument (``tab``, packed by
 # hemocircuit.kernels.tableaus: RODAS5P by default, ROS34PW2, ROS34PW3, RODAS4), so choosing a
 # method never recompiles.
-FD_REL = 1e-7  # finite-difference step, relative to max(|x|, the state's scale): hemocircuit.derivatives' rule
+from hemocircuit.derivatives import FD_REL  # noqa: E402 - the one step rule: relative to max(|x|, the state's scale)
 
 
 @njit(cache=True, nogil=True)

@@ -23,13 +23,14 @@ _checked = False
 
 def sources() -> list[Path]:
     """Every source file whose code or constants the compiled kernels contain: the components
-    package (built-in component types and their physics), this kernels package, units.py and
-    the batch integrator (tableau constants)."""
+    package (built-in component types and their physics), this kernels package, units.py,
+    the batch integrator (tableau constants) and derivatives.py (the difference step FD_REL,
+    which the engine and the heart's partials read)."""
     import hemocircuit.components as comps
 
     roots = [Path(p).resolve() for p in comps.__path__] + [_HERE]
     files = sorted({f for r in roots for f in r.rglob("*.py") if "__pycache__" not in f.parts})
-    return files + [_HERE.parent / "units.py", _HERE.parent / "batch_integrator.py"]
+    return files + [_HERE.parent / "units.py", _HERE.parent / "batch_integrator.py", _HERE.parent / "derivatives.py"]
 
 
 def key(files=None) -> str:
