@@ -149,7 +149,7 @@ def integrate(circuit, x0, t_out, rtol=1e-5, atol=None, h0=1e-3, max_steps=50000
                 fa[hit_any] = _rhs(circuit, ta[hit_any], xa[hit_any], members=a[hit_any])
                 age[a[hit_any]] = JAC_REUSE
             # dense output on the grid: cubic Hermite between (t, x, f) and (ta, xa, fa)
-            _emit(out, t_out, next_out, a, t[a], x[a], f_cur[a], ta, xa, fa)
+            _emit(out, t_out, next_out, a, t[a], x[a], f_cur[a], ta, xa, fa, limits)
             t[a], x[a], f_cur[a] = ta, xa, fa
             done = t[a] >= t_end[a] - 1e-12 * np.maximum(1.0, np.abs(t_end[a]))
             active[a[done]] = False
@@ -249,8 +249,10 @@ def _hermite_root(y0, d0, y1, d1):
     return hi
 
 
-def _emit(out, t_out, next_out, members, t0, x0, f0, t1, x1, f1):
-    """Fill each member's output grid points t0 < t_out <= t1 by cubic Hermite interpolation."""
+def _emit(out, t_out, next_out, members, t0, x0, f0, t1, x1, f1, limits=()):
+    """Fill each member's output grid points t0 < t_out <= t1 by cubic Hermite interpolation,
+    a hard-limited state on or above its bound (as the compiled engine's output: the
+    interpolant between two steps that respect it may dip below by its error)."""
     T = t_out.shape[1]
     k = next_out[members].copy()
     while True:
@@ -263,6 +265,8 @@ def _emit(out, t_out, next_out, members, t0, x0, f0, t1, x1, f1):
         dt = t1[j] - t0[j]
         s = np.clip((t_out[m, k[j]] - t0[j]) / dt, 0.0, 1.0)
         out[m, k[j]] = _hermite(x0[j], f0[j], x1[j], f1[j], dt, s)
+        for li, bound, _ in limits:
+            out[m, k[j], li] = np.maximum(out[m, k[j], li], bound)
         k[j] += 1
     next_out[members] = k
 
