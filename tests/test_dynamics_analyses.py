@@ -509,3 +509,22 @@ def test_forced_periodic_steady_state_matches_the_frequency_response(artc, nl_pa
         row = pick(nl_pa, o, 0.1, **{"Pa.value": 80.0})
         H_fr = row["gain"] * np.exp(1j * np.radians(row["phase"]))
         assert abs(H_orb - H_fr) <= 0.01 * abs(H_fr), (o, H_orb, H_fr)
+
+
+def test_numpy_output_keeps_limited_states_on_their_bound():
+    """The numpy batch integrator's dense output (batch_integrator._emit): between two steps on
+    a bound (x = 0 at both ends, slopes -1 and +1 over 1 s) the cubic Hermite dips to -0.25 at
+    the midpoint; a state with a hard limit there is written on its bound, another state is not."""
+    from hemocircuit.batch_integrator import _emit
+
+    t_out = np.array([[0.0, 0.5, 1.0]])
+    x0, f0 = np.zeros((1, 2)), np.array([[-1.0, -1.0]])
+    x1, f1 = np.zeros((1, 2)), np.array([[1.0, 1.0]])
+    def emit(**limits):
+        out = np.full((1, 3, 2), np.nan)
+        _emit(out, t_out, np.array([1]), np.array([0]), np.zeros(1), x0, f0, np.ones(1), x1, f1, **limits)
+        return out[0]
+
+    out = emit(limits=[(0, 0.0, None)])
+    assert out[1].tolist() == [0.0, -0.25] and out[2].tolist() == [0.0, 0.0]
+    assert emit()[1].tolist() == [-0.25, -0.25]
