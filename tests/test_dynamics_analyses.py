@@ -520,6 +520,7 @@ def test_numpy_output_keeps_limited_states_on_their_bound():
     t_out = np.array([[0.0, 0.5, 1.0]])
     x0, f0 = np.zeros((1, 2)), np.array([[-1.0, -1.0]])
     x1, f1 = np.zeros((1, 2)), np.array([[1.0, 1.0]])
+
     def emit(**limits):
         out = np.full((1, 3, 2), np.nan)
         _emit(out, t_out, np.array([1]), np.array([0]), np.zeros(1), x0, f0, np.ones(1), x1, f1, **limits)

@@ -68,7 +68,8 @@ _P = {"period": ("s", "cardiac period (their cardiac_cycle_period)"),
 _POSITIVE = {"period", "tpwave", "Tsa", "Lra_v", "Lrv_a", "Lla_v", "Llv_a", "Rpd", "Cp", "Cpa"}
 _NONNEG = {"Rra_v", "Rrv_a", "Rla_v", "Rlv_ao"}
 
-#: every state's scale [mL, mL/s]: the valve flows' sets the engine's difference step (heart_derivs_jac)
+#: every state's scale [mL or mL/s]; for the valve flows it also sets the engine's difference
+#: step, which heart_derivs_jac reproduces at a closed valve
 Q_SCALE = 10.0
 _STATES = ("V_RA", "Q_RA", "V_RV", "Q_RV", "V_pul", "V_LA", "Q_LA", "V_LV", "Q_LV", "V_ao")
 (PERIOD, TSA, TPWAVE, ERV_S, ELV_S, IML, IMR, LRA_V, RRA_V, LRV_A, RRV_A, LLA_V, RLA_V, LLV_A, RLV_AO, VRV_U,
@@ -106,6 +107,12 @@ def _atrium(AA, Emax, Kxp, Kxv, Vaso, V):
 def _pressures(p, x, t):
     """(P_RA, P_RV, P_pul, P_LA, P_LV, P_ao) from the states at time t."""
     AA, F = _activations(t, p)
+    return _pressures_at(p, x, AA, F)
+
+
+@jit
+def _pressures_at(p, x, AA, F):
+    """_pressures with the activations (AA, F) at that time given."""
     P_ra = _atrium(AA, p[EMAX_RA], p[KXP_RA], p[KXV_RA], p[VASO_RA], x[0])
     P_la = _atrium(AA, p[EMAX_LA], p[KXP_LA], p[KXV_LA], p[VASO_LA], x[5])
     P_rv = F * p[ERV_S] * (x[2] - p[VRV_U])
@@ -148,8 +155,10 @@ def heart_stamp(p, x, u, t, iopt, A, b):
 
 @jit
 def _heart(p, x, u, t, dx):
-    """dx/dt into dx; returns the valve positions (v_ra, v_rv, v_la, v_lv) for the partials."""
-    P_ra, P_rv, P_pul, P_la, P_lv, P_ao = _pressures(p, x, t)
+    """dx/dt into dx; returns what the partials need: the valve positions (v_ra, v_rv, v_la,
+    v_lv), their pressure differences and the activations (AA, F)."""
+    AA, F = _activations(t, p)
+    P_ra, P_rv, P_pul, P_la, P_lv, P_ao = _pressures_at(p, x, AA, F)
     q_ra, q_rv, q_la, q_lv = x[1], x[3], x[6], x[8]
     v_ra = _valve(P_ra - P_rv, q_ra)
     v_rv = _valve(P_rv - P_pul, q_rv)
@@ -165,7 +174,7 @@ def _heart(p, x, u, t, dx):
     dx[7] = v_la * q_la - v_lv * q_lv
     dx[8] = v_lv * (P_lv - P_ao - p[RLV_AO] * q_lv) / p[LLV_A]
     dx[9] = v_lv * q_lv + u[4]
-    return v_ra, v_rv, v_la, v_lv, P_ra - P_rv, P_rv - P_pul, P_la - P_lv, P_lv - P_ao
+    return v_ra, v_rv, v_la, v_lv, P_ra - P_rv, P_rv - P_pul, P_la - P_lv, P_lv - P_ao, AA, F
 
 
 @jit
@@ -186,8 +195,8 @@ def _valve_row(Jx, i, q, v, dp, R, L, up, a_up, down, a_down):
     open; for a closed valve (v = 0, Q = 0 on its bound) the forward difference quotient the
     engine's element-local differences take, (dp - R h) / (L h) with h = FD_REL Q_SCALE (the
     valve opens at Q = h): f jumps there, and this large entry is what has kept the
-    Rosenbrock stages of a closed valve at its bound (analytic -R/L, or 0, there: 50 % more
-    steps at rtol 1e-5, docs/performance.md)."""
+    Rosenbrock stages of a closed valve at its bound (-R/L there: 77 % more steps at rtol
+    1e-5; 0, session 7: 52 % more; docs/performance.md, "Session 15")."""
     Jx[i, up] = v * a_up / L
     Jx[i, down] = -v * a_down / L
     if v != 0.0:
@@ -202,13 +211,12 @@ def heart_derivs_jac(p, x, u, t, iopt, dx, Jx, Ju):
     """heart_derivs and its partials Jx (10, 10), Ju (10, 5) (the equations above).  A valve's
     flow enters every balance through v Q, and v = 1 wherever Q > 0, so d(v Q)/dQ = 1 on the
     feasible side Q >= 0, open or closed."""
-    v_ra, v_rv, v_la, v_lv, dp_ra, dp_rv, dp_la, dp_lv = _heart(p, x, u, t, dx)
+    v_ra, v_rv, v_la, v_lv, dp_ra, dp_rv, dp_la, dp_lv, AA, F = _heart(p, x, u, t, dx)
     for i in range(10):
         for k in range(10):
             Jx[i, k] = 0.0
         for k in range(5):
             Ju[i, k] = 0.0
-    AA, F = _activations(t, p)
     a_ra = _atrium_slope(AA, p[EMAX_RA], p[KXP_RA], p[KXV_RA], p[VASO_RA], x[0])
     a_la = _atrium_slope(AA, p[EMAX_LA], p[KXP_LA], p[KXV_LA], p[VASO_LA], x[5])
     a_rv, a_lv = F * p[ERV_S], F * p[ELV_S]

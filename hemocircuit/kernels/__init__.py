@@ -24,10 +24,11 @@ types use; plain ``numba.njit`` works the same), each working on ONE element (th
     apply to these options.  The engine's element-local Jacobian then uses them instead of
     differencing ``derivs`` once per state and local unknown (for the arteriole: 8 evaluations
     of its equations per Jacobian become one).  Without it, or when it returns 0, the engine
-    differences ``derivs``.  Where ``derivs`` is not differentiable (a clip, a switch), give
-    what the engine's forward difference would: the one-sided derivative of the branch taken,
-    or across a jump (a closed heart valve's flow on its bound) the forward quotient at the
-    engine's step ``FD_REL * max(|x|, scale)``.
+    differences ``derivs``.  Where ``derivs`` is not differentiable in a state (a clip, a
+    switch), give what the engine's forward difference would take: the one-sided derivative
+    towards increasing x at a kink, the forward quotient at the engine's step
+    ``FD_REL * max(|x|, scale)`` across a jump (a closed heart valve's flow on its bound); the
+    contract test checks this wherever its samples fall on such a point.
 
 The arrays may be LONGER than the element needs (the engine passes reusable scratch buffers,
 not slices, because a slice costs more than a small element's equations): read and write
