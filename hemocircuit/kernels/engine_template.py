@@ -1062,6 +1062,13 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
 # against the Rosenbrock method's 8 plus a Jacobian.
 BDF_MAX_ORDER = 5
 BDF_NEWTON_MAXITER = 4
+#: Newton's convergence test of a BDF step: the estimated distance to the solution, in the
+#: error test's norm (atol + rtol |y|), below this.  scipy (after Hairer's RADAU5) takes
+#: min(0.03, sqrt(rtol)), 1e-4 at rtol 1e-8, which cost freq's forced runs 2.6 iterations a
+#: step; CVODE's is 0.1 of its error test (nlscoef) at every rtol.  0.03 at every rtol: 2.0
+#: iterations a step, freq 27 % faster, its error against a roadrunner rtol 1e-11 reference
+#: 6.2e-6 / 2.3e-4 deg against 6.0e-6 / 2.2e-4 (docs/performance.md, session 16)
+BDF_NEWTON_TOL = 0.03
 BDF_MIN_FACTOR = 0.2
 BDF_MAX_FACTOR = 10.0
 
@@ -1204,7 +1211,7 @@ def integrate_batch_bdf(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, 
         for k in range(BDF_MAX_ORDER + 1):
             alp[k] = (1.0 - kappa[k]) * gam[k]
             ecst[k] = kappa[k] * gam[k] + 1.0 / (k + 1)
-        newton_tol = max(10.0 * 2.220446049250313e-16 / rtol, min(0.03, np.sqrt(rtol)))
+        newton_tol = max(10.0 * 2.220446049250313e-16 / rtol, BDF_NEWTON_TOL)
         t = t_out[0]
         t_end = t_out[-1]
         for i in range(nx):
