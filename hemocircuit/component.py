@@ -302,6 +302,12 @@ class Component:
         breakpoints are found by the circuit itself."""
         return []
 
+    def cycle_time_constants(self, p) -> np.ndarray | None:
+        """Time constants [s] (B, E) that set an up-front count of cardiac cycles for a periodic
+        run, as svZeroDSolver's (Solver.cpp: ceil(-tau_max / T ln tol) over its RCR boundary
+        conditions' Rd C; hemocircuit.svzerod.cycles), or None: the element sets none."""
+        return None
+
     def hard_limits(self) -> tuple[tuple[str, float, str | None], ...]:
         """``((state, lower bound, state reset to 0 at the bound or None), ...)``: the integration
         stops when ``state`` reaches the bound, puts it on the bound and resets the rate state

@@ -175,6 +175,22 @@ def test_their_steady_initial_makes_rcr_algebraic(tmp_path):
     assert float(c.outputs(0.0, x[None])["OUT.P_c"][0]) * MMHG == pytest.approx(5.0 * 1000.0 + 10.0, rel=1e-7)
 
 
+def test_rcr_time_constants_come_from_the_component(tmp_path):
+    """Their cycle count's time constants (Component.cycle_time_constants): Rd C of an RCR
+    outlet in seconds (cgs Rd = 1000, C = 0.1: 100 s), none for a resistance outlet."""
+    from hemocircuit.svzerod.output import _circuits
+
+    rcr = _rc_model(tmp_path, {"bc_name": "OUT", "bc_type": "RCR",
+                               "bc_values": {"Rp": 100.0, "C": 0.1, "Rd": 1000.0, "Pd": 10.0}}, {"R_poiseuille": 50.0})
+    c, _ = _circuits(import_svzerod(rcr))
+    assert cycles.rcr_time_constants(c) == [pytest.approx(100.0, rel=1e-12)]
+    assert cycles.rcr_time_constants(c.with_values({"OUT.Rd": c.parameters.values["OUT.Rd"] * 2})) == \
+        [pytest.approx(200.0, rel=1e-12)]
+    res = _rc_model(tmp_path, {"bc_name": "OUT", "bc_type": "RESISTANCE", "bc_values": {"R": 1000.0, "Pd": 10.0}},
+                    {"R_poiseuille": 50.0})
+    assert cycles.rcr_time_constants(_circuits(import_svzerod(res))[0]) == []
+
+
 def test_cycle_means_and_errors_by_hand():
     """Their cycle mean: the N samples of a cycle, both ends; the error relative to the earlier."""
     y = np.array([1.0, 2.0, 3.0, 5.0, 7.0])  # N = 3: cycles [1, 2, 3] and [3, 5, 7]

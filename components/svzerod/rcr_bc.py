@@ -56,6 +56,10 @@ class RCRBC(Component):
             out["Q_in"] = u[..., 2]
         return out
 
+    def cycle_time_constants(self, p):
+        """Rd C [s]: svZeroDSolver counts the cycles of a run with RCR outlets from it (Solver.cpp)."""
+        return p["Rd"] * p["C"]
+
     def dc_stamp(self, p, A_loc, b_loc, keep):
         """Steady state: C open, so Q_in = (P - Pd)/(Rp + Rd) (Pd's constant part)."""
         A_loc[..., 2, 2] = -(p["Rp"] + p["Rd"])

@@ -47,11 +47,15 @@ def vessel_caps(cfg, model):
 
 
 def rcr_time_constants(circuit):
-    """Rd C [s] of every RCR boundary condition (rcr_bc element) of a circuit, as it is
-    (``--set`` included)."""
-    vals = circuit.parameters.values
-    return [float(vals[f"{e}.Rd"][0]) * float(vals[f"{e}.C"][0])
-            for g in circuit.groups if g.comp.type_name == "rcr_bc" for e in g.ids]
+    """The time constants [s] their cycle count takes (Component.cycle_time_constants: Rd C of
+    every RCR boundary condition) of a circuit's first parameter set, as it is (``--set``
+    included)."""
+    out = []
+    for g, p in zip(circuit.groups, circuit.group_params()):
+        tau = g.comp.cycle_time_constants(p)
+        if tau is not None:
+            out += [float(v) for v in np.reshape(tau, (-1, len(g.ids)))[0]]
+    return out
 
 
 def pfaller_cycles(taus, period, tol):
