@@ -78,6 +78,7 @@ class PressureSource(Component):
     """Imposes P(node) - P(ref) = value(t) [mmHg]; supplies whatever flow the circuit draws."""
 
     type_name = "pressure_source"
+    svzerod_blocks = ("PRESSURE",)  # their PRESSURE boundary condition
     terminals = ("node", "ref")
     parameters = {"value": Param("mmHg", doc="constant pressure (or a waveform)"), **_sine_params("mmHg")}
     waveform_params = ("value",)
@@ -114,6 +115,7 @@ class FlowSource(Component):
     """Imposes a flow value(t) [mL/s] from terminal ``a`` through the source to ``b``."""
 
     type_name = "flow_source"
+    svzerod_blocks = ("FLOW",)  # their FLOW boundary condition
     terminals = ("a", "b")
     parameters = {"value": Param("mL/s", doc="constant flow (or a waveform)"), **_sine_params("mL/s")}
     waveform_params = ("value",)

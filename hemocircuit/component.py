@@ -149,6 +149,9 @@ class Component:
 
     #: name used as ``type:`` in netlists
     type_name: str = ""
+    #: svZeroDSolver block types (the names in their JSON) this type implements: the importer
+    #: (hemocircuit.svzerod) writes such a block as an element of this type
+    svzerod_blocks: tuple[str, ...] = ()
     #: terminal names, in netlist ``nodes:`` order
     terminals: tuple[str, ...] = ()
     #: numeric parameters

@@ -56,3 +56,17 @@ def component_types() -> dict[str, type[Component]]:
 
 def get_type(name: str) -> type[Component] | None:
     return component_types().get(name)
+
+
+@functools.lru_cache(maxsize=1)
+def svzerod_block_types() -> dict[str, str]:
+    """Map svZeroDSolver block type -> the component type that implements it
+    (Component.svzerod_blocks), for every component found."""
+    found: dict[str, str] = {}
+    for name, cls in component_types().items():
+        for block in cls.svzerod_blocks:
+            if found.get(block, name) != name:
+                raise HemocircuitError(f"svZeroDSolver block '{block}' is implemented twice: component types "
+                                       f"'{found[block]}' and '{name}'")
+            found[block] = name
+    return found

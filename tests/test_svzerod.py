@@ -97,6 +97,24 @@ def test_bad_models_name_the_block(tmp_path):
         import_svzerod(cfg)
 
 
+def test_every_supported_block_has_a_component_and_a_missing_one_is_named(tmp_path, monkeypatch):
+    """The importer writes a block as the component type that declares it
+    (Component.svzerod_blocks): every block type it supports has exactly one; a block no
+    component declares is an error naming the element and the block type."""
+    from hemocircuit import registry
+    from hemocircuit.svzerod import importer as imp
+
+    types = registry.svzerod_block_types()
+    supported = (imp.SUPPORTED_VESSELS + imp.SUPPORTED_VALVES + imp.SUPPORTED_CHAMBERS + imp.SUPPORTED_BC
+                 + imp.SUPPORTED_CLOSED_LOOP)
+    assert sorted(set(supported) - set(types)) == []
+    assert types["BloodVessel"] == "blood_vessel" and types["ClosedLoopCoronaryRight"] == "closed_loop_coronary"
+    monkeypatch.setattr(registry, "svzerod_block_types", lambda: {k: v for k, v in types.items() if k != "RESISTANCE"})
+    cfg = _model({"R_poiseuille": 1.0}, {"bc_name": "OUT", "bc_type": "RESISTANCE", "bc_values": {"R": 1.0, "Pd": 0.0}})
+    with pytest.raises(NetlistError, match="'OUT'.*block type 'RESISTANCE'"):
+        import_svzerod(cfg)
+
+
 @have_cases
 @pytest.mark.parametrize("case", ["steadyFlow_R_R", "steadyFlow_bifurcationR_R1", "steadyFlow_blood_vessel_junction",
                                   "steadyFlow_stenosis_R", "steadyFlow_RC_R"])

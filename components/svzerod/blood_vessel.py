@@ -114,6 +114,7 @@ class _Vessel(Component):
 class BloodVessel(_Vessel):
     __doc__ = __doc__
     type_name = "blood_vessel"
+    svzerod_blocks = ("BloodVessel",)
 
     def branches(self):
         if self.cap:

@@ -23,6 +23,7 @@ from .blood_vessel import BloodVessel, _Vessel, vessel_derivs, vessel_observe, v
 class BloodVesselCRL(_Vessel):
     __doc__ = __doc__
     type_name = "blood_vessel_crl"
+    svzerod_blocks = ("BloodVesselCRL",)
 
     def branches(self):
         if self.cap:

@@ -23,6 +23,7 @@ from ._common import batch_shape, C_UNIT, R_UNIT, jit
 class BloodVesselRC(Component):
     __doc__ = __doc__
     type_name = "blood_vessel_rc"
+    svzerod_blocks = ("BloodVesselRC",)
     terminals = ("in", "out", "ref")
     parameters = {"Rpd": Param(R_UNIT, lower=0.0, lower_open=True, doc="resistance"),
                   "Cp": Param(C_UNIT, lower=0.0, lower_open=True, doc="capacitance at the inlet")}

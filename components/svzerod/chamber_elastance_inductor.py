@@ -40,6 +40,7 @@ _OWN = {"Emax": Param(E_UNIT, lower=0.0, doc="maximum elastance"),
 class ChamberElastanceInductor(Component):
     __doc__ = __doc__
     type_name = "chamber_elastance_inductor"
+    svzerod_blocks = ("ChamberElastanceInductor",)
     terminals = ("in", "out", "ref")
     parameters = {**_OWN, **act_parameters()}
     options = {"activation": Option("half_cosine", choices=KINDS, doc="activation function A(t)")}

@@ -28,6 +28,7 @@ from .chamber_elastance_inductor import _OWN, ChamberElastanceInductor, cei_deri
 class ChamberElastanceInductorExponential(ChamberElastanceInductor):
     __doc__ = __doc__
     type_name = "chamber_elastance_inductor_exponential"
+    svzerod_blocks = ("ChamberElastanceInductorExponential",)
     # Impedance and period at the slots chamber_elastance_inductor's kernels read (4, 5)
     parameters = {"Emax": Param(E_UNIT, lower=0.0, doc="active elastance"),
                   "Kxp": Param("mmHg", doc="passive pressure scale"),

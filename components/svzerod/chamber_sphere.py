@@ -89,6 +89,7 @@ def sphere_observe(p, x, iopt, out):
 class ChamberSphere(Component):
     __doc__ = __doc__
     type_name = "chamber_sphere"
+    svzerod_blocks = ("ChamberSphere",)
     terminals = ("in", "out", "ref")
     parameters = {k: Param(u, lower=0.0 if pos else None, lower_open=pos, doc=d) for k, (u, pos, d) in _P.items()}
     time_dependent = True

@@ -36,6 +36,7 @@ from .activation import fourier_raw
 class ClosedLoopCoronary(Component):
     __doc__ = __doc__
     type_name = "closed_loop_coronary"
+    svzerod_blocks = ("ClosedLoopCoronaryLeft", "ClosedLoopCoronaryRight")
     terminals = ("in", "out", "ref")
     parameters = {"Ra": Param(R_UNIT, lower=0.0, doc="small-artery resistance"),
                   "Ram": Param(R_UNIT, lower=0.0, lower_open=True, doc="microvascular resistance"),

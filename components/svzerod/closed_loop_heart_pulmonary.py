@@ -249,6 +249,7 @@ def heart_observe(p, x, iopt, out):
 class ClosedLoopHeartAndPulmonary(Component):
     __doc__ = __doc__
     type_name = "closed_loop_heart_pulmonary"
+    svzerod_blocks = ("ClosedLoopHeartAndPulmonary",)
     terminals = ("in", "out", "ref")
     parameters = {k: Param(u, lower=0.0 if (k in _POSITIVE or k in _NONNEG) else None,
                            lower_open=k in _POSITIVE, doc=d) for k, (u, d) in _P.items()}

@@ -21,6 +21,7 @@ from ._common import batch_shape, C_UNIT, R_UNIT, jit
 class ClosedLoopRCR(Component):
     __doc__ = __doc__
     type_name = "closed_loop_rcr"
+    svzerod_blocks = ("ClosedLoopRCR",)
     terminals = ("in", "out", "ref")
     parameters = {"Rp": Param(R_UNIT, lower=0.0, doc="proximal resistance"),
                   "C": Param(C_UNIT, lower=0.0, lower_open=True, doc="capacitance"),

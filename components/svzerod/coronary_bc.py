@@ -23,6 +23,7 @@ from ._common import batch_shape, C_UNIT, R_UNIT, jit
 class CoronaryBC(Component):
     __doc__ = __doc__
     type_name = "coronary_bc"
+    svzerod_blocks = ("CORONARY",)
     terminals = ("node", "ref")
     parameters = {"Ra1": Param(R_UNIT, lower=0.0, doc="arterial resistance"),
                   "Ra2": Param(R_UNIT, lower=0.0, lower_open=True, doc="micro-arterial resistance"),

@@ -45,6 +45,7 @@ def var_resistance(t, T, Rmin, Rmax, T_vc, T_vr):
 class CoronaryVarResBC(CoronaryBC):
     __doc__ = __doc__
     type_name = "coronary_var_res_bc"
+    svzerod_blocks = ("CORONARY_VAR_RES",)
     # the first seven in coronary_bc's order (its compiled stamp reads p[0] = Ra1, p[3] = Ca)
     parameters = {"Ra1": Param(R_UNIT, lower=0.0, doc="arterial resistance"),
                   "Ra2_min": Param(R_UNIT, lower=0.0, lower_open=True, doc="minimum microvascular resistance"),

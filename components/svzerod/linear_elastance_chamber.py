@@ -23,6 +23,7 @@ from .activation import (KINDS, act_parameters, activation, activation_np, activ
 class LinearElastanceChamber(Component):
     __doc__ = __doc__
     type_name = "linear_elastance_chamber"
+    svzerod_blocks = ("LinearElastanceChamber",)
     terminals = ("in", "out", "ref")
     parameters = {"Emax": Param(E_UNIT, lower=0.0, doc="active elastance (added at full activation)"),
                   "Epass": Param(E_UNIT, lower=0.0, lower_open=True, doc="passive elastance"),

@@ -18,6 +18,7 @@ from ._common import R_UNIT, jit
 class PiecewiseValve(Component):
     __doc__ = __doc__
     type_name = "piecewise_valve"
+    svzerod_blocks = ("PiecewiseValve",)
     terminals = ("in", "out")
     parameters = {"Rmin": Param(R_UNIT, lower=0.0, lower_open=True, doc="resistance when open (P_out < P_in)"),
                   "Rmax": Param(R_UNIT, lower=0.0, lower_open=True, doc="resistance when closed")}

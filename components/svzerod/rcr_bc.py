@@ -20,6 +20,7 @@ from ._common import batch_shape, C_UNIT, R_UNIT, jit
 class RCRBC(Component):
     __doc__ = __doc__
     type_name = "rcr_bc"
+    svzerod_blocks = ("RCR",)
     terminals = ("node", "ref")
     parameters = {"Rp": Param(R_UNIT, lower=0.0, doc="proximal resistance"),
                   "C": Param(C_UNIT, lower=0.0, lower_open=True, doc="capacitance"),

@@ -16,6 +16,7 @@ from ._common import R_UNIT, jit
 class ResistanceBC(Component):
     __doc__ = __doc__
     type_name = "resistance_bc"
+    svzerod_blocks = ("RESISTANCE",)
     terminals = ("node", "ref")
     parameters = {"R": Param(R_UNIT, lower=0.0, lower_open=True, doc="resistance"),
                   "Pd": Param("mmHg", default="0 mmHg", doc="distal pressure (constant or a waveform)")}

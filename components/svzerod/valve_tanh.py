@@ -38,6 +38,7 @@ def _r_and_dr(Rmin, Rmax, k, dp):
 class ValveTanh(Component):
     __doc__ = __doc__
     type_name = "valve_tanh"
+    svzerod_blocks = ("ValveTanh",)
     terminals = ("in", "out")
     parameters = {"Rmin": Param(R_UNIT, lower=0.0, doc="resistance when open"),
                   "Rmax": Param(R_UNIT, lower=0.0, lower_open=True, doc="resistance when closed"),

@@ -123,6 +123,7 @@ class _Importer:
         self.elements, self.columns, self.types = [], {}, set()
         self.chamber_elements = []
         self.timed_elements = []  # elements (not chambers) whose 'period' is the model's
+        self.element_block = {}  # element id -> the block type of theirs it was written for
         self.extra_columns = {}  # their internal variable -> (our column, factor from its unit to theirs)
         self.factors = {}  # their name -> factor from our column's unit to theirs (not P, Q, Vc)
         self.ids = {}
@@ -197,8 +198,17 @@ class _Importer:
         if unknown:
             raise _err(f"block '{block}': unknown value(s) {unknown} (it takes {', '.join(keys)})", block, self.path)
 
-    def add(self, eid, typ, nodes, **vals):
+    def add(self, eid, block, nodes, **vals):
+        """Element ``eid`` for their block type ``block``, of the component type that declares it
+        (Component.svzerod_blocks)."""
+        from ..registry import svzerod_block_types
+
+        typ = svzerod_block_types().get(block)
+        if typ is None:
+            raise _err(f"element '{eid}': no component type implements svZeroDSolver block type '{block}' "
+                       "(a component declares the blocks it implements in svzerod_blocks)", eid, self.path)
         self.elements.append({"id": eid, "type": typ, "nodes": nodes, **vals})
+        self.element_block[eid] = block
 
     # --- the model ------------------------------------------------------------------------
     def run(self, steady=False):
@@ -353,7 +363,7 @@ class _Importer:
                 self.only_keys(name, vals, ("Rpd", "Cp"))
                 eid = self.id_of(name)
                 Cp = float(self.value(name, vals, "Cp"))
-                self.add(eid, "blood_vessel_rc", list(two_port("vessel", name)) + ["ground"],
+                self.add(eid, "BloodVesselRC", list(two_port("vessel", name)) + ["ground"],
                          Rpd=_fmt(self.value(name, vals, "Rpd"), self.uR), Cp=_fmt(Cp, self.uC))
                 q_in[name], q_out[name] = f"{eid}.Q_in", f"{eid}.Q_out"
                 start(eid, "X", Cp * ic(f"pressure:{inlet[name][0]}:{name}"), V)
@@ -364,7 +374,7 @@ class _Importer:
             n_in, n_out = two_port("vessel", name)
             up, down = inlet[name][0], outlet[name][0]
             eid = self.id_of(name)
-            self.add(eid, "blood_vessel" if typ == "BloodVessel" else "blood_vessel_crl", [n_in, n_out, "ground"],
+            self.add(eid, typ, [n_in, n_out, "ground"],
                      R_poiseuille=_fmt(R, self.uR), C=_fmt(C, self.uC), L=_fmt(L, self.uL),
                      stenosis_coefficient=_fmt(S, self.uS), capacitive=C != 0.0, inductive=L != 0.0,
                      stenotic=S != 0.0)
@@ -391,7 +401,7 @@ class _Importer:
                     raise _err(f"junction '{name}': '{key}' needs one value per outlet ({len(outs)})", name, path)
             for o, R, L, S in zip(outs, Rs, Ls, Ss):
                 eid = self.id_of(f"{name}_{o}")
-                self.add(eid, "blood_vessel", [node(ins[0], name), node(name, o), "ground"],
+                self.add(eid, "BloodVessel", [node(ins[0], name), node(name, o), "ground"],
                          R_poiseuille=_fmt(R, self.uR), L=_fmt(L, self.uL), stenosis_coefficient=_fmt(S, self.uS),
                          inductive=float(L) != 0.0, stenotic=float(S) != 0.0)
                 q_in[name + "->" + o] = f"{eid}.Q_out"
@@ -406,7 +416,7 @@ class _Importer:
             kw = {k: _fmt(self.value(name, prm, k), self.uR) for k in ("Rmin", "Rmax")}
             if typ == "ValveTanh":
                 kw["steepness"] = _fmt(self.value(name, prm, "Steepness"), f"1/({P})")
-            self.add(eid, "valve_tanh" if typ == "ValveTanh" else "piecewise_valve", list(two_port("valve", name)), **kw)
+            self.add(eid, typ, list(two_port("valve", name)), **kw)
             q_in[name] = q_out[name] = f"{eid}.Q"
 
         # chambers
@@ -423,7 +433,6 @@ class _Importer:
                 kw = {k: _fmt(self.value(name, vals, k), self.uE) for k in ("Emax", "Emin")}
                 kw.update({k: _fmt(self.value(name, vals, k), V) for k in ("Vrd", "Vrs")})
                 kw["Impedance"] = _fmt(self.value(name, vals, "Impedance"), self.uL)
-                ctype = "chamber_elastance_inductor"
             elif typ == "ChamberElastanceInductorExponential":
                 self.only_keys(name, vals, ("Emax", "Kxp", "Kxv", "Vaso", "Impedance"))
                 kw = {"Emax": _fmt(self.value(name, vals, "Emax"), self.uE),
@@ -431,13 +440,11 @@ class _Importer:
                       "Kxv": _fmt(self.value(name, vals, "Kxv"), f"1/({V})"),
                       "Vaso": _fmt(self.value(name, vals, "Vaso"), V),
                       "Impedance": _fmt(self.value(name, vals, "Impedance"), self.uL)}
-                ctype = "chamber_elastance_inductor_exponential"
             else:
                 kw = {k: _fmt(self.value(name, vals, k), self.uE) for k in ("Emax", "Epass")}
                 kw["Vrest"] = _fmt(self.value(name, vals, "Vrest"), V)
-                ctype = "linear_elastance_chamber"
             self.chamber_elements.append((eid, act))
-            self.add(eid, ctype, list(two_port("chamber", name)) + ["ground"], **kw, **act)
+            self.add(eid, typ, list(two_port("chamber", name)) + ["ground"], **kw, **act)
             q_in[name], q_out[name] = f"{eid}.Q_in", f"{eid}.Q_out"
             start(eid, "Vc", ic(f"Vc:{name}"), V, store=True)
             if typ != "LinearElastanceChamber":  # the inductor's flow
@@ -452,7 +459,7 @@ class _Importer:
             if not isinstance(period, (int, float)) or isinstance(period, bool) or period <= 0:
                 raise _err("ClosedLoopHeartAndPulmonary: 'cardiac_cycle_period' must be a positive number", HEART, path)
             self.note_period(float(period), HEART)
-            self.add(eid, "closed_loop_heart_pulmonary", [node(HEART_IN, HEART), node(HEART, HEART_OUT), "ground"],
+            self.add(eid, "ClosedLoopHeartAndPulmonary", [node(HEART_IN, HEART), node(HEART, HEART_OUT), "ground"],
                      period=_fmt(period, "s"), **hp)
             q_in[HEART], q_out[HEART] = f"{eid}.Q_in", f"{eid}.Q_out"
             for st in ("V_RA", "V_RV", "V_LA", "V_LV"):
@@ -475,7 +482,7 @@ class _Importer:
             if typ == "ClosedLoopRCR":
                 n_in, n_out = two_port("boundary condition", name)
                 C = self.value(name, vals, "C")
-                self.add(eid, "closed_loop_rcr", [n_in, n_out, "ground"], Rp=_fmt(self.value(name, vals, "Rp"), self.uR),
+                self.add(eid, "ClosedLoopRCR", [n_in, n_out, "ground"], Rp=_fmt(self.value(name, vals, "Rp"), self.uR),
                          C=_fmt(C, self.uC), Rd=_fmt(self.value(name, vals, "Rd"), self.uR))
                 q_in[name], q_out[name] = f"{eid}.Q_in", f"{eid}.Q_out"
                 start(eid, "V", float(C) * ic(f"P_c:{name}"), V, store=True)
@@ -491,32 +498,32 @@ class _Importer:
             nd = node(name, outs[0]) if outs else node(ins[0], name)
             if typ == "FLOW":
                 q, _ = self.series(name, vals, "Q", Q, steady)
-                self.add(eid, "flow_source", ["ground", nd] if outs else [nd, "ground"], value=q)
+                self.add(eid, "FLOW", ["ground", nd] if outs else [nd, "ground"], value=q)
                 flow_col[name] = f"Q({eid})"
                 self.pinned_q[nd] = (name, "Q")
             elif typ == "PRESSURE":
                 p_, _ = self.series(name, vals, "P", P, steady)
-                self.add(eid, "pressure_source", [nd, "ground"], value=p_)
+                self.add(eid, "PRESSURE", [nd, "ground"], value=p_)
                 self.pinned_p[nd] = (name, "P")
             elif typ == "RESISTANCE":
                 pd, _ = self.series(name, vals, "Pd", P, steady)
-                self.add(eid, "resistance_bc", [nd, "ground"], R=_fmt(self.value(name, vals, "R"), self.uR), Pd=pd)
+                self.add(eid, "RESISTANCE", [nd, "ground"], R=_fmt(self.value(name, vals, "R"), self.uR), Pd=pd)
             elif typ == "RCR":
                 pd, _ = self.series(name, vals, "Pd", P, steady) if "Pd" in vals else (_fmt(0.0, P), 0.0)
                 C = self.value(name, vals, "C")
-                self.add(eid, "rcr_bc", [nd, "ground"], Rp=_fmt(self.value(name, vals, "Rp"), self.uR),
+                self.add(eid, "RCR", [nd, "ground"], Rp=_fmt(self.value(name, vals, "Rp"), self.uR),
                          C=_fmt(C, self.uC), Rd=_fmt(self.value(name, vals, "Rd"), self.uR), Pd=pd)
                 start(eid, "V", float(C) * ic(f"pressure_c:{name}"), V)  # their WindkesselBC's name
             elif typ == "CORONARY":
                 pim, _ = self.series(name, vals, "Pim", P, steady)
-                self.add(eid, "coronary_bc", [nd, "ground"],
+                self.add(eid, "CORONARY", [nd, "ground"],
                          **{k: _fmt(self.value(name, vals, k), self.uR) for k in ("Ra1", "Ra2", "Rv1")},
                          **{k: _fmt(self.value(name, vals, k), self.uC) for k in ("Ca", "Cc")},
                          Pim=pim, P_v=_fmt(self.value(name, vals, "P_v"), P))
                 self.coronary_start(name, eid, vals, float(self.value(name, vals, "Ra2")), ins, outs, ic, start)
             elif typ == "CORONARY_VAR_RES":
                 pim, _ = self.series(name, vals, "Pim", P, steady)
-                self.add(eid, "coronary_var_res_bc", [nd, "ground"],
+                self.add(eid, "CORONARY_VAR_RES", [nd, "ground"],
                          **{k: _fmt(self.value(name, vals, k), self.uR) for k in ("Ra1", "Ra2_min", "Rv1", "Ra2_max")},
                          **{k: _fmt(self.value(name, vals, k), self.uC) for k in ("Ca", "Cc")},
                          **{k: _fmt(self.value(name, vals, k), "s") for k in ("T_vc", "T_vr")},
@@ -620,7 +627,7 @@ class _Importer:
                         roles.setdefault(m[t], []).append((i, role))
         Q, P = self.u["Q"], self.u["P"]
         for i, (e, c) in enumerate(list(zip(self.elements, comps))):
-            if e["type"] not in ("blood_vessel", "blood_vessel_crl"):
+            if self.element_block[e["id"]] not in ("BloodVessel", "BloodVesselCRL"):
                 continue
             m = dict(zip(c.terminals, e["nodes"]))
             eid, block = e["id"], self.block_of(e["id"])
@@ -632,7 +639,7 @@ class _Importer:
                 e["capacitive"] = False
                 self.drop_initial(eid, "V")
                 cid = self.id_of(f"{block}_C")
-                self.add(cid, "flow_source", [node, "ground"], value=self.slope(bc, key, Cv, Q))
+                self.add(cid, "FLOW", [node, "ground"], value=self.slope(bc, key, Cv, Q))
                 if stores[0].plus == "in":  # their flow_in includes the capacitor's flow
                     self.derived[f"{eid}_Q_in"] = {"expr": f"{eid}.Q_in + Q({cid})", "unit": "mL/s"}
                     q_in[block] = f"{eid}_Q_in"
@@ -646,7 +653,7 @@ class _Importer:
                 node = m[end]
                 others = [j for j, _ in roles.get(node, []) if j != i]
                 if node in self.pinned_q and all(r == "flow" for _, r in roles[node]) and all(
-                        self.elements[j]["type"] == "flow_source" for j in others):
+                        self.element_block[self.elements[j]["id"]] == "FLOW" for j in others):
                     bc, key = self.pinned_q[node]
                     Lv = float(e["L"].split()[0])
                     e["inductive"] = False
@@ -656,7 +663,7 @@ class _Importer:
                     pid = self.id_of(f"{block}_L")
                     # P(mid) - P(node) = L dQ/dt at the outlet; P(node) - P(mid) at the inlet
                     sign = 1.0 if end == "out" else -1.0
-                    self.add(pid, "pressure_source", [mid, node], value=self.slope(bc, key, sign * Lv, P))
+                    self.add(pid, "PRESSURE", [mid, node], value=self.slope(bc, key, sign * Lv, P))
                     break
 
     def coronary_start(self, name, eid, vals, Ram0, ins, outs, ic, start):
@@ -687,7 +694,7 @@ class _Importer:
         self.only_keys(name, vals, tuple(k for k in _P if k != "period"))
         eid = self.id_of(name)
         kw = {k: _fmt(self.value(name, vals, k), ours[u]) for k, (u, _, _) in _P.items() if k != "period"}
-        self.add(eid, "chamber_sphere", [nodes[0], nodes[1], "ground"], **kw)
+        self.add(eid, "ChamberSphere", [nodes[0], nodes[1], "ground"], **kw)
         self.timed_elements.append(eid)
         for their, ours_, unit, mine, state in (
                 ("radius", f"{eid}.r", Lu, "cm", "r"), ("velo", f"{eid}.v", f"({Lu})/s", "cm/s", "v"),
@@ -709,7 +716,7 @@ class _Importer:
         h = self.ids.get(HEART) or _ident(HEART, self.path)
         eid = self.ids[name]
         Ra, Ca = float(self.value(name, vals, "Ra")), float(self.value(name, vals, "Ca"))
-        self.add(eid, "closed_loop_coronary", [nodes[0], nodes[1], "ground"],
+        self.add(eid, typ, [nodes[0], nodes[1], "ground"],
                  **{k: _fmt(self.value(name, vals, k), self.uR) for k in ("Ra", "Ram", "Rv")},
                  **{k: _fmt(self.value(name, vals, k), self.uC) for k in ("Ca", "Cim")},
                  im=f"= {h}.{im}", E_s=f"= {h}.{E}", V_u=f"= {h}.{Vu}", V_vent=f"= {h}.{Vv}",
