@@ -1058,16 +1058,19 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
 # --- Variable-order BDF (NDF) integrator: the method of scipy's solve_ivp 'BDF' (Shampine &
 # Reichelt 1997, SIAM J Sci Comput 18:1; quasi-constant step with the difference array D,
 # orders 1-5, NDF coefficients kappa), compiled.  Its Jacobian is kept over many steps and only
-# refreshed when Newton's iteration fails to converge: about 1-2 right-hand sides per step,
-# against the Rosenbrock method's 8 plus a Jacobian.
+# refreshed when Newton's iteration fails to converge: about 2 right-hand sides per step (two
+# Newton iterations: the test needs a contraction rate), against the Rosenbrock method's 8
+# plus a Jacobian.
 BDF_MAX_ORDER = 5
 BDF_NEWTON_MAXITER = 4
 #: Newton's convergence test of a BDF step: the estimated distance to the solution, in the
 #: error test's norm (atol + rtol |y|), below this.  scipy (after Hairer's RADAU5) takes
-#: min(0.03, sqrt(rtol)), 1e-4 at rtol 1e-8, which cost freq's forced runs 2.6 iterations a
-#: step; CVODE's is 0.1 of its error test (nlscoef) at every rtol.  0.03 at every rtol: 2.0
-#: iterations a step, freq 27 % faster, its error against a roadrunner rtol 1e-11 reference
-#: 6.2e-6 / 2.3e-4 deg against 6.0e-6 / 2.2e-4 (docs/performance.md, session 16)
+#: min(0.03, sqrt(rtol)), 1e-4 at rtol 1e-8, which cost freq's forced runs 2.8 right-hand
+#: sides a step (Newton's iterations and ~0.15 for Jacobians); CVODE's is 0.1 of its error
+#: test (nlscoef) at every rtol.  0.03 (or the round-off floor 10 eps/rtol, larger below
+#: rtol 7e-14): 2.0 a step, a forced run's integration 27 % less time, freq's error against
+#: a roadrunner rtol 1e-11 reference 6.2e-6 / 2.3e-4 deg against 6.0e-6 / 2.2e-4
+#: (docs/performance.md, session 16)
 BDF_NEWTON_TOL = 0.03
 BDF_MIN_FACTOR = 0.2
 BDF_MAX_FACTOR = 10.0
