@@ -152,6 +152,9 @@ class Component:
     #: svZeroDSolver block types (the names in their JSON) this type implements: the importer
     #: (hemocircuit.svzerod) writes such a block as an element of this type
     svzerod_blocks: tuple[str, ...] = ()
+    #: (parameters, states) svZeroDSolver's steady_initial scales by 1e-9 for this type (their
+    #: to_steady: a boundary condition's capacitances and the volumes they store)
+    svzerod_steady_zeroed: tuple[tuple[str, ...], tuple[str, ...]] = ((), ())
     #: terminal names, in netlist ``nodes:`` order
     terminals: tuple[str, ...] = ()
     #: numeric parameters
@@ -306,7 +309,7 @@ class Component:
         return []
 
     def cycle_time_constants(self, p) -> np.ndarray | None:
-        """Time constants [s] (B, E) that set an up-front count of cardiac cycles for a periodic
+        """Time constants [s] (1 or B, E) that set an up-front count of cardiac cycles for a periodic
         run, as svZeroDSolver's (Solver.cpp: ceil(-tau_max / T ln tol) over its RCR boundary
         conditions' Rd C; hemocircuit.svzerod.cycles), or None: the element sets none."""
         return None

@@ -11,7 +11,9 @@ import functools
 import importlib
 import inspect
 import pkgutil
+from collections.abc import Mapping
 from importlib import metadata
+from types import MappingProxyType
 
 from .component import Component
 from .errors import HemocircuitError
@@ -59,14 +61,14 @@ def get_type(name: str) -> type[Component] | None:
 
 
 @functools.lru_cache(maxsize=1)
-def svzerod_block_types() -> dict[str, str]:
+def svzerod_block_types() -> Mapping[str, str]:
     """Map svZeroDSolver block type -> the component type that implements it
-    (Component.svzerod_blocks), for every component found."""
+    (Component.svzerod_blocks, each class's own), for every component found."""
     found: dict[str, str] = {}
     for name, cls in component_types().items():
-        for block in cls.svzerod_blocks:
+        for block in cls.__dict__.get("svzerod_blocks", ()):  # its own: a subclass implements none by inheriting
             if found.get(block, name) != name:
                 raise HemocircuitError(f"svZeroDSolver block '{block}' is implemented twice: component types "
                                        f"'{found[block]}' and '{name}'")
             found[block] = name
-    return found
+    return MappingProxyType(found)  # cached: read-only

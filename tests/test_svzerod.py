@@ -109,6 +109,11 @@ def test_every_supported_block_has_a_component_and_a_missing_one_is_named(tmp_pa
                  + imp.SUPPORTED_CLOSED_LOOP)
     assert sorted(set(supported) - set(types)) == []
     assert types["BloodVessel"] == "blood_vessel" and types["ClosedLoopCoronaryRight"] == "closed_loop_coronary"
+    # a plug-in subclass of a source implements no block by inheriting (no "implemented twice")
+    flow = registry.get_type("flow_source")
+    sub = type("MyFlow", (flow,), {"type_name": "my_flow"})
+    monkeypatch.setattr(registry, "component_types", lambda: {"flow_source": flow, "my_flow": sub})
+    assert dict(registry.svzerod_block_types.__wrapped__()) == {"FLOW": "flow_source"}
     monkeypatch.setattr(registry, "svzerod_block_types", lambda: {k: v for k, v in types.items() if k != "RESISTANCE"})
     cfg = _model({"R_poiseuille": 1.0}, {"bc_name": "OUT", "bc_type": "RESISTANCE", "bc_values": {"R": 1.0, "Pd": 0.0}})
     with pytest.raises(NetlistError, match="'OUT'.*block type 'RESISTANCE'"):

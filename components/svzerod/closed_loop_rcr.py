@@ -22,6 +22,7 @@ class ClosedLoopRCR(Component):
     __doc__ = __doc__
     type_name = "closed_loop_rcr"
     svzerod_blocks = ("ClosedLoopRCR",)
+    svzerod_steady_zeroed = (("C",), ("V",))  # their to_steady
     terminals = ("in", "out", "ref")
     parameters = {"Rp": Param(R_UNIT, lower=0.0, doc="proximal resistance"),
                   "C": Param(C_UNIT, lower=0.0, lower_open=True, doc="capacitance"),

@@ -24,6 +24,7 @@ class CoronaryBC(Component):
     __doc__ = __doc__
     type_name = "coronary_bc"
     svzerod_blocks = ("CORONARY",)
+    svzerod_steady_zeroed = (("Ca", "Cc"), ("V_a", "V_im"))  # their to_steady
     terminals = ("node", "ref")
     parameters = {"Ra1": Param(R_UNIT, lower=0.0, doc="arterial resistance"),
                   "Ra2": Param(R_UNIT, lower=0.0, lower_open=True, doc="micro-arterial resistance"),

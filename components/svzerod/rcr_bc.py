@@ -21,6 +21,7 @@ class RCRBC(Component):
     __doc__ = __doc__
     type_name = "rcr_bc"
     svzerod_blocks = ("RCR",)
+    svzerod_steady_zeroed = (("C",), ("V",))  # their to_steady
     terminals = ("node", "ref")
     parameters = {"Rp": Param(R_UNIT, lower=0.0, doc="proximal resistance"),
                   "C": Param(C_UNIT, lower=0.0, lower_open=True, doc="capacitance"),

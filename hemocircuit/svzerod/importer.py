@@ -123,7 +123,7 @@ class _Importer:
         self.elements, self.columns, self.types = [], {}, set()
         self.chamber_elements = []
         self.timed_elements = []  # elements (not chambers) whose 'period' is the model's
-        self.element_block = {}  # element id -> the block type of theirs it was written for
+        self.element_block = {}  # element id -> the block type whose component it is (importer.add)
         self.extra_columns = {}  # their internal variable -> (our column, factor from its unit to theirs)
         self.factors = {}  # their name -> factor from our column's unit to theirs (not P, Q, Vc)
         self.ids = {}

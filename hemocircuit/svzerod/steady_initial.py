@@ -30,9 +30,6 @@ from ..errors import HemocircuitError, SolverError
 
 EPS = 1e-9
 STEPS = 31  # Solver.cpp setup_initial
-#: capacitances their to_steady removes (per hemocircuit type) and the volume states they carry
-ZEROED = {"rcr_bc": (("C",), ("V",)), "closed_loop_rcr": (("C",), ("V",)),
-          "coronary_bc": (("Ca", "Cc"), ("V_a", "V_im"))}
 
 
 def gen_alpha_coefficients(rho):
@@ -124,6 +121,7 @@ def their_steady_initial(model, mean_circuit):
     ``model.mean_netlist``).  Their cardiac period T, ``rho_infty`` from their
     simulation_parameters."""
     from ..ic import apply_ic
+    from ..registry import get_type
     from .output import their_initial
 
     cm = mean_circuit
@@ -133,12 +131,12 @@ def their_steady_initial(model, mean_circuit):
     rho = float(model.sim.get("rho_infty", 0.5))
     changes, scaled = {}, []
     for e in model.netlist["elements"]:
-        if e["type"] in ZEROED:
-            params, states = ZEROED[e["type"]]
-            for p in params:
-                path = f"{e['id']}.{p}"
-                changes[path] = float(cm.parameters.values[path][0]) * EPS
-            scaled += [cm.state_names.index(f"{e['id']}.{s}") for s in states]
+        # the capacitances their to_steady removes and the volume states they carry
+        params, states = get_type(e["type"]).svzerod_steady_zeroed
+        for p in params:
+            path = f"{e['id']}.{p}"
+            changes[path] = float(cm.parameters.values[path][0]) * EPS
+        scaled += [cm.state_names.index(f"{e['id']}.{s}") for s in states]
     x0 = apply_ic(cm, np.zeros(cm.nx), their_initial(model, cm))
     x0[scaled] *= EPS
     c0 = cm.with_values(changes) if changes else cm
