@@ -15,7 +15,7 @@ import numpy as np
 
 from ..errors import HemocircuitError
 
-ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))  # reproduce/ sits in the checkout's root
 
 
 def repo_path(*parts):
