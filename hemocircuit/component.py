@@ -153,7 +153,8 @@ class Component:
     #: (hemocircuit.svzerod) writes such a block as an element of this type
     svzerod_blocks: tuple[str, ...] = ()
     #: (parameters, states) svZeroDSolver's steady_initial scales by 1e-9 for this type (their
-    #: to_steady: a boundary condition's capacitances and the volumes they store)
+    #: to_steady: a boundary condition's capacitances and the volumes they store); like
+    #: svzerod_blocks, read from the class itself, not inherited
     svzerod_steady_zeroed: tuple[tuple[str, ...], tuple[str, ...]] = ((), ())
     #: terminal names, in netlist ``nodes:`` order
     terminals: tuple[str, ...] = ()

@@ -66,7 +66,7 @@ def svzerod_block_types() -> Mapping[str, str]:
     (Component.svzerod_blocks, each class's own), for every component found."""
     found: dict[str, str] = {}
     for name, cls in component_types().items():
-        for block in cls.__dict__.get("svzerod_blocks", ()):  # its own: a subclass implements none by inheriting
+        for block in vars(cls).get("svzerod_blocks", ()):  # its own: a subclass implements none by inheriting
             if found.get(block, name) != name:
                 raise HemocircuitError(f"svZeroDSolver block '{block}' is implemented twice: component types "
                                        f"'{found[block]}' and '{name}'")

@@ -131,8 +131,10 @@ def their_steady_initial(model, mean_circuit):
     rho = float(model.sim.get("rho_infty", 0.5))
     changes, scaled = {}, []
     for e in model.netlist["elements"]:
-        # the capacitances their to_steady removes and the volume states they carry
-        params, states = get_type(e["type"]).svzerod_steady_zeroed
+        # the capacitances their to_steady removes and the volume states they carry: the type's
+        # own declaration, as for svzerod_blocks (coronary_var_res_bc, a subclass of coronary_bc,
+        # declares none: their steady form of it also fixes Ram at Ra2_min, which this does not)
+        params, states = vars(get_type(e["type"])).get("svzerod_steady_zeroed", ((), ()))
         for p in params:
             path = f"{e['id']}.{p}"
             changes[path] = float(cm.parameters.values[path][0]) * EPS
