@@ -20,7 +20,8 @@
 #   oe               elements whose observables expressions read (evaluated before them)
 #   nonlin           1 if some element is nonlinear in the pressures (Newton on the nodes)
 #   cm (E,)          1 if the element's matrix stamp is constant (summed once into A0)
-#   st (E,)          1 if its whole stamp is constant ("static": stamped once, into A0 and b0)
+#   st (E,)          1 if its whole stamp is constant ("static": stamped once, into A0 and b0),
+#                    2 if it is nonlinear in the pressures (stamped at every Newton iterate), else 0
 # Units: as the numpy path -- pressures mmHg, flows mL/s, time s, states in declared units.
 #
 # Entry points called from Python: rhs, rhs_batch, nodal_outputs, integrate_batch(_bdf).  Every other compiled
@@ -62,7 +63,9 @@ def make_work(lay):
             np.zeros(n + 1), np.zeros(n + 1),
             # 28-30: scratch of the waveform sums and the expression programs (no allocation in
             # the functions compiled without numba's runtime)
-            np.zeros(WAVE_SUM_DEPTH), np.zeros(WAVE_SUM_DEPTH, dtype=np.int64), np.zeros(EXPR_STACK))
+            np.zeros(WAVE_SUM_DEPTH), np.zeros(WAVE_SUM_DEPTH, dtype=np.int64), np.zeros(EXPR_STACK),
+            # 31-33: the nodal system's iterate-independent part A1 (Sw1 condensed), b1 (solve_nodes)
+            np.zeros((n + 1, n + 1)), np.zeros((n + 1, n + 1)), np.zeros(n + 1))
 
 
 # inline="always" (numba IR inlining) on the small helpers called inside the per-evaluation
@@ -206,51 +209,96 @@ def condense(lay, work):
 
 
 @njit(cache=True, nogil=True, inline="always")
+def add_stamp(e, L, eu, ui, cm, Al, bl, A, Sw, b, schur, vpos, n):
+    """Add element e's local stamp (Al, bl) into the nodal right-hand side b and, where its
+    matrix is not constant (cm 0; the constant ones are in A0), into A (dense path) or into
+    the condensed Sw (its V unknowns: a varying stamp touches only those)."""
+    for i in range(L[e]):
+        r = ui[eu[e] + i]
+        b[r] += bl[i]
+        if cm[e] == 0:
+            if schur:
+                if r < n:
+                    for j in range(L[e]):
+                        c = ui[eu[e] + j]
+                        if c < n:
+                            Sw[vpos[r], vpos[c]] += Al[i, j]
+            else:
+                for j in range(L[e]):
+                    A[r, ui[eu[e] + j]] += Al[i, j]
+
+
+@njit(cache=True, nogil=True, inline="always")
 def solve_nodes(t, x, Pe, lay, work):
     """Node pressures and branch flows u (n+1,; u[n] = 0 is ground) for states x: the MNA
     system A0 + (varying stamps) and b0 + (non-static right-hand sides), solved densely
     (Newton for elements nonlinear in the pressures).  prepare_static must have run for these
-    parameters.  Returns False if the system is singular or Newton fails."""
+    parameters.  Returns False if the system is singular or Newton fails.
+
+    With Newton (nonlin), the stamps that do not depend on the iterate (st 0: elements affine
+    in the pressures; they depend on t and x only, e.g. a pressure table or a chamber's
+    elastance) are summed once per solve into A1 (or Sw1) and b1, and only the elements
+    nonlinear in the pressures (st 2) are stamped again at every iterate (svZeroDSolver's
+    split of a block's contributions by what they depend on)."""
     (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st) = lay
     A, b, u, Al, bl, un, A0, b0 = work[2], work[3], work[4], work[5], work[6], work[8], work[14], work[15]
     ul, pl, xl, il, piv = work[7], work[9], work[10], work[11], work[16]
     Fc, Z, S0, Avc, Sw, pivc, order, vpos, meta, y, rv = (work[17], work[18], work[19], work[20], work[21],
                                                           work[22], work[23], work[24], work[25], work[26],
                                                           work[27])
+    A1, Sw1, b1 = work[31], work[32], work[33]
     schur = meta[2] == 1
     nc = meta[0]
     nv = meta[1]
     if nonlin == 0:
         for i in range(n + 1):
             u[i] = 0.0
-    for it in range(NEWTON_MAXIT):
+    else:  # the iterate-independent part, once
         for i in range(n + 1):
-            b[i] = b0[i]
+            b1[i] = b0[i]
         if schur:
             for a in range(nv):
                 for c in range(nv):
-                    Sw[a, c] = S0[a, c]
+                    Sw1[a, c] = S0[a, c]
         else:
             for i in range(n + 1):
                 for j in range(n + 1):
-                    A[i, j] = A0[i, j]
+                    A1[i, j] = A0[i, j]
         for e in range(et.shape[0]):
-            if st[e] == 1:
-                continue
-            stamp_element(e, t, x, Pe, et, L, ep, ex, eu, ui, eo, io, u, Al, bl, ul, pl, xl, il)
-            for i in range(L[e]):
-                r = ui[eu[e] + i]
-                b[r] += bl[i]
-                if cm[e] == 0:
-                    if schur:
-                        if r < n:
-                            for j in range(L[e]):
-                                c = ui[eu[e] + j]
-                                if c < n:
-                                    Sw[vpos[r], vpos[c]] += Al[i, j]
-                    else:
-                        for j in range(L[e]):
-                            A[r, ui[eu[e] + j]] += Al[i, j]
+            if st[e] == 0:
+                stamp_element(e, t, x, Pe, et, L, ep, ex, eu, ui, eo, io, u, Al, bl, ul, pl, xl, il)
+                add_stamp(e, L, eu, ui, cm, Al, bl, A1, Sw1, b1, schur, vpos, n)
+    for it in range(NEWTON_MAXIT):
+        if nonlin == 0:
+            for i in range(n + 1):
+                b[i] = b0[i]
+            if schur:
+                for a in range(nv):
+                    for c in range(nv):
+                        Sw[a, c] = S0[a, c]
+            else:
+                for i in range(n + 1):
+                    for j in range(n + 1):
+                        A[i, j] = A0[i, j]
+            for e in range(et.shape[0]):
+                if st[e] != 1:
+                    stamp_element(e, t, x, Pe, et, L, ep, ex, eu, ui, eo, io, u, Al, bl, ul, pl, xl, il)
+                    add_stamp(e, L, eu, ui, cm, Al, bl, A, Sw, b, schur, vpos, n)
+        else:
+            for i in range(n + 1):
+                b[i] = b1[i]
+            if schur:
+                for a in range(nv):
+                    for c in range(nv):
+                        Sw[a, c] = Sw1[a, c]
+            else:
+                for i in range(n + 1):
+                    for j in range(n + 1):
+                        A[i, j] = A1[i, j]
+            for e in range(et.shape[0]):
+                if st[e] == 2:
+                    stamp_element(e, t, x, Pe, et, L, ep, ex, eu, ui, eo, io, u, Al, bl, ul, pl, xl, il)
+                    add_stamp(e, L, eu, ui, cm, Al, bl, A, Sw, b, schur, vpos, n)
         if schur:
             # y = Acc^-1 b_C;  (S0 + varying) u_V = b_V - Avc y;  u_C = y - Z u_V
             for i in range(nc):
