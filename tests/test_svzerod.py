@@ -450,12 +450,12 @@ def test_chamber_case_keeps_its_start_and_passes():
     """chamber_elastance_inductor: both valves closed most of the cycle make its slowest mode
     far slower than its 30 s run, so the runner starts it by their steady_initial procedure,
     which gives their start (their solver's t = 0 row with output_all_cycles: Vc 96.06182131 mL,
-    Q_out -9.2214539e-4 mL/s in their cgs units), and the case passes against converged/; an
-    RCR case forgets its start (tau 0.1 s)."""
+    Q_out -9.2214539e-4 mL/s in their cgs units), its drift tolerances are tight on the chamber
+    volume only, and the case passes against converged/; an RCR case forgets its start (tau 0.1 s)."""
     import json
 
     from hemocircuit.analyses.op import operating_point
-    from hemocircuit.svzerod.conformance import keeps_its_start, run_case
+    from hemocircuit.svzerod.conformance import DRIFT_ATOL, DRIFT_ATOL_OTHERS, drift_atol, keeps_its_start, run_case
     from hemocircuit.svzerod.importer import guess_units
     from hemocircuit.svzerod.output import _circuits
     from hemocircuit.svzerod.steady_initial import their_steady_initial
@@ -468,6 +468,10 @@ def test_chamber_case_keeps_its_start_and_passes():
 
     m, (c, cm) = model_of("chamber_elastance_inductor")
     assert keeps_its_start(m, cm, operating_point(cm).x)
+    # the tight absolute tolerance on the state the slow mode moves only (the chamber volume)
+    atol = drift_atol(m, cm, operating_point(cm).x)
+    tight = [n for n, a in zip(c.state_names, atol) if a == DRIFT_ATOL]
+    assert tight == ["ventricle.Vc"] and set(atol) == {DRIFT_ATOL, DRIFT_ATOL_OTHERS}, atol
     x = their_steady_initial(m, cm)
     assert x[c.state_names.index("ventricle.Vc")] == pytest.approx(96.06182131239247, abs=1e-7)
     assert x[c.state_names.index("ventricle.Q_out")] == pytest.approx(-9.221453883781882e-4, rel=1e-6)

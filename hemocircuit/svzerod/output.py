@@ -316,7 +316,7 @@ def simulate_svzerod(model, sets=None, rtol=None, start="operating-point", cfg=N
     :func:`start_state` ``start``.  ``sets``: {ID.PARAM: value} changed in the circuit and in
     its time-averaged variant (``--set``).  ``rtol``: the integrator's, by default the
     conformance runner's for the model (conformance.case_rtol, or its DRIFT_RTOL and
-    DRIFT_ATOL for a model whose run keeps its start).  With ``use_cycle_to_cycle_error``,
+    drift_atol for a model whose run keeps its start).  With ``use_cycle_to_cycle_error``,
     no RCR and ``cfg`` (their configuration, for their vessel caps) the run goes on one cycle
     at a time until their criterion holds (:func:`their_extra_cycles`)."""
     from ..analyses.transient import TransientResult, simulate
@@ -335,11 +335,12 @@ def simulate_svzerod(model, sets=None, rtol=None, start="operating-point", cfg=N
     atol = None
     if rtol is None:  # the conformance runner's: drift tolerances for a run that keeps its start
         from ..analyses.op import operating_point
-        from .conformance import DRIFT_ATOL, DRIFT_RTOL, keeps_its_start
+        from .conformance import DRIFT_RTOL, drift_atol, keeps_its_start
 
         rtol = case_rtol(model)
-        if keeps_its_start(model, cm, operating_point(cm).x):
-            rtol, atol = DRIFT_RTOL, DRIFT_ATOL
+        x_op = operating_point(cm).x
+        if keeps_its_start(model, cm, x_op):
+            rtol, atol = DRIFT_RTOL, drift_atol(model, cm, x_op)
     res = simulate(c, model.n_cycles * model.period, dt=dt, x0=x0, rtol=rtol, atol=atol, progress=False)
     extra = 0
     if cfg is not None and runs_extra_cycles(model, c):
