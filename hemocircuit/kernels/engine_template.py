@@ -253,52 +253,42 @@ def solve_nodes(t, x, Pe, lay, work):
     if nonlin == 0:
         for i in range(n + 1):
             u[i] = 0.0
-    else:  # the iterate-independent part, once
+    for it in range(NEWTON_MAXIT):
+        # the system's base: A0, b0 at the first iterate, then A1, b1 (the base plus the
+        # iterate-independent stamps, kept from the first)
+        Ab, Sb, bb = (A0, S0, b0) if it == 0 else (A1, Sw1, b1)
         for i in range(n + 1):
-            b1[i] = b0[i]
+            b[i] = bb[i]
         if schur:
             for a in range(nv):
                 for c in range(nv):
-                    Sw1[a, c] = S0[a, c]
+                    Sw[a, c] = Sb[a, c]
         else:
             for i in range(n + 1):
                 for j in range(n + 1):
-                    A1[i, j] = A0[i, j]
-        for e in range(et.shape[0]):
-            if st[e] == 0:
+                    A[i, j] = Ab[i, j]
+        # phase 0 (first iterate only): the stamps that do not depend on the iterate (st 0);
+        # phase 1: those nonlinear in the pressures (st 2).  One stamp call site: each inlined
+        # copy of the kernels' stamps costs compile time
+        for ph in range(2):
+            if ph == 0 and it > 0:
+                continue
+            for e in range(et.shape[0]):
+                if st[e] != 2 * ph:
+                    continue
                 stamp_element(e, t, x, Pe, et, L, ep, ex, eu, ui, eo, io, u, Al, bl, ul, pl, xl, il)
-                add_stamp(e, L, eu, ui, cm, Al, bl, A1, Sw1, b1, schur, vpos, n)
-    for it in range(NEWTON_MAXIT):
-        if nonlin == 0:
-            for i in range(n + 1):
-                b[i] = b0[i]
-            if schur:
-                for a in range(nv):
-                    for c in range(nv):
-                        Sw[a, c] = S0[a, c]
-            else:
+                add_stamp(e, L, eu, ui, cm, Al, bl, A, Sw, b, schur, vpos, n)
+            if ph == 0 and nonlin != 0:  # keep the iterate-independent sum for the next iterates
                 for i in range(n + 1):
-                    for j in range(n + 1):
-                        A[i, j] = A0[i, j]
-            for e in range(et.shape[0]):
-                if st[e] != 1:
-                    stamp_element(e, t, x, Pe, et, L, ep, ex, eu, ui, eo, io, u, Al, bl, ul, pl, xl, il)
-                    add_stamp(e, L, eu, ui, cm, Al, bl, A, Sw, b, schur, vpos, n)
-        else:
-            for i in range(n + 1):
-                b[i] = b1[i]
-            if schur:
-                for a in range(nv):
-                    for c in range(nv):
-                        Sw[a, c] = Sw1[a, c]
-            else:
-                for i in range(n + 1):
-                    for j in range(n + 1):
-                        A[i, j] = A1[i, j]
-            for e in range(et.shape[0]):
-                if st[e] == 2:
-                    stamp_element(e, t, x, Pe, et, L, ep, ex, eu, ui, eo, io, u, Al, bl, ul, pl, xl, il)
-                    add_stamp(e, L, eu, ui, cm, Al, bl, A, Sw, b, schur, vpos, n)
+                    b1[i] = b[i]
+                if schur:
+                    for a in range(nv):
+                        for c in range(nv):
+                            Sw1[a, c] = Sw[a, c]
+                else:
+                    for i in range(n + 1):
+                        for j in range(n + 1):
+                            A1[i, j] = A[i, j]
         if schur:
             # y = Acc^-1 b_C;  (S0 + varying) u_V = b_V - Avc y;  u_C = y - Z u_V
             for i in range(nc):
