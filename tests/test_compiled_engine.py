@@ -611,3 +611,51 @@ def test_a_failed_member_has_nan_rows_and_the_others_run_as_alone(method):
     assert st[1, 0] == 0 and np.array_equal(X[1], alone[0])
     V = X[1, :, c.state_names.index("C1.V")]
     assert np.max(np.abs(V - 0.5 * 80.0 * (1 - np.exp(-t)))) < 1e-6 * 40.0
+
+
+def test_nodal_newton_with_condensation_matches_numpy_path(tmp_path):
+    """A ValveTanh (nonlinear in the pressures: stamped at every Newton iterate) between chains
+    of capacitive vessels, a pressure table at the inlet (time-dependent, stamped once per
+    nodal solve) and a resistance outlet: few enough unknowns touched by the varying stamps
+    (the valve's 3) that the nodal system is condensed (2 nv <= n), so the condensed Newton
+    runs with the iterate-independent stamps kept from the first iterate.  Its right-hand
+    side equals the numpy path's (a Python Newton on the whole system) at states where the
+    valve is open, closed and in its switching band."""
+    import json
+
+    from hemocircuit.svzerod import load_svzerod
+
+    chain = [{"vessel_name": f"v{i}", "vessel_id": i, "zero_d_element_type": "BloodVessel",
+              "zero_d_element_values": {"R_poiseuille": 100.0 + 10 * i, "C": 1e-4 * (1 + i)},
+              "boundary_conditions": ({"inlet": "IN"} if i == 0 else {}) | ({"outlet": "OUT"} if i == 5 else {})}
+             for i in range(6)]
+    cfg = {"simulation_parameters": {"number_of_cardiac_cycles": 1, "number_of_time_pts_per_cardiac_cycle": 11,
+                                     "steady_initial": False},
+           "vessels": chain,
+           "junctions": [{"junction_name": f"J{i}", "junction_type": "NORMAL_JUNCTION", "inlet_vessels": [i],
+                          "outlet_vessels": [i + 1]} for i in (0, 1, 3, 4)],
+           "valves": [{"type": "ValveTanh", "name": "valve",
+                       "params": {"Rmin": 100.0, "Rmax": 1e5, "Steepness": 100.0, "upstream_block": "v2",
+                                  "downstream_block": "v3"}}],
+           "boundary_conditions": [
+               {"bc_name": "IN", "bc_type": "PRESSURE", "bc_values": {"t": [0.0, 0.5, 1.0], "P": [0.0, 10.0, 0.0]}},
+               {"bc_name": "OUT", "bc_type": "RESISTANCE", "bc_values": {"R": 1000.0, "Pd": 2.0}}]}
+    p = tmp_path / "chain.json"
+    p.write_text(json.dumps(cfg))
+    c = load_svzerod(str(p), units="mmHg")
+    system = CompiledSystem.of(c)
+    n, cm, eu, ui, st = system.lay[0], system.lay[22], system.lay[7], system.lay[8], system.lay[23]
+    varying = {int(ui[k]) for e in range(len(cm)) if cm[e] == 0 for k in range(eu[e], eu[e + 1]) if ui[k] < n}
+    assert 2 * len(varying) <= n, (len(varying), n)  # the condensed path
+    assert 2 in st and 0 in st  # stamps of both kinds
+    P = system.params(c)
+    C = 1e-4 * (1 + np.arange(c.nx))  # the vessels' volumes at pressures p: V = C p
+    seen = set()
+    for t in (0.2, 0.5, 0.8):
+        for p_down in np.linspace(0.0, 12.0, 25):  # the chain's pressures past the valve
+            x = C * np.where(np.arange(c.nx) < 3, 5.0, p_down)
+            status = float(np.asarray(c.outputs(np.array([t]), x[None])["valve.status"])[0])
+            seen.add("open" if status < 0.01 else "closed" if status > 0.99 else "band")
+            f_np, f_c = c.rhs(t, x), system.rhs(t, x, P)
+            assert np.allclose(f_c, f_np, rtol=1e-8, atol=1e-10 * np.max(np.abs(f_np))), (t, p_down, f_c, f_np)
+    assert seen == {"open", "closed", "band"}

@@ -7,7 +7,7 @@ import os
 import numpy as np
 import pytest
 
-from hemocircuit.errors import NetlistError
+from hemocircuit.errors import HemocircuitError, NetlistError
 from hemocircuit.svzerod import import_svzerod, load_svzerod
 
 SHARED = os.environ.get("SVZEROD_CASES", "/work/shared/svzerod")
@@ -469,7 +469,8 @@ def test_chamber_case_keeps_its_start_and_passes():
     m, (c, cm) = model_of("chamber_elastance_inductor")
     assert keeps_its_start(m, cm, operating_point(cm).x)
     # the tight absolute tolerance on the state the slow mode moves only (the chamber volume)
-    atol = drift_atol(m, cm, operating_point(cm).x)
+    atol = drift_atol(m, cm, operating_point(cm).x, c)
+    assert len(atol) == c.nx
     tight = [n for n, a in zip(c.state_names, atol) if a == DRIFT_ATOL]
     assert tight == ["ventricle.Vc"] and set(atol) == {DRIFT_ATOL, DRIFT_ATOL_OTHERS}, atol
     x = their_steady_initial(m, cm)
@@ -479,6 +480,8 @@ def test_chamber_case_keeps_its_start_and_passes():
     assert r.ok, (r.err_p, r.err_q, r.worst, r.note)
     m, (c, cm) = model_of("pulsatileFlow_R_RCR")
     assert not keeps_its_start(m, cm, operating_point(cm).x)
+    with pytest.raises(HemocircuitError, match="forgets it"):  # no drift to keep
+        drift_atol(m, cm, operating_point(cm).x, c)
 
 
 @have_cases

@@ -105,7 +105,7 @@ class _Vessel(Component):
         return A_loc, b_loc
 
     def kernel_options(self):
-        return np.array([int(self.cap), int(self.ind)], dtype=np.int64)
+        return np.array([int(self.cap), int(self.ind), int(self.opts["stenotic"])], dtype=np.int64)
 
     def dc_short(self):
         return self.ind and not self.cap
@@ -223,10 +223,15 @@ class BloodVessel(_Vessel):
 
 
 # --- compiled path (hemocircuit.kernels contract) -------------------------------------------
-# p = [R_poiseuille, C, L, stenosis_coefficient]; iopt = [capacitive, inductive]; layout as above.
+# p = [R_poiseuille, C, L, stenosis_coefficient]; iopt = [capacitive, inductive, stenotic];
+# layout as above.  The stenosis term is linearised at the iterate's flow only for a stenotic
+# vessel: an affine one is stamped once per nodal solve (engine_template.solve_nodes), its
+# iterate not read (the numpy path's u is None)
 @jit
 def vessel_stamp(p, x, u, t, iopt, A, b):
     R, S = p[0], p[3]
+    if iopt[2] == 0:
+        S = 0.0
     if iopt[0] != 0:
         Pc = x[0] / p[1]
         slope, off = k_stenosis_linearised(R, S, u[3])

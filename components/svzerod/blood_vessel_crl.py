@@ -109,7 +109,7 @@ class BloodVesselCRL(_Vessel):
                       observables=("V",) if self.cap else ())
 
 
-# --- compiled path: p = [R_poiseuille, C, L, stenosis_coefficient], iopt = [capacitive, inductive]
+# --- compiled path: p = [R_poiseuille, C, L, stenosis_coefficient], iopt = [capacitive, inductive, stenotic]
 @jit
 def crl_stamp(p, x, u, t, iopt, A, b):
     if iopt[0] == 0:
@@ -124,7 +124,7 @@ def crl_stamp(p, x, u, t, iopt, A, b):
         b[0] = -x[1]
         b[1] = x[1]
     else:
-        slope, off = k_stenosis_linearised(p[0], p[3], u[4])
+        slope, off = k_stenosis_linearised(p[0], p[3] if iopt[2] != 0 else 0.0, u[4])
         A[0, 4] = 1.0
         A[1, 4] = -1.0
         A[4, 0] = 1.0

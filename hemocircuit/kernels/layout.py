@@ -107,8 +107,8 @@ def build_layout(circuit) -> Layout | None:
             const = g.comp.matrix_constant(name for j, name, _ in g.exprs if j == i)
             cm.append(int(const))
             # 1 static, 2 stamped at every Newton iterate, 0 once per nodal solve (engine_template)
-            st.append(1 if (const and g.S == 0 and not own and not g.comp.time_dependent)
-                      else (0 if g.comp.linear_in_pressure else 2))
+            st.append(2 if not g.comp.linear_in_pressure
+                      else (1 if (const and g.S == 0 and not own and not g.comp.time_dependent) else 0))
             L.append(g.L)
             S.append(g.S)
             for name in names:

@@ -107,20 +107,21 @@ def parse_result(d):
 #: is 96 mL, so rtol |Vc| is no useful bound: at rtol 1e-5 .. 1e-8 each opening and closing
 #: of its inflow valve left an error of ~9e-7 and ~6e-7 mL that the error estimate did not see,
 #: 1.5e-6 mL per cycle, 2 % of the range after 30 cycles).  Absolute tolerances per unit of
-#: state scale (:func:`drift_atol`): DRIFT_ATOL on the states the slowest mode moves (the
+#: state scale (:func:`drift_atol`): DRIFT_ATOL on the states the slow modes move (the
 #: drift), DRIFT_ATOL_OTHERS on the rest, which forget their errors within a cycle
 #: (chamber_elastance_inductor: 1e-8 on every state took 6 942 steps and left Vc 8.2e-3 of
 #: its range off their converged result; these 4 476 steps and 1.6e-3, docs/svzerod.md "Speed")
 DRIFT_RTOL, DRIFT_ATOL, DRIFT_ATOL_OTHERS = 1e-10, 1e-10, 1e-6
-#: a state is moved by the slowest mode when its component of the mode (in units of the state
-#: scales) is at least this fraction of the largest
+#: a state is moved by a slow mode when its component of the mode (in units of the state
+#: scales) is at least this fraction of the mode's largest
 DRIFT_COMPONENT = 0.1
 
 
-def slowest_mode(model, mean_circuit, x_op):
-    """(rate [1/s], mode in units of the state scales) of the time-averaged model's slowest
-    mode, linearised at its operating point ``x_op``; None for a closed loop, a model without
-    states or one whose run starts from their initial condition (steady_initial false)."""
+def _modes(model, mean_circuit, x_op):
+    """(rates [1/s] (nx,), modes in units of the state scales, one per column) of the
+    time-averaged model linearised at its operating point ``x_op``; None for a closed loop, a
+    model without states or one whose run starts from their initial condition (steady_initial
+    false)."""
     cm = mean_circuit
     if cm.nx == 0 or model.closed or not model.sim.get("steady_initial", True):
         return None
@@ -128,8 +129,7 @@ def slowest_mode(model, mean_circuit, x_op):
     J = J.toarray() if hasattr(J, "toarray") else np.asarray(J)
     s = np.asarray(cm.state_scales, dtype=float)
     w, V = np.linalg.eig(J * s[None, :] / s[:, None])  # scaled states: components compare
-    k = int(np.argmin(np.abs(w.real)))
-    return float(abs(w[k].real)), np.abs(V[:, k])
+    return np.abs(w.real), np.abs(V)
 
 
 def keeps_its_start(model, mean_circuit, x_op):
@@ -139,17 +139,30 @@ def keeps_its_start(model, mean_circuit, x_op):
     procedure (:mod:`hemocircuit.svzerod.steady_initial`) is the start to compare with, not
     our operating point.  chamber_elastance_inductor: 5.5e5 s (both valves closed, Rmax 1e5)
     against 30 s; every other shared open-loop case <= 0.1 s."""
-    mode = slowest_mode(model, mean_circuit, x_op)
-    return mode is not None and mode[0] * model.n_cycles * model.period < 1.0
+    modes = _modes(model, mean_circuit, x_op)
+    return modes is not None and float(modes[0].min()) * model.n_cycles * model.period < 1.0
 
 
-def drift_atol(model, mean_circuit, x_op):
-    """Absolute tolerances per unit of state scale (nx,) for a case that keeps its start:
-    DRIFT_ATOL on the states its slowest mode moves (component >= DRIFT_COMPONENT of the
-    largest), DRIFT_ATOL_OTHERS elsewhere.  chamber_elastance_inductor: the mode is the
-    chamber volume Vc (components 1, 9e-5 for its outflow, 9e-7 for the vessel)."""
-    _, v = slowest_mode(model, mean_circuit, x_op)
-    return np.where(v >= DRIFT_COMPONENT * v.max(), DRIFT_ATOL, DRIFT_ATOL_OTHERS)
+def drift_atol(model, mean_circuit, x_op, circuit):
+    """Absolute tolerances per unit of state scale (nx,) for ``circuit``'s run of a case that
+    keeps its start: DRIFT_ATOL on the states its slow modes move (those whose time constant
+    outlasts the run, as :func:`keeps_its_start`; a state is moved by a mode when its
+    component is >= DRIFT_COMPONENT of the mode's largest), DRIFT_ATOL_OTHERS elsewhere.
+    chamber_elastance_inductor: one such mode, the chamber volume Vc (components 1, 9e-5 for
+    its outflow, 9e-7 for the vessel).  The states of ``circuit`` and of the time-averaged
+    ``mean_circuit`` must be the same, in the same order."""
+    modes = _modes(model, mean_circuit, x_op)
+    run = model.n_cycles * model.period
+    if modes is None or not np.any(modes[0] * run < 1.0):
+        raise HemocircuitError(f"{model.name}: drift tolerances are for a run that keeps its start "
+                               "(a mode slower than the run); this one forgets it")
+    if list(circuit.state_names) != list(mean_circuit.state_names):
+        raise HemocircuitError(f"{model.name}: the time-averaged model's states {list(mean_circuit.state_names)} "
+                               f"are not the model's {list(circuit.state_names)}")
+    rates, V = modes
+    slow = V[:, rates * run < 1.0]
+    moved = np.any(slow >= DRIFT_COMPONENT * slow.max(axis=0), axis=1)  # each slow mode by its own largest
+    return np.where(moved, DRIFT_ATOL, DRIFT_ATOL_OTHERS)
 
 
 def case_start(model, mean_circuit):
@@ -206,7 +219,7 @@ def simulate_case(model, rtol=None, timed_runs=1, atol=None, cfg=None):
     T, N, ncyc = model.period, model.points, model.n_cycles
     start = case_start(model, cm) if c.nx else "operating-point"  # a choice of procedure: not timed
     if rtol is None:
-        rtol, atol = ((DRIFT_RTOL, drift_atol(model, cm, operating_point(cm).x)) if start == "their-steady"
+        rtol, atol = ((DRIFT_RTOL, drift_atol(model, cm, operating_point(cm).x, c)) if start == "their-steady"
                       else (case_rtol(model), atol))
     t_end = ncyc * T
     times = []

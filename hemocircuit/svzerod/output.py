@@ -340,7 +340,7 @@ def simulate_svzerod(model, sets=None, rtol=None, start="operating-point", cfg=N
         rtol = case_rtol(model)
         x_op = operating_point(cm).x
         if keeps_its_start(model, cm, x_op):
-            rtol, atol = DRIFT_RTOL, drift_atol(model, cm, x_op)
+            rtol, atol = DRIFT_RTOL, drift_atol(model, cm, x_op, c)
     res = simulate(c, model.n_cycles * model.period, dt=dt, x0=x0, rtol=rtol, atol=atol, progress=False)
     extra = 0
     if cfg is not None and runs_extra_cycles(model, c):
