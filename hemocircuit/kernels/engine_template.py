@@ -50,7 +50,6 @@ def make_work(lay):
         Pm = max(Pm, ep[e + 1] - ep[e])
         Im = max(Im, eo[e + 1] - eo[e])
         Om = max(Om, eb[e + 1] - eb[e])
-    nN = n + 1 if nonlin != 0 else 1  # the Newton-only buffers (31-32)
     return (np.zeros(ep[-1]), np.zeros(max(eb[-1], 1)), np.zeros((n + 1, n + 1)), np.zeros(n + 1),
             np.zeros(n + 1), np.zeros((Lm, Lm)), np.zeros(Lm), np.zeros(Lm), np.zeros(n + 1),
             np.zeros(Pm), np.zeros(Sm), np.zeros(Im, dtype=np.int64), np.zeros(Sm), np.zeros(Om),
@@ -65,9 +64,8 @@ def make_work(lay):
             # 28-30: scratch of the waveform sums and the expression programs (no allocation in
             # the functions compiled without numba's runtime)
             np.zeros(WAVE_SUM_DEPTH), np.zeros(WAVE_SUM_DEPTH, dtype=np.int64), np.zeros(EXPR_STACK),
-            # 31-32: the nodal system's iterate-independent part (solve_nodes): its matrix (dense
-            # or condensed: one buffer serves either), b1; (1, 1) without Newton
-            np.zeros((nN, nN)), np.zeros(nN))
+            # 31-33: the nodal system's iterate-independent part A1 (Sw1 condensed), b1 (solve_nodes)
+            np.zeros((n + 1, n + 1)), np.zeros((n + 1, n + 1)), np.zeros(n + 1))
 
 
 # inline="always" (numba IR inlining) on the small helpers called inside the per-evaluation
@@ -248,7 +246,7 @@ def solve_nodes(t, x, Pe, lay, work):
     Fc, Z, S0, Avc, Sw, pivc, order, vpos, meta, y, rv = (work[17], work[18], work[19], work[20], work[21],
                                                           work[22], work[23], work[24], work[25], work[26],
                                                           work[27])
-    A1, Sw1, b1 = work[31], work[31], work[32]  # one buffer: a solve is either dense or condensed
+    A1, Sw1, b1 = work[31], work[32], work[33]
     schur = meta[2] == 1
     nc = meta[0]
     nv = meta[1]
@@ -275,8 +273,6 @@ def solve_nodes(t, x, Pe, lay, work):
         for ph in range(2):
             if ph == 0 and it > 0:
                 continue
-            if ph == 1 and nonlin == 0:  # no element is nonlinear in the pressures
-                break
             for e in range(et.shape[0]):
                 if st[e] != 2 * ph:
                     continue
