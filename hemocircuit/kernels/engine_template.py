@@ -229,6 +229,21 @@ def add_stamp(e, L, eu, ui, cm, Al, bl, A, Sw, b, schur, vpos, n):
 
 
 @njit(cache=True, nogil=True, inline="always")
+def copy_nodal(As, Ss, bs, A, Sw, b, schur, nv, n):
+    """(A or, condensed, Sw; b) = (As or Ss; bs): the nodal system's matrix and right-hand side."""
+    for i in range(n + 1):
+        b[i] = bs[i]
+    if schur:
+        for a in range(nv):
+            for c in range(nv):
+                Sw[a, c] = Ss[a, c]
+    else:
+        for i in range(n + 1):
+            for j in range(n + 1):
+                A[i, j] = As[i, j]
+
+
+@njit(cache=True, nogil=True, inline="always")
 def solve_nodes(t, x, Pe, lay, work):
     """Node pressures and branch flows u (n+1,; u[n] = 0 is ground) for states x: the MNA
     system A0 + (varying stamps) and b0 + (non-static right-hand sides), solved densely
@@ -256,17 +271,10 @@ def solve_nodes(t, x, Pe, lay, work):
     for it in range(NEWTON_MAXIT):
         # the system's base: A0, b0 at the first iterate, then A1, b1 (the base plus the
         # iterate-independent stamps, kept from the first)
-        Ab, Sb, bb = (A0, S0, b0) if it == 0 else (A1, Sw1, b1)
-        for i in range(n + 1):
-            b[i] = bb[i]
-        if schur:
-            for a in range(nv):
-                for c in range(nv):
-                    Sw[a, c] = Sb[a, c]
+        if it == 0:
+            copy_nodal(A0, S0, b0, A, Sw, b, schur, nv, n)
         else:
-            for i in range(n + 1):
-                for j in range(n + 1):
-                    A[i, j] = Ab[i, j]
+            copy_nodal(A1, Sw1, b1, A, Sw, b, schur, nv, n)
         # phase 0 (first iterate only): the stamps that do not depend on the iterate (st 0);
         # phase 1: those nonlinear in the pressures (st 2).  One stamp call site: each inlined
         # copy of the kernels' stamps costs compile time
@@ -279,16 +287,7 @@ def solve_nodes(t, x, Pe, lay, work):
                 stamp_element(e, t, x, Pe, et, L, ep, ex, eu, ui, eo, io, u, Al, bl, ul, pl, xl, il)
                 add_stamp(e, L, eu, ui, cm, Al, bl, A, Sw, b, schur, vpos, n)
             if ph == 0 and nonlin != 0:  # keep the iterate-independent sum for the next iterates
-                for i in range(n + 1):
-                    b1[i] = b[i]
-                if schur:
-                    for a in range(nv):
-                        for c in range(nv):
-                            Sw1[a, c] = Sw[a, c]
-                else:
-                    for i in range(n + 1):
-                        for j in range(n + 1):
-                            A1[i, j] = A[i, j]
+                copy_nodal(A, Sw, b, A1, Sw1, b1, schur, nv, n)
         if schur:
             # y = Acc^-1 b_C;  (S0 + varying) u_V = b_V - Avc y;  u_C = y - Z u_V
             for i in range(nc):

@@ -117,13 +117,20 @@ DRIFT_RTOL, DRIFT_ATOL, DRIFT_ATOL_OTHERS = 1e-10, 1e-10, 1e-6
 DRIFT_COMPONENT = 0.1
 
 
+def _starts_steady(model, mean_circuit):
+    """True when the run may start from a steady state (theirs or our operating point): an
+    open loop with states and steady_initial (their default); otherwise their initial
+    condition is the start and no operating point is needed."""
+    return mean_circuit.nx > 0 and not model.closed and model.sim.get("steady_initial", True)
+
+
 def _modes(model, mean_circuit, x_op):
     """(rates [1/s] (nx,), modes in units of the state scales, one per column) of the
     time-averaged model linearised at its operating point ``x_op``; None for a closed loop, a
     model without states or one whose run starts from their initial condition (steady_initial
     false)."""
     cm = mean_circuit
-    if cm.nx == 0 or model.closed or not model.sim.get("steady_initial", True):
+    if not _starts_steady(model, cm):
         return None
     J = cm.jacobian(0.0, x_op)
     J = J.toarray() if hasattr(J, "toarray") else np.asarray(J)
@@ -165,6 +172,19 @@ def drift_atol(model, mean_circuit, x_op, circuit):
     return np.where(moved, DRIFT_ATOL, DRIFT_ATOL_OTHERS)
 
 
+def run_tolerances(model, mean_circuit, circuit):
+    """(rtol, atol) the runner integrates ``circuit`` (the model) at: DRIFT_RTOL and
+    :func:`drift_atol` for a run that keeps its start, else :func:`case_rtol` and None (the
+    integrator's default atol).  The conformance runner and ``tran --svzerod-output``."""
+    from ..analyses.op import operating_point
+
+    if _starts_steady(model, mean_circuit):
+        x_op = operating_point(mean_circuit).x
+        if keeps_its_start(model, mean_circuit, x_op):
+            return DRIFT_RTOL, drift_atol(model, mean_circuit, x_op, circuit)
+    return case_rtol(model), None
+
+
 def case_start(model, mean_circuit):
     """How the runner starts a case: 'initial' (their initial_condition: closed loops and
     steady_initial false), 'their-steady' (their procedure, for a case that keeps its start)
@@ -182,8 +202,8 @@ def simulate_case(model, rtol=None, timed_runs=1, atol=None, cfg=None):
     """Our run with their semantics: (result, mask of the rows they write, those rows' times
     in their convention, times (timed_runs, 2): wall and CPU time of each in-process solve [s]:
     the start (operating point, or their steady_initial procedure for a case that keeps its
-    start) and integration, not loading nor compiling).  ``rtol`` None: :func:`case_rtol`, or
-    DRIFT_RTOL and :func:`drift_atol` for a case that keeps its start.  The chosen start, rtol and
+    start) and integration, not loading nor compiling).  ``rtol`` None: :func:`run_tolerances`
+    (``atol`` kept unless the case keeps its start).  The chosen start, rtol and
     atol are in ``result.metadata['conformance']``.
 
     With ``use_cycle_to_cycle_error`` (``cfg``: their JSON configuration, for their vessel
@@ -219,8 +239,8 @@ def simulate_case(model, rtol=None, timed_runs=1, atol=None, cfg=None):
     T, N, ncyc = model.period, model.points, model.n_cycles
     start = case_start(model, cm) if c.nx else "operating-point"  # a choice of procedure: not timed
     if rtol is None:
-        rtol, atol = ((DRIFT_RTOL, drift_atol(model, cm, operating_point(cm).x, c)) if start == "their-steady"
-                      else (case_rtol(model), atol))
+        rtol, atol_run = run_tolerances(model, cm, c)
+        atol = atol if atol_run is None else atol_run
     t_end = ncyc * T
     times = []
     for _ in range(max(1, timed_runs)):

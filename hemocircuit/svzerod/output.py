@@ -315,12 +315,11 @@ def simulate_svzerod(model, sets=None, rtol=None, start="operating-point", cfg=N
     """(circuit, result) of a run with their semantics: t = 0 .. n T on their step grid, from
     :func:`start_state` ``start``.  ``sets``: {ID.PARAM: value} changed in the circuit and in
     its time-averaged variant (``--set``).  ``rtol``: the integrator's, by default the
-    conformance runner's for the model (conformance.case_rtol, or its DRIFT_RTOL and
-    drift_atol for a model whose run keeps its start).  With ``use_cycle_to_cycle_error``,
+    conformance runner's for the model (conformance.run_tolerances).  With ``use_cycle_to_cycle_error``,
     no RCR and ``cfg`` (their configuration, for their vessel caps) the run goes on one cycle
     at a time until their criterion holds (:func:`their_extra_cycles`)."""
     from ..analyses.transient import TransientResult, simulate
-    from .conformance import case_rtol
+    from .conformance import run_tolerances
 
     c, cm = _circuits(model, sets)
     model = their_cycles(model, c)  # a copy: the caller's model keeps its settings
@@ -334,13 +333,7 @@ def simulate_svzerod(model, sets=None, rtol=None, start="operating-point", cfg=N
         return c, res
     atol = None
     if rtol is None:  # the conformance runner's: drift tolerances for a run that keeps its start
-        from ..analyses.op import operating_point
-        from .conformance import DRIFT_RTOL, drift_atol, keeps_its_start
-
-        rtol = case_rtol(model)
-        x_op = operating_point(cm).x
-        if keeps_its_start(model, cm, x_op):
-            rtol, atol = DRIFT_RTOL, drift_atol(model, cm, x_op, c)
+        rtol, atol = run_tolerances(model, cm, c)
     res = simulate(c, model.n_cycles * model.period, dt=dt, x0=x0, rtol=rtol, atol=atol, progress=False)
     extra = 0
     if cfg is not None and runs_extra_cycles(model, c):
