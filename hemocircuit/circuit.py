@@ -1239,7 +1239,13 @@ def load(path: str, values: dict | None = None, allow_paths=None, svzerod_units=
     """Load, validate and assemble a netlist file; optionally apply {ID.PARAM: value}.
     ``allow_paths``: more folders its files may read (see hemocircuit.access);
     ``svzerod_units``: the unit system of an svZeroDSolver JSON model (netlist.load_netlist)."""
-    return assemble(load_netlist(path, allow_paths, svzerod_units)).with_values(values or {})
+    from .inputs import recording
+
+    with recording() as sources:  # every file the load reads (netlist, extends chain, tables)
+        netlist = load_netlist(path, allow_paths, svzerod_units)
+        c = assemble(netlist)
+    netlist.sources = sources
+    return c.with_values(values or {})
 
 
 # the common analyses as methods (c.simulate(), c.operating_point(), ...)

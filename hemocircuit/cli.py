@@ -507,6 +507,7 @@ def _extra_commands(only=None):
 
 
 OUTPUT_OPTIONS = ("out", "plot", "phase_plot", "svzerod_output")
+FIGURE_OPTIONS = ("plot", "phase_plot")
 
 
 def _check_outputs(args):
@@ -514,8 +515,11 @@ def _check_outputs(args):
     from . import io
     for key in OUTPUT_OPTIONS:
         path = getattr(args, key, None)
-        if path:
-            io.prepare_output(path, "--" + key.replace("_", "-"))
+        if path is not None:  # '' too: an empty name is an error, not a silent no-write
+            flag = "--" + key.replace("_", "-")
+            io.prepare_output(path, flag)
+            if key in FIGURE_OPTIONS:
+                io.figure_format(path, flag)
 
 
 def main(argv=None):

@@ -1,10 +1,13 @@
 """Writing files safely: atomic text and figure writes, output folders checked up front, and
 the series plot.
 
-Every output file (CSV, JSON, PNG) is written to a temporary file in the destination folder
-and then renamed over the destination (``os.replace``, atomic on POSIX and Windows): an
+Every output file (CSV, JSON, PNG, ...) is written to a temporary file in the destination
+folder and then renamed over the destination (``os.replace``, atomic on POSIX and Windows): an
 interrupted write (an exception, SIGINT, SIGTERM) leaves the previous file intact and never a
-truncated one.  The table formats themselves are in :mod:`hemocircuit.results`.
+truncated one.  Only a regular file is replaced, or the regular file a symbolic link in the
+same folder points to (the link stays): a FIFO, a device such as ``/dev/null``, a folder or a
+link leading elsewhere is refused.  Files get the usual mode (0666 less the umask, so 0644).
+The table formats themselves are in :mod:`hemocircuit.results`.
 """
 from __future__ import annotations
 
@@ -17,13 +20,44 @@ import numpy as np
 from .errors import HemocircuitError
 
 
-def prepare_output(path, flag="--out"):
-    """Check (before any computation) that ``path`` can be written: its folder exists, or is
-    created when the folder's parent exists; otherwise a clear error naming the option."""
-    path = os.fspath(path)
-    folder = os.path.dirname(os.path.abspath(path))
+FIGURE_FORMATS = ("png", "pdf", "svg", "svgz", "eps", "ps", "jpg", "jpeg", "tif", "tiff", "webp")
+
+
+def output_target(path, flag="--out"):
+    """The file a write of ``path`` replaces: ``path`` itself, or the regular file a symbolic
+    link ``path`` points to in the same folder.  Anything else is refused with a clear error
+    (see the module's docstring)."""
+    import stat
+
+    from .inputs import check_path
+    path = check_path(path, "output file", flag)
     if os.path.isdir(path):
         raise HemocircuitError(f"{flag} {path}: is a folder; give a file name")
+    if not os.path.lexists(path):
+        return path
+    target = os.path.realpath(path) if os.path.islink(path) else path
+    folder = os.path.realpath(os.path.dirname(os.path.abspath(path)))
+    if target != path and os.path.dirname(target) != folder:
+        raise HemocircuitError(f"{flag} {path}: a symbolic link to {target}, outside the output folder {folder}; "
+                               "give the file itself, or remove the link")
+    try:
+        mode = os.stat(target).st_mode
+    except FileNotFoundError:
+        return target  # a dangling link inside the folder: the write creates its file
+    except OSError as exc:
+        raise HemocircuitError(f"{flag} {path}: {exc.strerror or exc}") from None
+    if not stat.S_ISREG(mode):
+        raise HemocircuitError(f"{flag} {path}: not a regular file (a device, FIFO, socket or folder); an output "
+                               "only replaces a regular file: give another name")
+    return target
+
+
+def prepare_output(path, flag="--out"):
+    """Check (before any computation) that ``path`` can be written: a file name that may be
+    replaced (:func:`output_target`), a folder that exists or is created when the folder's
+    parent exists; otherwise a clear error naming the option."""
+    path = output_target(path, flag)
+    folder = os.path.dirname(os.path.abspath(path))
     if not os.path.isdir(folder):
         parent = os.path.dirname(folder)
         if not os.path.isdir(parent):
@@ -42,7 +76,7 @@ def prepare_output(path, flag="--out"):
 def atomic_file(path, mode="w", **kwargs):
     """Open a temporary file beside ``path``; on a clean exit it replaces ``path`` (fsync'd
     first), on an exception it is removed and ``path`` is left as it was."""
-    path = os.fspath(path)
+    path = output_target(path, "output")
     folder = os.path.dirname(os.path.abspath(path))
     fd, tmp = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.", suffix=".tmp", dir=folder)
     try:
@@ -79,13 +113,22 @@ def pyplot():
     return plt
 
 
+def figure_format(path, flag="--plot"):
+    """The figure format of ``path`` from its extension (png without one), or a clear error."""
+    fmt = os.path.splitext(os.fspath(path))[1].lstrip(".").lower() or "png"
+    if fmt not in FIGURE_FORMATS:
+        raise HemocircuitError(f"{flag} {path}: .{fmt} is not a figure format; use one of "
+                               f"{', '.join('.' + f for f in FIGURE_FORMATS)}")
+    return fmt
+
+
 def save_figure(fig, path, dpi=110):
     """Lay out, write (atomically) and close a figure."""
     import matplotlib.pyplot as plt
 
-    fig.tight_layout()
-    fmt = os.path.splitext(os.fspath(path))[1].lstrip(".").lower() or "png"
     try:
+        fmt = figure_format(path)
+        fig.tight_layout()
         with atomic_file(path, "wb") as fh:
             fig.savefig(fh, dpi=dpi, format=fmt)
     except OSError as exc:

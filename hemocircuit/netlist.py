@@ -11,9 +11,8 @@ import os
 import re
 from dataclasses import dataclass, field
 
-import yaml
 
-from . import limits
+from . import inputs, limits
 from .access import Access
 from .errors import NetlistError, did_you_mean, excerpt
 
@@ -50,42 +49,14 @@ class Netlist:
     input_file: str | None = None
     #: the folders this netlist's files may be read from (hemocircuit.access), for protocol tables
     allowed: list = field(default_factory=list)
+    #: the files read to load it (hemocircuit.inputs.Sources: extends chain, tables), for provenance
+    sources: object = None
 
     def element(self, eid):
         for e in self.elements:
             if e.id == eid:
                 return e
         raise KeyError(eid)
-
-
-class _UniqueKeys:
-    """Rejects a key repeated in one mapping (PyYAML keeps the last one silently, so
-    ``{R: 1 mmHg*s/mL, R: 2 mmHg*s/mL}`` would hide a typo)."""
-
-    def construct_mapping(self, node, deep=False):
-        seen = set()
-        for key_node, _ in node.value:
-            try:
-                key = self.construct_object(key_node, deep=True)
-                hash(key)
-            except (TypeError, yaml.YAMLError):
-                continue  # unhashable keys: PyYAML itself reports them
-            if key in seen:
-                raise yaml.constructor.ConstructorError(
-                    "while constructing a mapping", node.start_mark, f"found duplicate key {key!r}",
-                    key_node.start_mark)
-            seen.add(key)
-        return super().construct_mapping(node, deep=deep)
-
-
-class UniqueKeyLoader(_UniqueKeys, yaml.SafeLoader):
-    """A safe YAML loader that rejects a key repeated in one mapping."""
-
-
-# libyaml's parser (about 5x faster on netlists of thousands of elements), same constructor
-# and resolver; an invalid file is re-read with the pure-Python loader for its exact message
-_FastUniqueKeyLoader = (type("_FastUniqueKeyLoader", (_UniqueKeys, yaml.CSafeLoader), {})
-                        if getattr(yaml, "__with_libyaml__", False) else None)
 
 
 def resolve_files(value, base_dir, access, where):
@@ -106,123 +77,31 @@ def resolve_files(value, base_dir, access, where):
     return value
 
 
-# ``value: ${Pic}`` inside a flow mapping ``{...}`` is not valid YAML (the braces are flow
-# indicators), yet it is the documented netlist shape.  Before parsing, every ``${name}`` becomes
-# ``$(name)`` (same length, so YAML error columns stay right), and back afterwards.
-_REF_TEXT = re.compile(r"\$\{([A-Za-z_][A-Za-z0-9_]*)\}")
-_REF_SAFE = re.compile(r"\$\(([A-Za-z_][A-Za-z0-9_]*)\)")
+def read_yaml_file(path, what="netlist", access=None):
+    """A netlist or protocol YAML file under the input policy (hemocircuit.inputs: size, depth,
+    alias and value limits, repeated keys refused); ``${name}`` may stand unquoted in flow
+    mappings.  Errors quote at most a short excerpt of the file."""
+    return inputs.read_yaml(path, what + " file", access, refs=True)
 
 
-_ALIAS = re.compile(r"(?:^|[\s\[{,:])\*[^\s*]", re.M)  # a YAML alias (*name), or the odd false alarm
+def read_json_file(path, what="netlist", access=None):
+    """A JSON file under the input policy (hemocircuit.inputs)."""
+    return inputs.read_json(path, what + " file", access)
 
 
-def _may_nest_deeper(text, limit) -> bool:
-    """A cheap upper bound on the YAML nesting: flow brackets open at once plus the widest
-    indentation (each block level takes at least one column); True if it could exceed ``limit``."""
-    import numpy as np
-
-    br = np.frombuffer(re.sub(r"[^\[\]{}]", "", text).encode(), dtype=np.uint8)
-    if br.size and np.cumsum(np.where((br == ord("[")) | (br == ord("{")), 1, -1)).max() > limit // 2:
-        return True
-    indent = max((len(m.group(0)) for m in re.finditer(r"^[ \t?:-]+", text, re.M)), default=0)
-    return indent > limit // 2
-
-
-def _restore_refs(value, path, depth=0, memo=None, lim=None):
-    """``$(name)`` back to ``${name}``, checking the nesting depth and the length of strings.
-    A node shared through a YAML alias is converted once and stays shared (an alias bomb is
-    not expanded here)."""
-    if lim is None:
-        lim, memo = (limits.limit("YAML_DEPTH"), limits.limit("VALUE_CHARS")), {}
-    if depth > lim[0]:
-        raise NetlistError(f"YAML nested more than {depth - 1} levels deep {limits.how_to_raise('YAML_DEPTH')}",
-                           file=path)
-    if isinstance(value, str):
-        if len(value) > lim[1]:
-            limits.check_value_length(value, {"file": path}, f"the value {excerpt(value, 40)}")
-        return _REF_SAFE.sub(lambda m: "${" + m.group(1) + "}", value) if "$(" in value else value
-    if isinstance(value, (list, dict)):
-        key = id(value)
-        if key in memo:
-            return memo[key][1]
-        if isinstance(value, list):
-            out = [_restore_refs(v, path, depth + 1, memo, lim) for v in value]
-        else:
-            out = {_restore_refs(k, path, depth + 1, memo, lim): _restore_refs(v, path, depth + 1, memo, lim)
-                   for k, v in value.items()}
-        memo[key] = (value, out)  # the original is kept alive, so its id is not reused
-        return out
-    return value
-
-
-def _check_input_file(path, what):
-    """A readable file within the input size limit, or a NetlistError saying what is wrong."""
-    if not os.path.exists(path):
-        raise NetlistError(f"{what} file not found: {path}")
-    if os.path.isdir(path):
-        raise NetlistError(f"{what} file {path} is a folder")
-    limits.check_file_size(path, what)
-
-
-def read_yaml_file(path, what="netlist"):
-    """Parse a YAML file (netlist or protocol) within the input limits (hemocircuit.limits),
-    rejecting repeated keys; ``${name}`` may stand unquoted in flow mappings.  Errors quote at
-    most a short excerpt of the file."""
-    _check_input_file(path, what)
-    try:
-        with open(path, encoding="utf-8") as fh:
-            text = _REF_TEXT.sub(lambda m: "$(" + m.group(1) + ")", fh.read())
-        loader = _FastUniqueKeyLoader or UniqueKeyLoader
-        if _ALIAS.search(text) or _may_nest_deeper(text, limits.limit("YAML_DEPTH")):
-            # aliases can multiply the document, and libyaml's composer recurses (a crash, not
-            # an error, at tens of thousands of levels): scan the event stream first
-            limits.check_yaml(text, path, loader)
-        try:
-            data = yaml.load(text, Loader=loader)
-        except yaml.YAMLError:
-            data = yaml.load(text, Loader=UniqueKeyLoader)  # raises again, with the snippet
-        data = _restore_refs(data, path)
-    except yaml.YAMLError as exc:
-        msg = str(exc)
-        raise NetlistError(f"not valid YAML: {msg[:600]}{'...' if len(msg) > 600 else ''}", file=path) from None
-    except (UnicodeDecodeError, OSError) as exc:
-        raise NetlistError(f"cannot read ({type(exc).__name__}): not a UTF-8 text file?", file=path) from None
-    except (RecursionError, MemoryError):
-        raise NetlistError(f"the YAML is too deeply nested or too large to read {limits.how_to_raise('YAML_DEPTH')}",
-                           file=path) from None
-    return data
-
-
-def read_json_file(path, what="netlist"):
-    """Parse a JSON file within the input size limit.  Not through YAML: PyYAML reads YAML 1.1,
-    where a JSON number such as 9.0219259e7 (no sign in the exponent) is a string."""
-    import json
-
-    _check_input_file(path, what)
-    try:
-        with open(path, encoding="utf-8") as fh:
-            return json.load(fh)
-    except json.JSONDecodeError as exc:
-        raise NetlistError(f"not valid JSON: {exc}", file=path) from None
-    except (UnicodeDecodeError, OSError) as exc:
-        raise NetlistError(f"cannot read ({type(exc).__name__}): not a UTF-8 text file?", file=path) from None
-    except RecursionError:
-        raise NetlistError("the JSON is too deeply nested to read", file=path) from None
-
-
-def _read_yaml(path, svzerod=None):
+def _read_yaml(path, svzerod=None, access=None):
     """The mapping of a netlist file; an svZeroDSolver JSON model through the importer, in
     ``svzerod['units']`` (None: the importer's guess, cgs unless the model says m^3; the dict
     records in 'used' that a model was read with it)."""
     if str(path).lower().endswith(".json"):
-        data = read_json_file(path)
+        data = read_json_file(path, access=access)
         from .svzerod.importer import is_svzerod_model, netlist_of
 
         if is_svzerod_model(data):  # an svZeroDSolver model: read through the importer
             if svzerod is not None:
                 svzerod["used"] = True
             return netlist_of(data, path, (svzerod or {}).get("units"))
-    data = read_yaml_file(path)  # a netlist (JSON is YAML; its ${name} references resolved)
+    data = read_yaml_file(path, access=access)  # a netlist (JSON is YAML; its ${name} references resolved)
     if not isinstance(data, dict):
         raise NetlistError("a netlist is a YAML mapping with at least 'elements' (or 'extends')", file=path)
     unknown = sorted(set(map(str, data)) - TOP_KEYS)
@@ -265,7 +144,7 @@ def _load_raw(path, chain, access, svzerod=None):
     path = os.path.abspath(path)
     if path in chain:
         raise NetlistError(f"'extends' cycle: {' -> '.join(chain + [path])}", file=path)
-    data = _read_yaml(path, svzerod)
+    data = _read_yaml(path, svzerod, access if chain else None)  # the first file: the user's choice
     base_dir = os.path.dirname(path)
     params = data.get("parameters") or {}
     if not isinstance(params, dict):

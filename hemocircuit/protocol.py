@@ -43,13 +43,21 @@ class Protocol:
     events: list = field(default_factory=list)
     description: str = ""
     file: str | None = None
+    #: the files it was read from (hemocircuit.inputs.Sources: the protocol, the tables it names)
+    sources: object = None
 
     @classmethod
     def load(cls, path, circuit=None):
+        from .inputs import read_bytes, recording
         from .netlist import read_yaml_file
 
-        data = read_yaml_file(str(path), "protocol")
-        return cls.from_dict(data, str(path), circuit)
+        with recording() as sources:
+            data = read_yaml_file(str(path), "protocol")
+            proto = cls.from_dict(data, str(path), circuit)
+            for table in _table_files([proto.initial] + [ev.set for ev in proto.events]):
+                read_bytes(table, "table file", where={"file": str(path)})  # the events read them later
+        proto.sources = sources
+        return proto
 
     @classmethod
     def from_dict(cls, data, path=None, circuit=None):
@@ -171,3 +179,14 @@ def _reject_bare_numbers(circuit, mapping, what, file):
             parse_quantity(value, unit, path)
         except UnitError as exc:
             raise NetlistError(f"{what}: {exc}", file=file, element=path.partition(".")[0]) from None
+
+
+def _table_files(value):
+    """The table files ({file: PATH}, already resolved) named anywhere in ``value``."""
+    if isinstance(value, dict):
+        if isinstance(value.get("file"), str):
+            return [value["file"]]
+        return [f for v in value.values() for f in _table_files(v)]
+    if isinstance(value, list):
+        return [f for v in value for f in _table_files(v)]
+    return []

@@ -9,17 +9,17 @@ Filled in three steps:
 2. :func:`add_invocation` (by the command line): the exact command line (``command`` as one
    shell line, ``argv`` as a list, ``cwd``), the ``--set`` overrides (numeric values and
    structural options alike) and the ``--protocol`` file.
-3. :func:`complete` (when a result is written): ``netlist_files`` -- the netlist, every file
-   of its ``extends`` chain and every data file they name (``file:`` tables), in that order --
-   and ``netlist_sha256``, one SHA-256 over their contents; the same for the protocol
-   (``protocol_files``, ``protocol_sha256``).  A change to any parent or table changes the hash.
+3. :func:`complete` (when a result is written): ``netlist_files`` -- the files the loader
+   read: the netlist, every file of its ``extends`` chain and every table it loaded, in that
+   order (hemocircuit.inputs records them; nothing the loader did not read) -- and
+   ``netlist_sha256``, one SHA-256 over them; the same for the protocol (``protocol_files``,
+   ``protocol_sha256``).  A change to any parent or table changes the hash.
 
-``hemocircuit show RESULT --rerun NEW`` runs the stored command line again (see cli.py).
+``hemocircuit show RESULT --rerun NEW`` rebuilds the run from the stored settings (hemocircuit.rerun).
 """
 from __future__ import annotations
 
 import datetime as _dt
-import hashlib
 import os
 import platform
 import time
@@ -51,6 +51,9 @@ def stamp(result, analysis, circuit=None, settings=None, started=None, status=No
     prov.update(versions())
     if circuit is not None and getattr(circuit, "file", None):
         prov["netlist"] = str(circuit.file)
+        sources = getattr(circuit.netlist, "sources", None)  # what its load read (hemocircuit.inputs)
+        if sources is not None and sources.files:
+            record_sources(prov, "netlist", sources, circuit.file)
     if circuit is not None and "interest" not in md:  # what the default plots draw (hemocircuit.plotting)
         from .plotting import interest_of
         md["interest"] = interest_of(circuit)
@@ -74,73 +77,57 @@ def add_invocation(metadata, argv, sets=None, protocol=None, netlists=None):
     return metadata
 
 
-def complete(metadata):
-    """Add the file hashes to ``metadata['provenance']`` (in place) if not there yet."""
+def complete(metadata, circuit=None):
+    """Add the input files and their hashes to ``metadata['provenance']`` (in place) if not
+    there yet: the files the loader read (hemocircuit.inputs records them), never files it did
+    not; from ``circuit`` (or the protocol object) when given, else by loading the stored path
+    again through the loader."""
     prov = metadata.setdefault("provenance", {})
     for key in ("netlist", "protocol"):
         path = prov.get(key)
         if path and f"{key}_sha256" not in prov:
-            files = source_files(path)
-            prov[f"{key}_files"] = [os.path.relpath(f) if not os.path.isabs(path) else f for f in files]
-            prov[f"{key}_sha256"] = sha256_files(files)
+            src = netlist_sources(path) if key == "netlist" else protocol_sources(path)
+            prov[f"{key}_files"] = [os.path.relpath(f) if not os.path.isabs(path) else f for f in src.paths]
+            prov[f"{key}_sha256"] = src.sha256()
     if "netlists" in prov and "netlists_sha256" not in prov:
-        prov["netlists_sha256"] = {n: sha256_files(source_files(n)) for n in prov["netlists"]}
+        prov["netlists_sha256"] = {n: netlist_sources(n).sha256() for n in prov["netlists"]}
     return metadata
 
 
-def source_files(path):
-    """The YAML file ``path``, the files of its ``extends`` chain and the data files they name
-    (``file:`` entries), each resolved against the folder of the file naming it; files that
-    cannot be read are skipped (the netlist loader reports them, not the provenance)."""
-    import yaml
+def record_sources(prov, key, sources, path):
+    """``{key}_files`` and ``{key}_sha256`` from a loader's :class:`~hemocircuit.inputs.Sources`."""
+    prov[f"{key}_files"] = [os.path.relpath(f) if not os.path.isabs(str(path)) else f for f in sources.paths]
+    prov[f"{key}_sha256"] = sources.sha256()
 
-    out, todo = [], [os.path.abspath(path)]
-    while todo:
-        p = todo.pop(0)
-        if p in out or not os.path.isfile(p):
-            continue
-        out.append(p)
-        if not p.lower().endswith((".yaml", ".yml")):
-            continue
+
+def netlist_sources(path, allow_paths=None):
+    """The files the loader reads for the netlist ``path`` (the netlist, its ``extends`` chain,
+    its tables: hemocircuit.inputs.Sources), under the input policy.  A netlist that no longer
+    loads gives the files read before the error."""
+    from .circuit import load
+    from .errors import HemocircuitError
+    from .inputs import recording
+
+    with recording() as src:
         try:
-            with open(p, encoding="utf-8") as fh:
-                data = yaml.safe_load(fh)
-        except (OSError, yaml.YAMLError, UnicodeDecodeError):
-            continue
-        base = os.path.dirname(p)
-        if isinstance(data, dict) and isinstance(data.get("extends"), str):
-            todo.append(os.path.join(base, data["extends"]))
-        todo.extend(os.path.join(base, f) for f in _named_files(data))
-    return out
+            load(str(path), allow_paths=allow_paths)
+        except HemocircuitError:
+            pass
+    return src
 
 
-def _named_files(value, depth=0):
-    if depth > 50:
-        return []
-    found = []
-    if isinstance(value, dict):
-        for k, v in value.items():
-            if k == "file" and isinstance(v, str) and v and "${" not in v:
-                found.append(v)
-            else:
-                found += _named_files(v, depth + 1)
-    elif isinstance(value, list):
-        for v in value:
-            found += _named_files(v, depth + 1)
-    return found
+def protocol_sources(path):
+    """The files a protocol was read from (its YAML and the tables it names)."""
+    from .errors import HemocircuitError
+    from .inputs import recording
+    from .protocol import Protocol
 
-
-def sha256_files(paths):
-    """One SHA-256 over the contents of ``paths`` in order (each length-prefixed, so moving a
-    byte from one file to the next changes it; file names do not enter: a moved project keeps
-    its hash)."""
-    h = hashlib.sha256()
-    for p in paths:
-        with open(p, "rb") as fh:
-            data = fh.read()
-        h.update(len(data).to_bytes(8, "little"))
-        h.update(data)
-    return h.hexdigest()
+    with recording() as src:
+        try:
+            Protocol.load(str(path))
+        except HemocircuitError:
+            pass
+    return src
 
 
 def command_of(metadata):

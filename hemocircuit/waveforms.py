@@ -19,7 +19,6 @@ kinks, where the compiled integrator ends a step but needs no new evaluation).
 """
 from __future__ import annotations
 
-import csv
 import os
 import re
 from dataclasses import dataclass
@@ -197,15 +196,8 @@ def _table_rows(spec, base_dir, unit, where):
         # netlists and protocols resolve and check the path against their allowed folders
         # (hemocircuit.access) before it gets here; relative paths left are the API's own
         path = spec["file"] if os.path.isabs(spec["file"]) else os.path.join(base_dir or ".", spec["file"])
-        if not os.path.isfile(path):
-            raise NetlistError(f"table file not found: {path}", **where)
-        limits.check_file_size(path, "table file")
-        try:
-            with open(path, newline="", encoding="utf-8") as fh:
-                rows = [r for r in csv.reader(fh) if r and not r[0].lstrip().startswith("#")]
-        except (OSError, UnicodeDecodeError, csv.Error) as exc:
-            raise NetlistError(f"table file {path}: cannot read ({type(exc).__name__}): not a CSV text file?",
-                               **where) from None
+        from .inputs import read_csv_rows
+        rows = read_csv_rows(path, "table file", where=where)  # regular file, size, UTF-8 (hemocircuit.inputs)
         if len(rows) < 2:
             raise NetlistError(f"table file {path}: needs a header 'time [s],value [UNIT]' and at least one row",
                                **where)

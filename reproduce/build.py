@@ -30,7 +30,7 @@ class Report:
 def build(out, quick=False, only=None, progress=True, argv=None):
     """Run the sections (all, or ``only`` those keys) into the folder ``out``; returns a
     :class:`Report`.  Progress per section goes to stderr."""
-    from ..provenance import sha256_files, source_files, versions
+    from ..provenance import netlist_sources, versions
 
     keys = registry.check_keys(only) if only else list(registry.SECTIONS)
     os.makedirs(out, exist_ok=True)
@@ -69,7 +69,7 @@ def build(out, quick=False, only=None, progress=True, argv=None):
         "only": list(only) if only else None,
         "wall_time_s": round(time.perf_counter() - started, 2),
         "netlists": {os.path.relpath(p, os.path.dirname(os.path.dirname(p))):
-                     sha256_files(source_files(p)) for p in netlists},
+                     netlist_sources(p).sha256() for p in netlists},
         "sections": {k: {"status": runs[k].status, "seconds": round(runs[k].seconds, 2),
                          "settings": runs[k].ctx.settings if runs[k].ctx else {}} for k in registry.SECTIONS},
     }

@@ -80,7 +80,8 @@ def test_cli_output_carries_provenance(tmp_path, capsys):
     assert p["date"].endswith("+00:00")  # ISO 8601, UTC
     assert p["netlist"] == str(BASE_RC) and p["sets"] == {"R1.R": "4 mmHg*s/mL"}
     assert p["command"].startswith("hemocircuit tran ") and p["argv"][-4:-2] == ["--set", "R1.R=4mmHg*s/mL"]
-    assert p["netlist_sha256"] == provenance.sha256_files([str(BASE_RC)])
+    assert p["netlist_sha256"] == provenance.netlist_sources(BASE_RC).sha256()
+    assert p["netlist_files"] == [str(BASE_RC)]
     assert out.read_text().startswith("# index: ")
 
 
@@ -90,17 +91,17 @@ def test_netlist_hash_covers_the_extends_chain_and_tables(write):
           "  - {id: R1, type: resistor, nodes: [in, ground], R: 2 mmHg*s/mL}\n", "base/parent.yaml")
     table = write("time [s],value [mmHg]\n0,80\n10,90\n", "base/drive.csv")
     child = write("extends: base/parent.yaml\nchange: {R1: {R: 3 mmHg*s/mL}}\n", "child.yaml")
-    files = provenance.source_files(child)
+    files = provenance.netlist_sources(child).paths
     assert [os.path.basename(f) for f in files] == ["child.yaml", "parent.yaml", "drive.csv"]
-    h0 = provenance.sha256_files(files)
+    h0 = provenance.netlist_sources(child).sha256()
     c = hc.load(child)
     assert c.parameters.values["R1.R"][0] == 3.0  # the chain the hash covers is the one the loader reads
     parent = child.parent / "base" / "parent.yaml"
     parent.write_text(parent.read_text().replace("2 mmHg", "5 mmHg"))
-    h1 = provenance.sha256_files(provenance.source_files(child))
+    h1 = provenance.netlist_sources(child).sha256()
     assert h1 != h0
     table.write_text("time [s],value [mmHg]\n0,80\n10,91\n")
-    assert provenance.sha256_files(provenance.source_files(child)) not in (h0, h1)
+    assert provenance.netlist_sources(child).sha256() not in (h0, h1)
 
 
 # ---------------------------------------------------------------- atomic writes ------------
