@@ -54,12 +54,16 @@ class Access:
         return Access(self.folders + [folder])
 
     def allows(self, path) -> bool:
+        if "\x00" in str(path):
+            return False  # no file has such a name
         real = os.path.realpath(path)
         return any(real == f or real.startswith(f.rstrip(os.sep) + os.sep) for f in self.folders)
 
     def resolve(self, name, base_dir, what, where) -> str:
         """``name`` (as written in the file in ``base_dir``) as an absolute path, checked against
         the allowed folders."""
+        from .inputs import check_path
+        check_path(name, what)
         path = os.path.normpath(name if os.path.isabs(name) else os.path.join(base_dir or ".", name))
         if not self.allows(path):
             raise NetlistError(f"{what} {name!r} is outside the allowed folders {self.folders}; a netlist reads "

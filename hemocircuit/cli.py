@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import shlex
 import sys
 
 from .errors import HemocircuitError, Interrupted
@@ -310,7 +311,7 @@ def _unit_to(text, unit):
 
 def cmd_show(args):
     """Reload a result file: its provenance, a summary, optionally a plot or a re-run."""
-    from .provenance import command_of, describe
+    from .provenance import describe
     from .results import Result
 
     res = Result.load(args.result)
@@ -320,35 +321,15 @@ def cmd_show(args):
     if args.plot:
         res.plot(args.plot, select=args.show)
         print(f"wrote {args.plot}")
-    if args.rerun:
-        argv, cwd = command_of(res.metadata)
-        if not argv:
-            raise HemocircuitError(f"{args.result}: no command line in its provenance (written by the API?)")
-        new = _rerun_argv(argv, os.path.abspath(args.rerun))
-        print("re-running: hemocircuit " + " ".join(new) + (f"  (in {cwd})" if cwd else ""))
-        here = os.getcwd()
-        try:
-            if cwd:
-                os.chdir(cwd)
-            return main(new)
-        finally:
-            os.chdir(here)
+    if args.rerun is not None:
+        from .rerun import rerun_argv
+        new, notes = rerun_argv(res.metadata, args.result, args.rerun, lambda cmd: build_parser(cmd).commands[cmd],
+                                args.allow_path)
+        for n in notes:
+            print(f"note: {n}", file=sys.stderr)
+        print("re-running: " + shlex.join(["hemocircuit", *new]))
+        return main(new)
     return 0
-
-
-def _rerun_argv(argv, out):
-    """The stored command line with --out replaced by ``out`` and plot outputs dropped."""
-    new, skip = [], False
-    for a in argv:
-        if skip:
-            skip = False
-            continue
-        key = a.split("=", 1)[0]
-        if key in ("--out", "--plot", "--phase-plot"):
-            skip = "=" not in a
-            continue
-        new.append(a)
-    return new + ["--out", out]
 
 
 def cmd_graph(args):
@@ -437,7 +418,11 @@ def build_parser(command=None):
     sp.add_argument("result", help="a CSV or JSON file written by a hemocircuit command (--out)")
     sp.add_argument("--plot", help="draw it again to this PNG file")
     sp.add_argument("--show", action="append", help="column to print/plot (repeatable)")
-    sp.add_argument("--rerun", metavar="OUT", help="run the command stored in its provenance again, writing OUT")
+    sp.add_argument("--rerun", metavar="OUT", help="run the analysis stored in its provenance again, writing OUT: "
+                                                   "its settings only (no stored output file, --allow-path or "
+                                                   "--scheduler), its netlist inside the result's project")
+    sp.add_argument("--allow-path", action="append", metavar="DIR",
+                    help="with --rerun: let the stored netlist or protocol lie in DIR too (repeatable)")
     sp.add_argument("--set", action="append", help=argparse.SUPPRESS)
     sp.add_argument("--protocol", help=argparse.SUPPRESS)
     sp.add_argument("--quiet", action="store_true", help="no progress bars (for --rerun)")
@@ -506,7 +491,7 @@ def _extra_commands(only=None):
     return out
 
 
-OUTPUT_OPTIONS = ("out", "plot", "phase_plot", "svzerod_output")
+OUTPUT_OPTIONS = ("out", "plot", "phase_plot", "svzerod_output", "rerun")
 FIGURE_OPTIONS = ("plot", "phase_plot")
 
 

@@ -27,6 +27,7 @@ DEFAULTS = {
     "EXPR_NODES": 10_000,     # syntax-tree nodes of one expression
     "EXPR_DEPTH": 250,        # nesting depth of one expression (a sum of N terms is N deep)
     "TABLE_ROWS": 1_000_000,  # rows of one waveform table
+    "RESULT_MB": 1024,        # size of one result file read back (show, conformance) [MiB]
 }
 
 

@@ -333,6 +333,7 @@ def load_netlist(path: str, allow_paths=None, svzerod_units=None) -> Netlist:
     :mod:`hemocircuit.access`); ``allow_paths`` adds folders.  ``svzerod_units``: the unit
     system of an svZeroDSolver JSON model's numbers (hemocircuit.svzerod.importer.UNIT_SYSTEMS;
     an error for a hemocircuit netlist)."""
+    path = inputs.check_path(path, "netlist file")
     access = Access.for_netlist(path, allow_paths)
     svzerod = None if svzerod_units is None else {"units": svzerod_units, "used": False}
     raw = _load_raw(path, [], access, svzerod)

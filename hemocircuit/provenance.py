@@ -130,13 +130,6 @@ def protocol_sources(path):
     return src
 
 
-def command_of(metadata):
-    """(argv list, cwd) stored by :func:`add_invocation`, or (None, None)."""
-    prov = (metadata or {}).get("provenance", {}) or {}
-    argv = prov.get("argv")
-    return (list(argv), prov.get("cwd")) if isinstance(argv, list) else (None, None)
-
-
 def describe(metadata):
     """Printable lines: status, analysis, settings and provenance."""
     lines = [f"analysis: {metadata.get('analysis', '?')} ({metadata.get('status', 'complete')})"]

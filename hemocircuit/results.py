@@ -257,18 +257,22 @@ class Result:
     def load(cls, path):
         """A result written by :meth:`to_csv` or :meth:`to_json` (or by any ``hemocircuit``
         command): columns, units, index and metadata as they were saved."""
-        from .errors import HemocircuitError
-        try:
-            with open(path, newline="", encoding="utf-8") as fh:
-                text = fh.read()
-        except OSError as exc:
-            raise HemocircuitError(f"cannot read result file {path}: {exc.strerror or exc}") from None
+        from .errors import HemocircuitError, excerpt
+        from .inputs import parse_json, read_text
+
+        text = read_text(path, "result file", size_limit="RESULT_MB")  # the input policy (hemocircuit.inputs)
         try:
             if str(path).lower().endswith(".json"):
-                return cls._from_json(json.loads(text))
-            return cls._from_csv(text)
-        except (ValueError, KeyError, TypeError, IndexError) as exc:
-            raise HemocircuitError(f"{path}: not a hemocircuit result file ({exc})") from None
+                res = cls._from_json(parse_json(text, str(path), allow_nan=True))
+            else:
+                res = cls._from_csv(text)
+        except (ValueError, KeyError, TypeError, IndexError, AttributeError) as exc:
+            raise HemocircuitError(f"{path}: not a hemocircuit result file ({excerpt(exc, 120)})") from None
+        for section in _MAPPING_SECTIONS:
+            if not isinstance(res.metadata.get(section, {}), dict):
+                raise HemocircuitError(f"{path}: not a hemocircuit result file (its '{section}' metadata is "
+                                       f"{excerpt(res.metadata[section], 60)}, not a mapping)")
+        return res
 
     @classmethod
     def _from_json(cls, doc):
@@ -407,6 +411,9 @@ class Result:
         return (f"<{type(self).__name__} {self.analysis or ''} {self.status}: {self.n_rows} rows x "
                 f"{len(self.data)} columns; index {self.index}>")
 
+
+# metadata sections that are mappings in every file hemocircuit writes
+_MAPPING_SECTIONS = ("provenance", "settings", "solver", "measures")
 
 # analyses whose default plot is not a plain series plot (analysis name -> module)
 _PLOTTERS = {"ac": "hemocircuit.analyses.ac", "freq": "hemocircuit.analyses.freq",
