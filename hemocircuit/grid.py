@@ -54,13 +54,19 @@ def _check_path(circuit, path):
     circuit.param_path(path)  # raises a NetlistError naming the element's parameters
 
 
-def _as_set(v):
-    """A grid value as a --set value (numbers are in the parameter's unit already)."""
+def _as_set(v, unit=""):
+    """A grid value as a --set value: a number (a range's value, in the parameter's ``unit``)
+    with that unit, so it reads back as it was meant (a bare number is refused for a parameter
+    with a unit); an option or a quantity as given."""
     if isinstance(v, (bool, np.bool_)):
         return "true" if v else "false"
     if isinstance(v, (int, float, np.integer, np.floating)):
-        return repr(float(v))
+        return f"{float(v)!r} {unit}" if unit and unit not in ("1", "dimensionless") else repr(float(v))
     return str(v)
+
+
+def _unit_of(circuit, path):
+    return "" if circuit.is_option(path) else circuit.param_unit(path)
 
 
 def _member(job):
@@ -89,7 +95,8 @@ def run(compute, args, circuit, base_sets, workers=None, scheduler=None, progres
 
     paths, assignments = parse(circuit, args.grid)
     grid_columns(circuit, paths, assignments)  # values and units checked before anything runs
-    jobs = [(compute, args, {**base_sets, **{p: _as_set(v) for p, v in a.items()}}) for a in assignments]
+    units = {p: _unit_of(circuit, p) for p in paths}
+    jobs = [(compute, args, {**base_sets, **{p: _as_set(v, units[p]) for p, v in a.items()}}) for a in assignments]
     started = time.perf_counter()
     stopped = None
     try:
