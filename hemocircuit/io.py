@@ -72,6 +72,25 @@ def prepare_output(path, flag="--out"):
     return path
 
 
+def prepare_folder(path, flag="--out"):
+    """An output folder (reports, fits): created if missing when its parent exists; an
+    existing file or a name no folder can have is a clear error naming the option."""
+    from .inputs import check_path
+    path = check_path(path, "output folder", flag)
+    if os.path.lexists(path) and not os.path.isdir(path):
+        raise HemocircuitError(f"{flag} {path}: exists and is not a folder; give a folder name")
+    parent = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(parent):
+        raise HemocircuitError(f"{flag} {path}: its parent folder {parent} does not exist; create it first")
+    try:
+        os.makedirs(path, exist_ok=True)
+    except OSError as exc:
+        raise HemocircuitError(f"{flag} {path}: cannot create the folder: {exc.strerror or exc}") from None
+    if not os.access(path, os.W_OK | os.X_OK):
+        raise HemocircuitError(f"{flag} {path}: the folder is not writable")
+    return path
+
+
 @contextlib.contextmanager
 def atomic_file(path, mode="w", **kwargs):
     """Open a temporary file beside ``path``; on a clean exit it replaces ``path`` (fsync'd

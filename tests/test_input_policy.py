@@ -216,3 +216,10 @@ def test_bad_output_names_are_clear_errors_before_computing(project, capsys, fla
 def test_writer_refuses_a_device_even_through_the_api(tmp_path):
     with pytest.raises(HemocircuitError, match="not a regular file"):
         io.atomic_write("/dev/null", "x")
+
+
+def test_reproduce_out_on_a_file_is_a_clear_error(tmp_path, capsys):
+    f = tmp_path / "report"
+    f.write_text("")
+    assert main(["reproduce", "--quick", "--only", "ch4_lee97", "--out", str(f)]) == 2
+    assert "exists and is not a folder" in capsys.readouterr().err

@@ -6,8 +6,10 @@ from __future__ import annotations
 
 
 def cmd_reproduce(args):
+    from ..io import prepare_folder
     from ..reproduce import build
 
+    prepare_folder(args.out_dir)
     rep = build(args.out_dir, quick=args.quick, only=args.only, progress=not args.no_progress, argv=args.argv)
     c = rep.counts
     print(f"wrote {rep.index}")
