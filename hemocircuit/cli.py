@@ -261,11 +261,15 @@ def _range_spacing(r):
 
 def compute_tran(args, sets):
     """One run (a --grid member, :func:`computed`)."""
+    import numpy as np
+
     c, proto = circuit_of_args(args, sets)
     t_end = float(_unit_to(args.t_end, "s")) if args.t_end else None
     dt = float(_unit_to(args.dt, "s")) if args.dt else None
     ic = _assignments(args.ic, "--ic", "ID.STATE=VALUE", "Cv.V=20mL")
-    return c.simulate(t_end, dt=dt, protocol=events_only(proto), method=args.method, ic=ic, compile=args.compile)
+    max_step = float(_unit_to(args.max_step, "s")) if args.max_step else np.inf
+    return c.simulate(t_end, dt=dt, protocol=events_only(proto), integrator=args.integrator, rtol=args.rtol,
+                      atol=args.atol, max_step=max_step, ic=ic, compile=args.compile)
 
 
 def cmd_tran(args):
@@ -397,7 +401,15 @@ def build_parser(command=None):
     sp = common(sub.add_parser("tran", help="transient simulation"))
     sp.add_argument("--t-end", help="end time (e.g. 100 or '100 s')")
     sp.add_argument("--dt", help="output interval (e.g. 0.1 s)")
-    sp.add_argument("--method", default="BDF", help="solve_ivp method (BDF, Radau, LSODA)")
+    sp.add_argument("--integrator", choices=("rodas5p", "rodas4", "ros34pw2", "bdf", "scipy-bdf", "scipy-radau",
+                                             "lsoda"),
+                    help="the integrator: rodas5p (default; Rosenbrock order 5), rodas4, ros34pw2 or bdf on the "
+                         "compiled engine, or scipy's solve_ivp BDF, Radau or LSODA; recorded in the result's "
+                         "provenance with its tolerances")
+    sp.add_argument("--rtol", type=float, default=1e-6, help="relative tolerance (default 1e-6)")
+    sp.add_argument("--atol", type=float,
+                    help="absolute tolerance per unit of each state's scale (default rtol * 1e-3)")
+    sp.add_argument("--max-step", help="largest step (e.g. 0.1 s; default: no limit)")
     sp.add_argument("--ic", action="append", metavar="ID.STATE=VALUE",
                     help="start with this state overridden (units allowed, e.g. Cv.V=20mL, art.Ca=1e-7M); "
                          "the others at the operating point; repeatable")

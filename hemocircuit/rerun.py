@@ -30,7 +30,8 @@ COMMANDS = ("op", "dc", "tran", "ac", "freq", "stability", "envelope", "periodic
 
 #: analysis settings kept from the stored command line (argparse dests)
 SETTINGS = ("set", "grid", "measure", "show", "quiet", "workers", "svzerod_units",
-            "sweep", "t_end", "dt", "method", "ic", "compile", "svzerod_start", "tran",
+            "sweep", "t_end", "dt", "method", "integrator", "atol", "max_step", "ic", "compile", "svzerod_start",
+            "tran",
             "input", "output", "freq", "per_decade", "step", "amplitude", "rtol",
             "no_locate", "forced", "cycle_tol", "t_settle")
 

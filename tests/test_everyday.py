@@ -1,5 +1,6 @@
 """Everyday use: what a new user meets first (the --help examples, the terminal tables)."""
 import numpy as np
+import pytest
 
 from hemocircuit.cli import main
 from hemocircuit.results import Result
@@ -17,3 +18,33 @@ def test_grid_range_from_the_help_text_runs_with_its_unit(tmp_path):
     np.testing.assert_allclose(res["Ps.value"], [60, 80, 100, 120])
     np.testing.assert_allclose(res["P(a)"], [60, 80, 100, 120])  # no flow at steady state: P(a) = Ps
     assert "error" not in res
+
+
+@pytest.mark.parametrize("integrator, method", [("rodas5p", "RODAS5P (compiled)"), ("ros34pw2", "ROS34PW2 (compiled)"),
+                                                ("bdf", "BDF (compiled)"), ("scipy-bdf", "BDF"),
+                                                ("scipy-radau", "Radau"), ("lsoda", "LSODA")])
+def test_tran_integrators_by_name_with_their_tolerances_recorded(tmp_path, integrator, method):
+    out = tmp_path / "t.csv"
+    assert main(["tran", str(BASE_RC), "--t-end", "5", "--dt", "0.5", "--ic", "C1.V=10mL", "--integrator", integrator,
+                 "--rtol", "1e-8", "--atol", "1e-10", "--out", str(out), "--quiet"]) == 0
+    res = Result.load(out)
+    # R C = 2 mmHg*s/mL * 0.5 mL/mmHg = 1 s, from 10 mL towards C * 80 mmHg = 40 mL
+    np.testing.assert_allclose(res["V(C1)"], 40 - 30 * np.exp(-res["time"]), rtol=1e-6)
+    md = res.metadata
+    assert md["solver"]["method"] == method
+    assert (md["settings"]["integrator"], md["settings"]["rtol"], md["settings"]["atol"]) == (integrator, 1e-8, 1e-10)
+
+
+def test_tran_max_step_bounds_the_steps(tmp_path):
+    out = tmp_path / "t.csv"
+    assert main(["tran", str(BASE_RC), "--t-end", "5", "--dt", "1", "--ic", "C1.V=10mL", "--max-step", "10ms",
+                 "--integrator", "rodas5p", "--out", str(out), "--quiet"]) == 0
+    md = Result.load(out).metadata
+    assert md["solver"]["steps"] >= 500 and md["settings"]["max_step"] == pytest.approx(0.01)
+
+
+@pytest.mark.parametrize("flag, value, message", [("--rtol", "2", "between 0 and 1"), ("--atol", "-1", "positive"),
+                                                  ("--max-step", "0s", "positive time")])
+def test_tran_bad_tolerances_are_clear_errors(capsys, flag, value, message):
+    assert main(["tran", str(BASE_RC), "--t-end", "1", flag, value, "--quiet"]) == 2
+    assert message in capsys.readouterr().err

@@ -70,9 +70,34 @@ def _limit_events(circuit, limits):
     return evs
 
 
+#: the integrators by name (tran --integrator, simulate(integrator=...)): (engine, method)
+INTEGRATORS = {
+    "rodas5p": ("compiled", "rodas5p"),     # Rosenbrock, order 5(4), stiffly accurate (the default)
+    "rodas4": ("compiled", "rodas4"),       # Rosenbrock, order 4(3)
+    "ros34pw2": ("compiled", "ros34pw2"),   # Rosenbrock W-method, order 3(2), Jacobian reused
+    "bdf": ("compiled", "bdf"),             # variable-order BDF (1-5), compiled
+    "scipy-bdf": ("scipy", "BDF"),          # scipy.integrate.solve_ivp's BDF
+    "scipy-radau": ("scipy", "Radau"),      # scipy.integrate.solve_ivp's Radau IIA, order 5
+    "lsoda": ("scipy", "LSODA"),            # scipy.integrate.solve_ivp's LSODA (ODEPACK)
+}
+
+
+def resolve_integrator(integrator, method="BDF", engine="auto"):
+    """(engine, scipy method, compiled method or None) of an integrator name (None: ``method``
+    and ``engine`` as given, the compiled engine's default method)."""
+    if integrator is None:
+        return engine, method, None
+    if integrator not in INTEGRATORS:
+        from ..errors import did_you_mean
+        raise SolverError(f"integrator {integrator!r}{did_you_mean(integrator, INTEGRATORS)}: choose one of "
+                          f"{', '.join(INTEGRATORS)}")
+    eng, meth = INTEGRATORS[integrator]
+    return (eng, meth, None) if eng == "scipy" else (eng, "BDF", meth)
+
+
 def simulate(circuit, t_end, dt=None, t0=0.0, x0=None, protocol=None, method="BDF", rtol=1e-6, atol=None,
              max_step=np.inf, first_step=None, engine="auto", ic=None, progress=None, compile="wait",
-             output_from=None):
+             output_from=None, integrator=None):
     """Integrate from t0 to t_end [s].
 
     x0: initial states (default: the operating point after the protocol's initial settings).
@@ -83,6 +108,11 @@ def simulate(circuit, t_end, dt=None, t0=0.0, x0=None, protocol=None, method="BD
     protocol: a Protocol (or path to a protocol YAML) with initial settings and timed events.
     ic: {ID.STATE: value} states to override in that start (x0 or the operating point), e.g.
         {'Cv.V': '20 mL'}; units allowed, plain numbers are in the state's unit (hemocircuit.ic).
+    integrator: a name of :data:`INTEGRATORS` (rodas5p, rodas4, ros34pw2, bdf on the compiled
+        engine; scipy-bdf, scipy-radau, lsoda through solve_ivp); it sets ``engine`` and
+        ``method``.  None: as ``engine`` and ``method`` say.
+    rtol, atol: relative tolerance and absolute tolerance per unit of each state's scale
+        (default rtol * 1e-3); max_step: the largest step [s].
     engine: 'compiled' (numba Rosenbrock RODAS5P, hemocircuit.kernels), 'scipy'
         (solve_ivp with ``method``), or 'auto': compiled when every component type has a
         kernel and ``method`` is left at its default, scipy otherwise.
@@ -101,7 +131,16 @@ def simulate(circuit, t_end, dt=None, t0=0.0, x0=None, protocol=None, method="BD
     of either is the result up to that point, marked ``metadata['status'] = 'partial'``.
     """
     started = clock()
-    settings = {"t_end": t_end, "dt": dt, "t0": t0, "method": method, "engine": engine, "rtol": rtol,
+    engine, method, compiled_method = resolve_integrator(integrator, method, engine)
+    if not (isinstance(rtol, (int, float, np.number)) and 0 < rtol < 1):
+        raise SolverError(f"rtol = {rtol!r}: the relative tolerance must be a number between 0 and 1 (e.g. 1e-6)")
+    if atol is not None and not (isinstance(atol, (int, float, np.number)) and 0 < atol < np.inf):
+        raise SolverError(f"atol = {atol!r}: the absolute tolerance must be a positive number (per unit of each "
+                          "state's scale, e.g. 1e-9)")
+    if not (isinstance(max_step, (int, float, np.number)) and max_step > 0):
+        raise SolverError(f"max_step = {max_step!r}: the largest step must be a positive time [s]")
+    settings = {"t_end": t_end, "dt": dt, "t0": t0, "integrator": integrator, "method": method, "engine": engine,
+                "rtol": rtol,
                 "atol": atol, "max_step": None if max_step == np.inf else max_step, "first_step": first_step,
                 "ic": dict(ic) if ic else None, "x0": None if x0 is None else "given",
                 "protocol": protocol if isinstance(protocol, str) else getattr(protocol, "file", None),
@@ -110,7 +149,7 @@ def simulate(circuit, t_end, dt=None, t0=0.0, x0=None, protocol=None, method="BD
         raise SolverError(f"compile {compile!r} (tran --compile, $HEMOCIRCUIT_COMPILE): choose 'wait' or 'background'")
     try:
         res = _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step, first_step, engine, ic,
-                        progress, compile, output_from)
+                        progress, compile, output_from, compiled_method)
     except SolverError as exc:
         if exc.partial is not None:
             stamp(exc.partial, "tran", circuit, settings, started, status="partial")
@@ -133,7 +172,7 @@ def simulate(circuit, t_end, dt=None, t0=0.0, x0=None, protocol=None, method="BD
 
 
 def _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step, first_step, engine, ic,
-              progress=None, compile="wait", output_from=None):
+              progress=None, compile="wait", output_from=None, compiled_method=None):
     from ..progress import bar, wanted
     from .op import operating_point
 
@@ -188,7 +227,7 @@ def _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step
             else:
                 with bar(t_end - t0, "tran (simulated time)", unit="s", progress=progress) as pbar:
                     res = _simulate_compiled(system, c, x, t0, t_end, dt, events, rtol, atol, max_step, first_step,
-                                             pbar, output_from=output_from)
+                                             pbar, output_from=output_from, method=compiled_method)
                 background.mark_ready(system)
                 return res
     ts, xs, segs = [], [], []
@@ -380,7 +419,7 @@ def _output_grid(t0, t_end, dt):
 
 
 def _simulate_compiled(system, c, x, t0, t_end, dt, events, rtol, atol, max_step, first_step, bar=None,
-                       t_grid=None, parts=None, bar_t0=None, output_from=None):
+                       t_grid=None, parts=None, bar_t0=None, output_from=None, method=None):
     """simulate() on the compiled engine: kernel calls per protocol segment (hard limits and
     source breakpoints are handled inside the kernel), in pieces (:func:`_compiled_segment`):
     at most PIECE_STEPS steps each and, with a progress ``bar`` shown, about 50 per segment.
@@ -416,7 +455,7 @@ def _simulate_compiled(system, c, x, t0, t_end, dt, events, rtol, atol, max_step
         tpts = np.concatenate([[t_a], tpts, [t_b]])
         try:
             x = _compiled_segment(system, c, tpts, x, rtol, atol, h0, max_step, stats, ts, xs, segs, bar,
-                                  t0 if bar_t0 is None else bar_t0)
+                                  t0 if bar_t0 is None else bar_t0, method)
         except KeyboardInterrupt as exc:
             raise Interrupted.of(exc, partial=_collect(c, ts, xs, segs, output_from) if ts else None) from None
         except SolverError as exc:  # its partial: the rows from output_from on, as the result's
@@ -425,7 +464,7 @@ def _simulate_compiled(system, c, x, t0, t_end, dt, events, rtol, atol, max_step
             raise
     res = _collect(c, ts, xs, segs, output_from)
     from ..kernels.tableaus import DEFAULT
-    res.stats = {**stats, "method": f"{DEFAULT.upper()} (compiled)"}
+    res.stats = {**stats, "method": f"{(method or DEFAULT).upper()} (compiled)"}
     return res
 
 
@@ -436,7 +475,8 @@ PIECE_STEPS = 200_000
 MAX_STEPS = 10_000_000  # per protocol segment, as the compiled integrator's own limit
 
 
-def _compiled_segment(system, c, tpts, x, rtol, atol, h0, max_step, stats, ts, xs, segs, bar=None, t0=0.0):
+def _compiled_segment(system, c, tpts, x, rtol, atol, h0, max_step, stats, ts, xs, segs, bar=None, t0=0.0,
+                      method=None):
     """One protocol segment on the output times ``tpts``; appends to ts, xs, segs; returns the
     final state.  The compiled integrator returns to Python at least every PIECE_STEPS steps
     and, with a progress ``bar`` shown, after each of ~50 consecutive ranges of output times
@@ -449,14 +489,14 @@ def _compiled_segment(system, c, tpts, x, rtol, atol, h0, max_step, stats, ts, x
     for a, b in zip(cuts[:-1], cuts[1:]):
         before = used
         x, used = _compiled_range(system, c, P, tpts[a:b + 1], x, rtol, atol, h0, max_step, stats, ts, xs, segs,
-                                  used)
+                                  used, method)
         if bar is not None:
             bar.update_to(tpts[b] - t0)
         h0 = (tpts[b] - tpts[a]) / max(used - before, 1)
     return x
 
 
-def _compiled_range(system, c, P, tpts, x, rtol, atol, h0, max_step, stats, ts, xs, segs, used):
+def _compiled_range(system, c, P, tpts, x, rtol, atol, h0, max_step, stats, ts, xs, segs, used, method=None):
     """The output times ``tpts`` in calls of at most PIECE_STEPS steps (``used``: the steps the
     segment took so far, at most MAX_STEPS); appends to ts, xs, segs; returns (final state, used)."""
     from ..execution import check_interrupted
@@ -468,7 +508,7 @@ def _compiled_range(system, c, P, tpts, x, rtol, atol, h0, max_step, stats, ts, 
     while True:
         check_interrupted()
         X, st = system.integrate(tpts, x, P, rtol=rtol, atol=atol, breaks=breaks, kinks=kinks, h0=h0,
-                                 hmax=max_step, max_steps=min(budget, MAX_STEPS - used))
+                                 hmax=max_step, max_steps=min(budget, MAX_STEPS - used), method=method)
         for key in stats:
             stats[key] += st[key]
         used += st["steps"]
