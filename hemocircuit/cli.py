@@ -242,9 +242,15 @@ def cmd_dc(args):
     if not args.sweep or "=" not in args.sweep:
         raise HemocircuitError("dc needs --sweep ID.PARAM=START:STOP:STEP UNIT (e.g. Pa.value=20:200:5mmHg)")
     param = args.sweep.split("=", 1)[0].strip()
-    res = computed(args, compute_dc) if args.grid else _dc(args, _load(args)[0])
+    c = None if args.grid else _load(args)[0]
+    res = computed(args, compute_dc) if args.grid else _dc(args, c)
     cols = res.columns
-    show = args.show or [k for k in cols if k.startswith("Q(")][:1] + [k for k in cols if k.startswith("P(")][:3]
+    # the netlist's outputs of interest (what the plots draw), else the first flows and pressures,
+    # a source's own flow last (a pressure source's Q is minus the flow it delivers)
+    interest = [k for k in (res.metadata.get("interest") or {}).get("outputs", []) if k in cols]
+    sources = {e.id for e in c.netlist.elements if e.type.endswith("_source")} if c is not None else set()
+    flows = sorted((k for k in cols if k.startswith("Q(")), key=lambda k: k[2:-1] in sources)
+    show = args.show or interest or (flows[:2] + [k for k in cols if k.startswith("P(")][:3])
     if args.grid:
         return report_grid(args, res, show)
     print(res.summary(show=show, max_rows=0, where=args.out))

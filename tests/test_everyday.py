@@ -48,3 +48,11 @@ def test_tran_max_step_bounds_the_steps(tmp_path):
 def test_tran_bad_tolerances_are_clear_errors(capsys, flag, value, message):
     assert main(["tran", str(BASE_RC), "--t-end", "1", flag, value, "--quiet"]) == 2
     assert message in capsys.readouterr().err
+
+
+def test_dc_table_shows_the_outputs_of_interest(capsys):
+    from paths import PAYNE06
+    assert main(["dc", str(PAYNE06), "--sweep", "Pa.value=20:200:90mmHg", "--quiet"]) == 0
+    head = [ln for ln in capsys.readouterr().out.splitlines() if ln.lstrip().startswith("Pa.value")][0]
+    # payne06_passive declares its outputs: the cerebral flow, not the source's own (negative) flow
+    assert "Q(Rla)" in head and "Q(Pa)" not in head
