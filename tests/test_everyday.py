@@ -56,3 +56,17 @@ def test_dc_table_shows_the_outputs_of_interest(capsys):
     head = [ln for ln in capsys.readouterr().out.splitlines() if ln.lstrip().startswith("Pa.value")][0]
     # payne06_passive declares its outputs: the cerebral flow, not the source's own (negative) flow
     assert "Q(Rla)" in head and "Q(Pa)" not in head
+
+
+def test_first_api_simulate_says_once_that_it_compiles(monkeypatch, capsys):
+    import hemocircuit as hc
+    from hemocircuit.analyses import transient
+    from hemocircuit.kernels import background, prebuild
+
+    monkeypatch.setattr(transient, "_told", [])
+    monkeypatch.setattr(background, "ready", lambda system: False)  # as on a fresh install
+    monkeypatch.setattr(prebuild, "start", lambda system: None)
+    c = hc.load(str(BASE_RC))
+    c.simulate(1.0, dt=0.5)
+    c.simulate(1.0, dt=0.5)
+    assert capsys.readouterr().err.count("hemocircuit: compiling the engine") == 1

@@ -171,6 +171,18 @@ def simulate(circuit, t_end, dt=None, t0=0.0, x0=None, protocol=None, method="BD
     return stamp(res, "tran", circuit, settings, started)
 
 
+_told = []
+
+
+def _say_compiling():
+    """Once per process: the first run of a set of component types waits for its compile."""
+    if not _told:
+        _told.append(True)
+        from ..kernels.codegen import cache_dir
+        print(f"hemocircuit: compiling the engine for these component types (their first run; about 15-30 s, "
+              f"cached in {cache_dir()} for every later run)", file=sys.stderr, flush=True)
+
+
 def _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step, first_step, engine, ic,
               progress=None, compile="wait", output_from=None, compiled_method=None):
     from ..progress import bar, wanted
@@ -197,6 +209,9 @@ def _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step
         from ..kernels.system import CompiledSystem
         system = CompiledSystem.of(c)
         if system is not None:  # a first compile: its second process starts before the operating point
+            from ..kernels import background
+            if not background.ready(system) and progress is not False:
+                _say_compiling()
             prebuild.start(system)
     x = operating_point(c, t=t0).x if x0 is None else np.asarray(x0, dtype=float).copy()
     if ic:
