@@ -162,8 +162,8 @@ def save_outputs(args, res, plot=None):
     """Compute and print ``--measure`` (saved in ``metadata['measures']``), then write ``--out``
     (the result, with provenance) and ``--plot`` (``plot(path)``, default ``res.plot``); both
     files were checked before the computation (:func:`_check_outputs`)."""
+    record(args, res)  # first: its warnings are reported even if a measure fails
     apply_measures(args, res)
-    record(args, res)
     if getattr(args, "out", None):
         print(f"wrote {res.save(args.out)}")
     if getattr(args, "plot", None):
@@ -554,6 +554,8 @@ def main(argv=None):
     except _Reported:
         return EXIT_ERROR
     except HemocircuitError as exc:
+        for w in (getattr(getattr(args, "computed_result", None), "metadata", None) or {}).get("warnings", []):
+            print(f"warning: {w}", file=sys.stderr)  # e.g. why a measure found nothing
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_ERROR
     except KeyboardInterrupt as exc:  # SIGINT, or SIGTERM (execution.catch_signals)

@@ -179,6 +179,10 @@ def _series_measure(res, kind, col, x, y, x_name, xu, yu, pos, kw, spec):
         if res.analysis == "periodic":
             return {f"period [{xu}]": float(x[-1] - x[0])}
         xw, yw = _window(x, y, kw, xu, spec)
+        swing, level = float(np.ptp(yw)), float(np.max(np.abs(yw)))
+        if swing <= 1e-9 * level:  # crossings of the mean by round-off are no oscillation
+            raise MeasureError(f"--measure {spec!r}: {col} varies by {swing:.3g} around {float(np.mean(yw)):.6g} in "
+                               "the window, round-off: no oscillation to time")
         T, n = period_of(xw, yw)
         if not np.isfinite(T):
             raise MeasureError(f"--measure {spec!r}: {col} does not cross its mean upwards twice in the window "

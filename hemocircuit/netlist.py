@@ -17,7 +17,7 @@ from .access import Access
 from .errors import NetlistError, did_you_mean, excerpt
 
 TOP_KEYS = {"name", "description", "parameters", "elements", "extends", "add", "remove", "change",
-            "constraints", "outputs", "input", "derived"}
+            "constraints", "outputs", "input", "derived", "ic"}
 ELEMENT_KEYS = {"id", "type", "nodes"}
 GROUND = "ground"
 _REF = re.compile(r"\$\{([A-Za-z_][A-Za-z0-9_]*)\}")
@@ -47,6 +47,9 @@ class Netlist:
     input: str | None = None  # the default input: a source id or ID.PARAM
     outputs_file: str | None = None  # the files that declared outputs / input (for errors)
     input_file: str | None = None
+    #: a transient's starting perturbation {ID.STATE: value} (applied to the operating point
+    #: like --ic, which overrides it state by state)
+    ic: dict = field(default_factory=dict)
     #: the folders this netlist's files may be read from (hemocircuit.access), for protocol tables
     allowed: list = field(default_factory=list)
     #: the files read to load it (hemocircuit.inputs.Sources: extends chain, tables), for provenance
@@ -225,9 +228,15 @@ def _load_raw(path, chain, access, svzerod=None):
         raise NetlistError("'derived' must be a mapping name -> {expr: '<expression of columns>', unit: ...}",
                            file=path)
     derived = {**(base["derived"] if "extends" in data else {}), **derived}
+    ic = data.get("ic") or {}
+    if not isinstance(ic, dict) or not all(isinstance(k, str) and isinstance(v, (str, int, float))
+                                           and not isinstance(v, bool) for k, v in ic.items()):
+        raise NetlistError("'ic' must be a mapping ID.STATE -> value with its unit (a transient's starting "
+                           "perturbation, e.g. {art.dCa: 1e-9 M/s})", file=path)
+    ic = {**(base["ic"] if "extends" in data else {}), **ic}
     return {"elements": elements, "parameters": merged_params, "constraints": constraints, "name": name,
             "description": description, "outputs": outputs, "base_dir": base_dir, "derived": derived,
-            "outputs_file": outputs_file, "input": inp, "input_file": input_file}
+            "outputs_file": outputs_file, "input": inp, "input_file": input_file, "ic": ic}
 
 
 def _outputs(value, path):
@@ -356,5 +365,5 @@ def load_netlist(path: str, allow_paths=None, svzerod_units=None) -> Netlist:
     return Netlist(name=str(raw["name"]), description=str(raw["description"] or ""), elements=raw["elements"],
                    parameters=params, constraints=raw["constraints"], file=os.path.abspath(path),
                    base_dir=raw["base_dir"], outputs=dict(raw["outputs"] or {}), derived=dict(raw["derived"]),
-                   input=raw["input"], outputs_file=raw["outputs_file"], input_file=raw["input_file"],
+                   input=raw["input"], outputs_file=raw["outputs_file"], input_file=raw["input_file"], ic=raw["ic"],
                    allowed=list(access.folders))

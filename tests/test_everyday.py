@@ -70,3 +70,30 @@ def test_first_api_simulate_says_once_that_it_compiles(monkeypatch, capsys):
     c.simulate(1.0, dt=0.5)
     c.simulate(1.0, dt=0.5)
     assert capsys.readouterr().err.count("hemocircuit: compiling the engine") == 1
+
+
+def test_vasomotion_netlist_starts_its_limit_cycle(tmp_path, capsys):
+    from paths import ROOT
+    out = tmp_path / "v.csv"
+    assert main(["tran", str(ROOT / "netlists" / "vasomotion.yaml"), "--t-end", "300", "--dt", "0.5",
+                 "--measure", "period art.r from=150s", "--out", str(out), "--quiet"]) == 0
+    res = Result.load(out)
+    late = res["art.r"][res["time"] >= 150]
+    assert np.ptp(late) > 10  # um: a limit cycle of the radius, not a flat line
+    period = res.metadata["measures"]["period art.r from=150s"]["period [s]"]
+    assert 7.6 < period < 7.8  # the thesis's ~7.7 s cycle (zeta = 0.1, omega_n = pi/5)
+    assert "unstable equilibrium" not in capsys.readouterr().err
+
+
+def test_an_unperturbed_start_on_an_unstable_equilibrium_is_flagged(capsys):
+    from paths import ROOT
+    # vasomotion's parameters without its netlist's starting kick
+    args = ["tran", str(ROOT / "netlists" / "second_order_ca.yaml"), "--set", "art.omega_n=0.6283185307179586rad/s",
+            "--set", "art.zeta=0.1", "--t-end", "100", "--dt", "0.5", "--quiet"]
+    assert main(args) == 0
+    err = capsys.readouterr().err
+    assert "started on an unstable equilibrium" in err and "--ic" in err
+    # a period of its round-off is refused, and the warning says why
+    assert main(args + ["--measure", "period art.r"]) == 2
+    err = capsys.readouterr().err
+    assert "round-off: no oscillation" in err and "unstable equilibrium" in err

@@ -168,7 +168,40 @@ def simulate(circuit, t_end, dt=None, t0=0.0, x0=None, protocol=None, method="BD
         raise SolverError("implausible solution: " + "; ".join(map(str, bad)),
                           partial=stamp(res, "tran", circuit, settings, started, status="partial"))
     plausibility.add_warnings(res, findings)
+    if x0 is None and not ic and not circuit.netlist.ic and not (protocol is not None and getattr(protocol, "events",
+                                                                                                  None)):
+        unstable = _unstable_start(protocol.apply_initial(circuit) if protocol is not None else circuit, t0)
+        if unstable:
+            res.metadata.setdefault("warnings", []).append(unstable)
     return stamp(res, "tran", circuit, settings, started)
+
+
+#: states up to which a run from the operating point checks that equilibrium's stability
+#: (a dense eigen-decomposition: cheap below this size)
+UNSTABLE_CHECK_STATES = 300
+
+
+def _unstable_start(c, t0):
+    """A warning when a run starting unperturbed on the operating point starts on an unstable
+    equilibrium: without a perturbation it stays there up to round-off (a flat line where a
+    limit cycle was expected).  None otherwise, and for circuits above UNSTABLE_CHECK_STATES."""
+    from .op import operating_point
+    from .stability import eigenvalues
+
+    if not 0 < c.nx <= UNSTABLE_CHECK_STATES:
+        return None
+    try:
+        lam = eigenvalues(c, operating_point(c, t=t0).x, t=t0)
+    except (SolverError, np.linalg.LinAlgError):
+        return None
+    lam = lam[np.isfinite(lam)]
+    if not lam.size or lam.real.max() <= 0:
+        return None
+    top = lam[np.argmax(lam.real)]
+    mode = f", an oscillation of period {2 * np.pi / abs(top.imag):.4g} s" if abs(top.imag) > 1e-12 else ""
+    return (f"the run started on an unstable equilibrium (growth rate {top.real:.3g} 1/s{mode}) and, unperturbed, "
+            "stays on it up to round-off; perturb the start: --ic ID.STATE=VALUE, a protocol event, or an 'ic:' "
+            "entry in the netlist (docs/netlist.md)")
 
 
 _told = []
@@ -214,6 +247,8 @@ def _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step
                 _say_compiling()
             prebuild.start(system)
     x = operating_point(c, t=t0).x if x0 is None else np.asarray(x0, dtype=float).copy()
+    # the netlist's starting perturbation (from the operating point only), --ic state by state over it
+    ic = {**(c.netlist.ic if x0 is None else {}), **(ic or {})}
     if ic:
         from ..ic import apply_ic
         x = apply_ic(c, x, ic)
