@@ -97,3 +97,21 @@ def test_an_unperturbed_start_on_an_unstable_equilibrium_is_flagged(capsys):
     assert main(args + ["--measure", "period art.r"]) == 2
     err = capsys.readouterr().err
     assert "round-off: no oscillation" in err and "unstable equilibrium" in err
+
+
+def test_ac_with_an_input_of_zero_reports_the_absolute_gain(tmp_path, capsys):
+    # an imported svZeroDSolver inflow has mean 0: there is no relative change to compare
+    net = tmp_path / "q.yaml"
+    net.write_text("name: q\nelements:\n"
+                   "  - {id: Q, type: flow_source, nodes: [ground, a], value: 0 mL/s}\n"
+                   "  - {id: R, type: resistor, nodes: [a, ground], R: 2 mmHg*s/mL}\n"
+                   "  - {id: C, type: compliance, nodes: [a, ground], C: 0.5 mL/mmHg}\n")
+    out = tmp_path / "ac.csv"
+    assert main(["ac", str(net), "--input", "Q", "--output", "P(a)", "--freq", "0.1,1Hz", "--out", str(out),
+                 "--plot", str(tmp_path / "ac.png")]) == 0
+    assert "no relative gain: the input is 0 at the operating point" in capsys.readouterr().out
+    res = Result.load(out)
+    w = 2 * np.pi * np.array([0.1, 1.0])
+    # the input impedance of R || C: R / (1 + j w R C), R C = 1 s
+    np.testing.assert_allclose(res["gain(P(a)/Q.value)"], 2 / np.sqrt(1 + w ** 2), rtol=1e-5)
+    assert np.isnan(res["rel_gain(P(a)/Q.value)"]).all()

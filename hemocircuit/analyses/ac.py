@@ -113,7 +113,11 @@ class ACResult(Result):
         self.y0 = {n: y0[..., k] for k, n in enumerate(outputs)}
         self.gain = {n: np.abs(h) for n, h in self.H.items()}
         with np.errstate(divide="ignore", invalid="ignore"):
-            self.rel_gain = {n: np.abs(h) * np.abs(np.asarray(p0)[..., None] / np.asarray(self.y0[n])[..., None])
+            # undefined (NaN) where the input or the output is 0 at the operating point (a flow
+            # source whose mean is 0): there is no relative change to compare
+            self.rel_gain = {n: np.where((np.asarray(p0) != 0)[..., None] & (np.asarray(self.y0[n]) != 0)[..., None],
+                                         np.abs(h) * np.abs(np.asarray(p0)[..., None] / np.asarray(self.y0[n])[..., None]),
+                                         np.nan)
                              for n, h in self.H.items()}
         self.phase = {n: unwrapped_phase(h) for n, h in self.H.items()}
         self.input_unit = units.get("input", "")
@@ -195,6 +199,9 @@ def plot_result(res, path, select=None, title=None):
         names = [n for n in names if n.split("/")[0] in select] or names
     from ..grid import members
     groups = members(res, [k for k in res.index if k != "frequency"])
+    # the relative gain where every output has one; else |H| with its unit (an input or output
+    # that is 0 at the operating point has no relative change)
+    relative = all(np.isfinite(np.asarray(res[f"rel_gain({n})"], dtype=float)).any() for n in names)
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(8, 6.5), sharex=True)
     for j, n in enumerate(names):
         for g, (glab, mask) in enumerate(groups):
@@ -204,9 +211,14 @@ def plot_result(res, path, select=None, title=None):
                                      f" (|H| at {f[0]:.3g} Hz: {gain[0]:.3g} {res.units[f'gain({n})']})")
             color = f"C{(g if len(groups) > 1 else j) % 10}"
             style = ["-", "--", ":", "-."][(j if len(groups) > 1 else 0) % 4]
-            ax1.loglog(f, res[f"rel_gain({n})"][mask], style, color=color, label=lab)
+            if relative:
+                ax1.loglog(f, res[f"rel_gain({n})"][mask], style, color=color, label=lab)
+            else:
+                ax1.loglog(f, gain, style, color=color, label=lab)
             ax2.semilogx(f, res[f"phase({n})"][mask], style, color=color, label=lab)
-    ax1.set_ylabel("relative gain (dy/y0)/(dp/p0) [1]")
+    gain_units = {res.units[f"gain({n})"] for n in names}
+    ax1.set_ylabel("relative gain (dy/y0)/(dp/p0) [1]" if relative else
+                   f"gain |H| [{gain_units.pop()}]" if len(gain_units) == 1 else "gain |H| (units in the legend)")
     ax1.grid(alpha=0.3, which="both")
     ax1.legend(fontsize=8)
     ax2.axhline(0, color="k", lw=0.6)
@@ -246,16 +258,20 @@ def cmd_ac(args):
         k = int(np.argmax(lam.real))
         print(f"warning: the operating point is unstable (eigenvalue {lam[k].real:+.4g}{lam[k].imag:+.4g}j /s); "
               "the transfer function is formal (no periodic steady state to observe it in)", file=sys.stderr)
+    relative = {n: bool(np.isfinite(res.rel_gain[n]).any()) for n in outputs}
     for n in outputs:
-        g = res.rel_gain[n]
-        k = int(np.nanargmax(g))
         u = res.output_units[n]
+        g = res.rel_gain[n] if relative[n] else res.gain[n]
+        k = int(np.nanargmax(g))
+        rel = (f"relative {g[0]:.4g}" if relative[n] else
+               f"no relative gain: {'the input' if res.p0 == 0 else 'the output'} is 0 at the operating point")
         print(f"  {n}: operating point {res.y0[n]:.6g} {u}; "
               f"gain at {res.freq[0]:.4g} Hz {res.gain[n][0]:.6g} {u}/{res.input_unit} "
-              f"(relative {g[0]:.4g}, phase {res.phase[n][0]:+.2f} deg); "
-              f"relative-gain peak {g[k]:.4g} at {res.freq[k]:.4g} Hz")
+              f"({rel}, phase {res.phase[n][0]:+.2f} deg); "
+              f"{'relative-' if relative[n] else ''}gain peak {g[k]:.4g} at {res.freq[k]:.4g} Hz")
     if not args.quiet:
-        show = [k for n in outputs for k in (f"rel_gain({n}/{res.input})", f"phase({n}/{res.input})")]
+        show = [k for n in outputs for k in (f"{'rel_gain' if relative[n] else 'gain'}({n}/{res.input})",
+                                             f"phase({n}/{res.input})")]
         print(res.summary(show=show, max_rows=0, where=args.out))
     save_outputs(args, res)
 
