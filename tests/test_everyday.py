@@ -115,3 +115,23 @@ def test_ac_with_an_input_of_zero_reports_the_absolute_gain(tmp_path, capsys):
     # the input impedance of R || C: R / (1 + j w R C), R C = 1 s
     np.testing.assert_allclose(res["gain(P(a)/Q.value)"], 2 / np.sqrt(1 + w ** 2), rtol=1e-5)
     assert np.isnan(res["rel_gain(P(a)/Q.value)"]).all()
+
+
+def test_envelope_phase_plot_of_many_members_colours_by_the_sweep(monkeypatch):
+    from types import SimpleNamespace
+
+    from hemocircuit.analyses import envelope
+
+    t = np.linspace(0, 2 * np.pi, 50)
+    rows = [{"Pa.value": 60.0 + k, "art.zeta": z} for z in (0.0, 0.1) for k in range(55)]
+    series = [{"x": np.cos(t) * (1 + r["Pa.value"] / 100), "y": np.sin(t)} for r in rows]
+    res = SimpleNamespace(rows=lambda: rows, series=series, index=["Pa.value", "art.zeta"],
+                          units={"Pa.value": "mmHg", "art.zeta": "1"})
+    saved = {}
+    monkeypatch.setattr(envelope, "save_figure", lambda fig, path: saved.update(fig=fig))
+    envelope.plot_phase_plane("p.png", res, "x", "y")
+    fig = saved["fig"]
+    main_ax, bar = fig.axes  # the curves and a colour bar for the sweep
+    assert len(main_ax.lines) == 110 + 2  # 110 curves, 2 line-style keys
+    assert [t.get_text() for t in main_ax.get_legend().get_texts()] == ["art.zeta=0", "art.zeta=0.1"]
+    assert "Pa.value [mmHg]" in bar.get_ylabel()

@@ -236,15 +236,33 @@ def plot_result(res, path, select=None, title=None):
 def plot_phase_plane(path, res, x_col, y_col):
     plt = pyplot()
 
-    fig, ax = plt.subplots(figsize=(5.5, 4.5))
-    for r, s in zip(res.rows(), res.series):
-        if s and x_col in s and y_col in s:
-            lab = ", ".join(f"{k}={label_value(r[k])}" for k in res.index)
-            ax.plot(s[x_col], s[y_col], lw=0.7, label=lab)
+    curves = [(r, s) for r, s in zip(res.rows(), res.series) if s and x_col in s and y_col in s]
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    if len(curves) <= 8:  # few: one legend entry each, beside the axes
+        for r, s in curves:
+            ax.plot(s[x_col], s[y_col], lw=0.7, label=", ".join(f"{k}={label_value(r[k])}" for k in res.index))
+        if curves:
+            ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0)
+    else:  # many: the sweep's value as colour (a colour bar), the grid's members as line styles
+        import matplotlib as mpl
+        sweep, rest = res.index[0], list(res.index[1:])
+        v = np.array([float(r[sweep]) for r, _ in curves])
+        norm = mpl.colors.Normalize(vmin=v.min(), vmax=v.max() if v.max() > v.min() else v.min() + 1)
+        cmap = mpl.colormaps["viridis"]
+        others = list(dict.fromkeys(tuple(r[k] for k in rest) for r, _ in curves))
+        styles = ["-", "--", ":", "-."]
+        for (r, s), val in zip(curves, v):
+            style = styles[others.index(tuple(r[k] for k in rest)) % 4]
+            ax.plot(s[x_col], s[y_col], style, lw=0.6, color=cmap(norm(val)))
+        if rest and len(others) > 1:
+            for j, o in enumerate(others[:4]):
+                ax.plot([], [], styles[j], color="k", lw=0.8, label=", ".join(f"{k}={label_value(x)}"
+                                                                              for k, x in zip(rest, o)))
+            ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.25, 1.0), borderaxespad=0)
+        fig.colorbar(mpl.cm.ScalarMappable(norm=norm, cmap=cmap), ax=ax, label=f"{sweep} [{res.units.get(sweep, '')}]")
     ax.set_xlabel(x_col)
     ax.set_ylabel(y_col)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=6)
     save_figure(fig, path)
 
 
