@@ -334,7 +334,7 @@ def cmd_show(args):
     if args.rerun is not None:
         from .rerun import rerun_argv
         new, notes = rerun_argv(res.metadata, args.result, args.rerun, lambda cmd: build_parser(cmd).commands[cmd],
-                                args.allow_path)
+                                RESULT_COMMANDS, args.allow_path)
         for n in notes:
             print(f"note: {n}", file=sys.stderr)
         print("re-running: " + shlex.join(["hemocircuit", *new]))
@@ -511,6 +511,8 @@ def _extra_commands(only=None):
 
 OUTPUT_OPTIONS = ("out", "plot", "phase_plot", "svzerod_output", "rerun")
 FIGURE_OPTIONS = ("plot", "phase_plot")
+#: the commands whose --out is one result file (hemocircuit.results); show --rerun re-runs these
+RESULT_COMMANDS = ("op", "dc", "tran", "ac", "freq", "stability", "envelope", "periodic", "compare")
 
 
 def _check_outputs(args):
@@ -523,6 +525,9 @@ def _check_outputs(args):
             io.prepare_output(path, flag)
             if key in FIGURE_OPTIONS:
                 io.figure_format(path, flag)
+            elif key in ("out", "rerun") and args.command in ("show",) + RESULT_COMMANDS:
+                from .results import file_format
+                file_format(path, flag)  # .csv, .json, .npz, .parquet: known before computing
 
 
 def main(argv=None):

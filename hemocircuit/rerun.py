@@ -6,7 +6,7 @@ writes, reads or connects to.  So the stored command line is parsed with the com
 parser (abbreviations such as ``--plo=`` resolve to the option they name) and rebuilt from a
 whitelist of analysis settings:
 
-* the command must be an analysis that writes one result (:data:`COMMANDS`);
+* the command must be an analysis that writes one result (cli.RESULT_COMMANDS);
 * kept: the settings in :data:`SETTINGS` (``--set``, ``--grid``, sweeps, times, tolerances,
   inputs and outputs of interest, ...);
 * the netlist(s) and ``--protocol``: kept when they lie in the allowed folders (the project of
@@ -25,8 +25,6 @@ import os
 
 from .errors import HemocircuitError, excerpt
 
-#: the analyses a result file can be re-run from (each writes one result with --out)
-COMMANDS = ("op", "dc", "tran", "ac", "freq", "stability", "envelope", "periodic", "compare")
 
 #: analysis settings kept from the stored command line (argparse dests)
 SETTINGS = ("set", "grid", "measure", "show", "quiet", "workers", "svzerod_units",
@@ -39,10 +37,10 @@ SETTINGS = ("set", "grid", "measure", "show", "quiet", "workers", "svzerod_units
 PATHS = ("netlist", "netlists", "protocol")
 
 
-def rerun_argv(metadata, result_path, out, parser_of, allow_paths=None):
+def rerun_argv(metadata, result_path, out, parser_of, commands, allow_paths=None):
     """(argv of the run to make, [notes on what was dropped]) from a result's ``metadata``.
     ``out``: the new result file; ``parser_of(command)``: that command's argparse parser (the
-    command line's own).  Raises a HemocircuitError when the stored command cannot be re-run
+    command line's own); ``commands``: the commands that write one result (the only ones re-run).  Raises a HemocircuitError when the stored command cannot be re-run
     safely, saying why."""
     from .access import Access
 
@@ -52,9 +50,9 @@ def rerun_argv(metadata, result_path, out, parser_of, allow_paths=None):
         raise HemocircuitError(f"{result_path}: no command line in its provenance (written by the API?); run the "
                                "analysis yourself")
     command = argv[0]
-    if command not in COMMANDS:
+    if command not in commands:
         raise HemocircuitError(f"{result_path}: its stored command {excerpt(command, 40)} cannot be re-run by "
-                               f"show --rerun (only {', '.join(COMMANDS)}); run it yourself")
+                               f"show --rerun (only {', '.join(commands)}); run it yourself")
     parser = parser_of(command)
     parser.exit_on_error = False
     try:

@@ -75,8 +75,8 @@ def jsonable(v):
         return {str(k): jsonable(x) for k, x in v.items()}
     if isinstance(v, (list, tuple)):
         return [jsonable(x) for x in v]
-    if isinstance(v, np.ndarray):
-        return [jsonable(x) for x in v.tolist()]
+    if isinstance(v, np.ndarray):  # numbers and flags as they are: one C-level tolist, not a call per value
+        return v.tolist() if v.dtype.kind in "iufb" else [jsonable(x) for x in v.tolist()]
     if isinstance(v, (bool, np.bool_)):
         return bool(v)
     if isinstance(v, (int, np.integer)):
@@ -99,6 +99,45 @@ def _cell(v):
         f = float(v)
         return "nan" if math.isnan(f) else repr(f)
     return "" if v is None else str(v)
+
+
+#: result file formats by extension (Result.save, Result.load, --out)
+FORMATS = {".csv": "csv", ".txt": "csv", ".json": "json", ".npz": "npz", ".parquet": "parquet"}
+
+
+def file_format(path, what="--out"):
+    """The result format of ``path``'s extension, or a clear error listing them."""
+    from .errors import HemocircuitError
+    ext = os.path.splitext(os.fspath(path))[1].lower()
+    if ext not in FORMATS:
+        raise HemocircuitError(f"{what} {path}: unknown result format {ext or '(no extension)'!r}; use "
+                               f"{', '.join(FORMATS)} (.npz and .parquet are binary and exact, for long runs)")
+    return FORMATS[ext]
+
+
+def _pyarrow():
+    from .errors import HemocircuitError
+    try:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+    except ImportError:
+        raise HemocircuitError("Parquet files need pyarrow: pip install pyarrow (or write .npz, numpy's binary "
+                               "format, or .csv)") from None
+    return pa, pq
+
+
+def _csv_cells(a):
+    """A column's cells as CSV text: numbers and flags by one repr of the whole column (Python's
+    shortest round-trip repr of each float, as ``repr(x)``; no Python call per cell), text quoted
+    where CSV needs it."""
+    if a.dtype.kind in "iufb":
+        return repr(a.tolist())[1:-1].split(", ") if a.size else []
+    return [_csv_quote(_cell(v)) for v in a.tolist()]
+
+
+def _csv_quote(text):
+    """Quoted as the csv module quotes (and "" for an empty cell, so a one-column row survives)."""
+    return '"' + text.replace('"', '""') + '"' if not text or any(c in text for c in ',"\n\r') else text
 
 
 def label_value(v) -> str:
@@ -211,8 +250,9 @@ class Result:
 
     # ------------------------------------------------------------------ files -------------
     def save(self, path):
-        """Write ``path`` (``.json``: :meth:`to_json`, anything else: :meth:`to_csv`); returns it."""
-        return self.to_json(path) if str(path).lower().endswith(".json") else self.to_csv(path)
+        """Write ``path`` in the format its extension names (:data:`FORMATS`: ``.csv``, ``.json``,
+        and for long runs the binary ``.npz`` or ``.parquet``); returns it."""
+        return getattr(self, "to_" + file_format(path))(path)
 
     def _file_metadata(self):
         """The metadata as JSON types, file hashes added, in a reading order (what, how, whence)."""
@@ -235,13 +275,41 @@ class Result:
                     buf.write(f"# {key}.{sub}: {_json_line(v)}\n")
             else:
                 buf.write(f"# {key}: {_json_line(value)}\n")
-        w = csv.writer(buf, lineterminator="\n")
         names = list(self.data)
-        w.writerow([self.label(n) for n in names])
-        cols = [self.data[n].tolist() for n in names]
-        for vals in zip(*cols):
-            w.writerow([_cell(v) for v in vals])
+        buf.write(",".join(_csv_quote(self.label(n)) for n in names) + "\n")
+        cells = [_csv_cells(self.data[n]) for n in names]
+        buf.write("\n".join(map(",".join, zip(*cells))))
+        if self.n_rows:
+            buf.write("\n")
         atomic_write(path, buf.getvalue())
+        return str(path)
+
+    def to_npz(self, path):
+        """numpy's ``.npz`` (binary, exact, compact for long runs): one array per column under its
+        header ``name [unit]``, plus ``__index__`` and ``__metadata__`` (JSON text).  Atomic;
+        read back by :meth:`load` (no pickles: text columns are stored as unicode arrays)."""
+        from .io import atomic_file
+        arrays = {self.label(n): (v if _is_numeric(v) or v.dtype.kind == "b" else
+                                  np.array([_cell(x) for x in v.tolist()], dtype=str))
+                  for n, v in self.data.items()}
+        arrays["__index__"] = np.array(json.dumps(self.index))
+        arrays["__metadata__"] = np.array(json.dumps(self._file_metadata(), allow_nan=True))
+        with atomic_file(path, "wb") as fh:
+            np.savez(fh, **arrays)
+        return str(path)
+
+    def to_parquet(self, path):
+        """Apache Parquet through pyarrow (an optional dependency): one column per result column
+        under its header, the index and metadata as JSON in the file's key-value metadata."""
+        from .io import atomic_file
+        pa, pq = _pyarrow()
+        table = pa.table({self.label(n): (v if _is_numeric(v) or v.dtype.kind == "b" else
+                                          [None if x is None else str(x) for x in v.tolist()])
+                          for n, v in self.data.items()})
+        table = table.replace_schema_metadata({"hemocircuit.index": json.dumps(self.index),
+                                               "hemocircuit.metadata": json.dumps(self._file_metadata())})
+        with atomic_file(path, "wb") as fh:
+            pq.write_table(table, fh)
         return str(path)
 
     def to_json(self, path):
@@ -249,8 +317,11 @@ class Result:
         from .io import atomic_write
         single = self.n_rows == 1
         values = {self.label(n): (jsonable(v.tolist()[0]) if single else jsonable(v)) for n, v in self.data.items()}
-        doc = {"metadata": self._file_metadata(), "index": self.index, "values": values}
-        atomic_write(path, json.dumps(doc, indent=1) + "\n")
+        # the metadata indented; each column on one line (json's C encoder: indenting every value
+        # of a long run would take the Python encoder and a line per number)
+        columns = ",\n".join(f"  {json.dumps(k)}: {json.dumps(v)}" for k, v in values.items())
+        atomic_write(path, '{\n "metadata": ' + json.dumps(self._file_metadata(), indent=1).replace("\n", "\n ")
+                     + ',\n "index": ' + json.dumps(self.index) + ',\n "values": {\n' + columns + "\n }\n}\n")
         return str(path)
 
     @classmethod
@@ -260,19 +331,51 @@ class Result:
         from .errors import HemocircuitError, excerpt
         from .inputs import parse_json, read_text
 
-        text = read_text(path, "result file", size_limit="RESULT_MB")  # the input policy (hemocircuit.inputs)
+        fmt = file_format(path, "result file")
         try:
-            if str(path).lower().endswith(".json"):
-                res = cls._from_json(parse_json(text, str(path), allow_nan=True))
+            if fmt in ("npz", "parquet"):
+                from .inputs import read_bytes
+                data = read_bytes(path, "result file", size_limit="RESULT_MB")  # the input policy (inputs.py)
+                res = cls._from_npz(data) if fmt == "npz" else cls._from_parquet(data)
             else:
-                res = cls._from_csv(text)
-        except (ValueError, KeyError, TypeError, IndexError, AttributeError) as exc:
+                text = read_text(path, "result file", size_limit="RESULT_MB")
+                res = cls._from_json(parse_json(text, str(path), allow_nan=True)) if fmt == "json" else \
+                    cls._from_csv(text)
+        except (ValueError, KeyError, TypeError, IndexError, AttributeError, OSError) as exc:
             raise HemocircuitError(f"{path}: not a hemocircuit result file ({excerpt(exc, 120)})") from None
         for section in _MAPPING_SECTIONS:
             if not isinstance(res.metadata.get(section, {}), dict):
                 raise HemocircuitError(f"{path}: not a hemocircuit result file (its '{section}' metadata is "
                                        f"{excerpt(res.metadata[section], 60)}, not a mapping)")
         return res
+
+    @classmethod
+    def _from_npz(cls, data):
+        with np.load(_io.BytesIO(data), allow_pickle=False) as z:
+            index, meta = json.loads(str(z["__index__"])), json.loads(str(z["__metadata__"]))
+            cols, units = {}, {}
+            for head in z.files:
+                if head.startswith("__"):
+                    continue
+                name, unit = parse_label(head)
+                v = z[head]
+                cols[name] = v if v.dtype.kind in "iufb" else np.array(v.tolist(), dtype=object)
+                units[name] = unit
+        return cls._make(cols, units, index, meta)
+
+    @classmethod
+    def _from_parquet(cls, data):
+        pa, pq = _pyarrow()
+        table = pq.read_table(pa.BufferReader(data))
+        md = table.schema.metadata or {}
+        cols, units = {}, {}
+        for head in table.column_names:
+            name, unit = parse_label(head)
+            v = table.column(head).to_numpy(zero_copy_only=False)
+            cols[name] = v if v.dtype.kind in "iufb" else np.array(v.tolist(), dtype=object)
+            units[name] = unit
+        return cls._make(cols, units, json.loads(md.get(b"hemocircuit.index", b"[]")),
+                         json.loads(md.get(b"hemocircuit.metadata", b"{}")))
 
     @classmethod
     def _from_json(cls, doc):

@@ -135,3 +135,49 @@ def test_envelope_phase_plot_of_many_members_colours_by_the_sweep(monkeypatch):
     assert len(main_ax.lines) == 110 + 2  # 110 curves, 2 line-style keys
     assert [t.get_text() for t in main_ax.get_legend().get_texts()] == ["art.zeta=0", "art.zeta=0.1"]
     assert "Pa.value [mmHg]" in bar.get_ylabel()
+
+
+def _mixed_result():
+    from hemocircuit.results import Result
+    cols = {"time": np.array([0.0, 0.1, 1e-7, 1e22]), "x": np.array([np.nan, -0.0, np.inf, 1 / 3]),
+            "n": np.array([1, -2, 3, 2 ** 40]), "flag": np.array([True, False, True, True]),
+            "note": np.array(["a,b", 'say "hi"', "", None], dtype=object)}
+    return Result(cols, {"time": "s", "x": "mmHg", "n": "1"}, index=["time"], metadata={"analysis": "tran"})
+
+
+def test_csv_writer_writes_what_the_csv_module_writes():
+    """The vectorised writer's cells read back as the csv module's per-cell writer's did."""
+    import csv
+    import io
+
+    from hemocircuit.results import _cell, _csv_cells
+    res = _mixed_result()
+    buf = io.StringIO()
+    csv.writer(buf, lineterminator="\n").writerows(zip(*[[_cell(v) for v in res[n].tolist()] for n in res.keys()]))
+    ours = "\n".join(map(",".join, zip(*[_csv_cells(res[n]) for n in res.keys()])))
+    assert list(csv.reader(io.StringIO(ours))) == list(csv.reader(io.StringIO(buf.getvalue())))
+    assert ours.splitlines()[0] == '0.0,nan,1,True,"a,b"' and ours.splitlines()[3] == '1e+22,0.3333333333333333,' \
+        '1099511627776,True,""'
+
+
+@pytest.mark.parametrize("ext", [".csv", ".json", ".npz", ".parquet"])
+def test_result_formats_round_trip_exactly(tmp_path, ext):
+    if ext == ".parquet":
+        pytest.importorskip("pyarrow")
+    res = _mixed_result()
+    path = tmp_path / f"r{ext}"
+    res.save(path)
+    back = Result.load(path)
+    assert list(back.keys()) == list(res.keys()) and back.index == ["time"]
+    for k in ("time", "x", "n"):
+        np.testing.assert_array_equal(back[k], res[k])  # bit for bit, nan and -0.0 included
+    assert np.signbit(back["x"][1])
+    assert list(back["flag"]) == [True, False, True, True]
+    assert [("" if v is None else v) for v in back["note"]] == ["a,b", 'say "hi"', "", ""]
+    assert back.units["x"] == "mmHg" and back.metadata["analysis"] == "tran"
+
+
+def test_unknown_result_format_is_refused_before_computing(tmp_path, capsys):
+    assert main(["tran", str(BASE_RC), "--t-end", "1", "--out", str(tmp_path / "r.xlsx"), "--quiet"]) == 2
+    assert "unknown result format '.xlsx'" in capsys.readouterr().err
+    assert not (tmp_path / "r.xlsx").exists()

@@ -91,10 +91,10 @@ def test_rerun_never_uses_a_stored_allow_path_or_scheduler(project, capsys):
     # a stored scheduler address is dropped: the grid runs on local processes, no connection made
     src2 = _result_with_argv(proj / "c.csv", ["freq", "rc.yaml", "--freq", "0.01:0.1Hz", "--scheduler",
                                               "tcp://127.0.0.1:9"], proj)
-    from hemocircuit.cli import build_parser
+    from hemocircuit.cli import RESULT_COMMANDS, build_parser
     from hemocircuit.rerun import rerun_argv
     argv, notes = rerun_argv(Result.load(src2).metadata, str(src2), str(proj / "d.csv"),
-                             lambda c: build_parser(c).commands[c])
+                             lambda c: build_parser(c).commands[c], RESULT_COMMANDS)
     assert not any("scheduler" in a or "tcp://" in a for a in argv)
     assert any("--scheduler (a network address)" in n for n in notes)
 
