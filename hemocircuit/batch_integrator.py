@@ -21,21 +21,10 @@ import numpy as np
 
 from .derivatives import fd_steps, time_step
 
-# ROS34PW2 tableau (Hairer convention: W = I - gamma h J,
-# W k_i = h f(t + c_i h, x + sum_j A_ij k_j) + h J sum_j G_ij k_j + h^2 d_i f_t)
-GAMMA = 4.3586652150845900e-01
-A = np.array([[0.0, 0.0, 0.0, 0.0],
-              [8.7173304301691801e-01, 0.0, 0.0, 0.0],
-              [8.4457060015369423e-01, -1.1299064236397981e-01, 0.0, 0.0],
-              [0.0, 0.0, 1.0, 0.0]])
-G = np.array([[0.0, 0.0, 0.0, 0.0],
-              [-8.7173304301691801e-01, 0.0, 0.0, 0.0],
-              [-9.0338057013044082e-01, 5.4180672388095326e-02, 0.0, 0.0],
-              [2.4212380706095346e-01, -1.2232505839045147e+00, 5.4526025533510214e-01, 0.0]])
-B_SOL = np.array([2.4212380706095346e-01, -1.2232505839045147e+00, 1.5452602553351023e+00,
-                  4.3586652150845900e-01])
-B_EMB = np.array([3.7810903145819369e-01, -9.6042292212423178e-02, 5.0000000000000000e-01,
-                  2.1793326075422950e-01])
+# the ROS34PW2 tableau (one definition, with the compiled engine's: kernels/tableaus.py)
+from .kernels.tableaus import ROS34PW2_A as A, ROS34PW2_B_EMB as B_EMB, ROS34PW2_B_SOL as B_SOL, ROS34PW2_G as G, \
+    ROS34PW2_GAMMA as GAMMA
+
 C_T = A.sum(axis=1)
 D_T = GAMMA + G.sum(axis=1)
 ORDER = 3

@@ -7,7 +7,7 @@ hemocircuit.kernels.background JOB``), integrates on the scipy path meanwhile, a
 rest of the run over to the compiled engine as soon as the build reports ready
 (hemocircuit.analyses.transient).  Later runs find the engine built and use it from the start.
 
-Files, beside the engine module in the cache folder (:func:`codegen.cache_dir`):
+Files, beside the engine module in the cache folder (:func:`freshness.cache_dir`):
   ``<engine>.ready-<N>``   the transient entry points are compiled and in numba's cache
                            (N: a hash of ``NUMBA_CACHE_DIR``, where that cache lives)
   ``<engine>.building-<N>`` a build is running (its process id; stale when that process is gone)

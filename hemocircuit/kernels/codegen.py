@@ -29,6 +29,7 @@ import time
 from pathlib import Path
 
 from . import freshness
+from .freshness import cache_dir
 
 _TEMPLATE = Path(__file__).with_name("engine_template.py")
 _loaded: dict[str, object] = {}
@@ -39,12 +40,6 @@ STALE_DAYS = 7
 def loaded_any() -> bool:
     """True when this process has loaded an engine module (it runs compiled code already)."""
     return bool(_loaded)
-
-
-def cache_dir() -> Path:
-    d = Path(os.environ.get("HEMOCIRCUIT_CACHE_DIR") or Path.home() / ".cache" / "hemocircuit") / "kernels"
-    d.mkdir(parents=True, exist_ok=True)
-    return d
 
 
 def _ref(fn) -> tuple[str, str]:

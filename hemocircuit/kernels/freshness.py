@@ -17,20 +17,29 @@ import hashlib
 import os
 from pathlib import Path
 
+
+def cache_dir() -> Path:
+    """The folder of the compiled engines and their markers (HEMOCIRCUIT_CACHE_DIR, default
+    ~/.cache/hemocircuit), created on first use."""
+    d = Path(os.environ.get("HEMOCIRCUIT_CACHE_DIR") or Path.home() / ".cache" / "hemocircuit") / "kernels"
+    d.mkdir(parents=True, exist_ok=True)
+    return d
+
+
 _HERE = Path(__file__).resolve().parent
 _checked = False
 
 
 def sources() -> list[Path]:
     """Every source file whose code or constants the compiled kernels contain: the components
-    package (built-in component types and their physics), this kernels package, units.py,
-    the batch integrator (tableau constants) and derivatives.py (the difference step FD_REL,
+    package (built-in component types and their physics), this kernels package, units.py
+    and derivatives.py (the difference step FD_REL,
     which the engine and the heart's partials read)."""
     import hemocircuit.components as comps
 
     roots = [Path(p).resolve() for p in comps.__path__] + [_HERE]
     files = sorted({f for r in roots for f in r.rglob("*.py") if "__pycache__" not in f.parts})
-    return files + [_HERE.parent / "units.py", _HERE.parent / "batch_integrator.py", _HERE.parent / "derivatives.py"]
+    return files + [_HERE.parent / "units.py", _HERE.parent / "derivatives.py"]
 
 
 def key(files=None) -> str:
@@ -55,7 +64,6 @@ def _numba_dirs(py_file: Path) -> list[Path]:
 
 
 def _stamp() -> Path:
-    from .codegen import cache_dir
 
     where = os.environ.get("NUMBA_CACHE_DIR", "") + "|" + str(_HERE)
     return cache_dir() / f"kernel-sources-{hashlib.sha256(where.encode()).hexdigest()[:10]}.key"
