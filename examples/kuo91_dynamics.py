@@ -8,14 +8,16 @@ tau_Ca = 230 s throughout (the dashed line of figKuo91Fig2ACombo).  The pressure
 the protocols are assumptions (docs/kuo91_protocols.md); the event times and Ca time constants
 are the thesis's.
 
-Writes to examples/output/:
+Writes to examples/out/:
   kuo91_<run>.csv            time series (t, Pup, Pdown, P, dP, r, lambda, Ca, Cw, cGMP, ...)
   kuo91_features.csv         response features per event (radius before, extreme, epoch end)
   kuo91_{A,B,C,D}.png        radius (1st and 2nd order) over P and dP, like Kuo91 fig. 2
   kuo91_fig2_overview.png    the four first-order radius traces (figKuo91Fig2A-D)
   kuo91_A_states.png         radius, wall NO with NO_U, Ca and cGMP in A (figKuo91Fig2AStates)
 
-Run:  python examples/kuo91_dynamics.py
+Run:  python examples/kuo91_dynamics.py   (about 10 s once the engine is compiled;
+HEMOCIRCUIT_EXAMPLES_QUICK=1: the same runs written every 1 s instead of 0.25 s;
+HEMOCIRCUIT_EXAMPLES_OUT=DIR: write to DIR instead of examples/out/)
 """
 from __future__ import annotations
 
@@ -34,10 +36,11 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
 NETLIST = os.path.join(ROOT, "netlists", "isolated_arteriole.yaml")
 PROTOCOLS = os.path.join(HERE, "protocols")
-OUT = os.path.join(HERE, "output")
+QUICK = os.environ.get("HEMOCIRCUIT_EXAMPLES_QUICK", "") not in ("", "0")  # the test suite's smoke run
+OUT = os.environ.get("HEMOCIRCUIT_EXAMPLES_OUT") or os.path.join(HERE, "out")
 
 CMH2O_PER_MMHG = conversion_factor("mmHg", "cmH2O")
-DT = 0.25  # output interval [s]
+DT = 1.0 if QUICK else 0.25  # output interval [s]
 EXPERIMENTS = ("A", "B", "C", "D")
 SERIES = ("r", "lambda", "Ca", "dCa", "Cw", "Cb_mean", "cGMP", "M", "Mp", "AMp", "AM", "sigma",
           "tau_hat", "Q")

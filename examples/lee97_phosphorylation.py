@@ -6,10 +6,11 @@ tab4State, preset kuo91).
 thesis), plus the two conditions of the Lee97 data: [8Br-cGMP] = 0 (control) and 2 uM.
 The Lee97 data points themselves are not in the thesis text and are not drawn.
 
-Writes examples/output/lee97_phosphorylation.csv (Ca, cGMP, Mp + AMp, long format) and
-examples/output/lee97_phosphorylation.png.
+Writes examples/out/lee97_phosphorylation.csv (Ca, cGMP, Mp + AMp, long format) and
+examples/out/lee97_phosphorylation.png.
 
-Run:  python examples/lee97_phosphorylation.py
+Run:  python examples/lee97_phosphorylation.py   (a second or two; HEMOCIRCUIT_EXAMPLES_QUICK=1:
+41 Ca values; HEMOCIRCUIT_EXAMPLES_OUT=DIR: write to DIR instead of examples/out/)
 """
 from __future__ import annotations
 
@@ -23,9 +24,10 @@ from hemocircuit.components.arteriole import make_params
 from hemocircuit.components.arteriole.lee97 import phosphorylation_curves
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-OUT = os.path.join(HERE, "output")
+QUICK = os.environ.get("HEMOCIRCUIT_EXAMPLES_QUICK", "") not in ("", "0")  # the test suite's smoke run
+OUT = os.environ.get("HEMOCIRCUIT_EXAMPLES_OUT") or os.path.join(HERE, "out")
 
-CA = np.logspace(-8, -4, 161)          # 10 nM .. 100 uM
+CA = np.logspace(-8, -4, 41 if QUICK else 161)  # 10 nM .. 100 uM
 CGMP = np.logspace(-10, -5, 6)         # 0.1 nM .. 10 uM
 LEE97 = (0.0, 2e-6)                    # Lee97 conditions: control, 2 uM 8Br-cGMP
 

@@ -13,11 +13,13 @@ the flow leads.  The script reports, for each case and flow, where the phase rev
 to lag (linear interpolation of the phase in log tau_Ca between the bracketing grid values);
 the thesis puts the reversal near tau_Ca = 2.5 s when the volume flow is neglected.
 
-Writes examples/output/payne06_phase_vs_tau.csv (the frequency response, one row per run) and
-examples/output/payne06_phase_vs_tau.png.
+Writes examples/out/payne06_phase_vs_tau.csv (the frequency response, one row per run) and
+examples/out/payne06_phase_vs_tau.png.
 
 Run:  python examples/payne06_phase_vs_tau.py [--workers N] [--scheduler serial|processes|tcp://...]
-                                             [--n-tau 12]
+                                             [--n-tau 12] [--out-dir DIR]
+(about a minute; HEMOCIRCUIT_EXAMPLES_QUICK=1: 4 tau_Ca values by default;
+HEMOCIRCUIT_EXAMPLES_OUT=DIR: the default of --out-dir instead of examples/out/)
 """
 from __future__ import annotations
 
@@ -33,7 +35,8 @@ from hemocircuit.analyses.freq import frequency_response
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
 NETLIST = os.path.join(ROOT, "netlists", "payne06.yaml")
-OUT = os.path.join(HERE, "output")
+QUICK = os.environ.get("HEMOCIRCUIT_EXAMPLES_QUICK", "") not in ("", "0")  # the test suite's smoke run
+OUT = os.environ.get("HEMOCIRCUIT_EXAMPLES_OUT") or os.path.join(HERE, "out")
 
 FREQ = 0.1          # Hz
 STEP = 0.05         # 80 -> 84 mmHg
@@ -58,7 +61,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--scheduler", default=None)
-    ap.add_argument("--n-tau", type=int, default=12)
+    ap.add_argument("--n-tau", type=int, default=4 if QUICK else 12)
     ap.add_argument("--out-dir", default=OUT)
     args = ap.parse_args(argv)
 

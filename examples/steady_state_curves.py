@@ -8,10 +8,11 @@ For both presets (kuo91, falcone91) and P = 20..140 cmH2O:
 Each curve is one batched operating point of ``netlists/isolated_arteriole.yaml`` (all
 pressures solved at once).
 
-Writes examples/output/steady_state_curves.csv (long format, one row per preset x case x P)
+Writes examples/out/steady_state_curves.csv (long format, one row per preset x case x P)
 and the PNGs steady_kuo91.png, steady_falcone91.png and steady_passive_both.png.
 
-Run:  python examples/steady_state_curves.py
+Run:  python examples/steady_state_curves.py   (a few seconds; HEMOCIRCUIT_EXAMPLES_QUICK=1: P in
+steps of 10 cmH2O; HEMOCIRCUIT_EXAMPLES_OUT=DIR: write to DIR instead of examples/out/)
 """
 from __future__ import annotations
 
@@ -27,10 +28,11 @@ from hemocircuit.units import conversion_factor
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
 NETLIST = os.path.join(ROOT, "netlists", "isolated_arteriole.yaml")
-OUT = os.path.join(HERE, "output")
+QUICK = os.environ.get("HEMOCIRCUIT_EXAMPLES_QUICK", "") not in ("", "0")  # the test suite's smoke run
+OUT = os.environ.get("HEMOCIRCUIT_EXAMPLES_OUT") or os.path.join(HERE, "out")
 
 MMHG_PER_CMH2O = conversion_factor("cmH2O", "mmHg")  # 0.7356
-P_CMH2O = np.arange(20.0, 140.0 + 1e-9, 2.0)          # intramural pressure grid
+P_CMH2O = np.arange(20.0, 140.0 + 1e-9, 10.0 if QUICK else 2.0)  # intramural pressure grid
 DP_FLOW = 4.0                                          # cmH2O, Kuo91 fig. 4 'with flow'
 PRESETS = ("kuo91", "falcone91")
 CASES = (  # name, structural options, dP [cmH2O]

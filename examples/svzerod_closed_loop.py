@@ -13,10 +13,14 @@ output SV/T, ejection fraction, mean aortic pressure (at the heart's outlet) and
 Floquet multiplier.
 
 Writes OUT/svzerod_closed_loop.csv (one row per Rd) and OUT/svzerod_closed_loop.png (the PV
-loops).  Run:
+loops); OUT defaults to examples/out/.  Run:
 
-    python examples/svzerod_closed_loop.py OUT [--model PATH/closedLoopHeart_singleVessel.json]
-                                               [--factors 0.5,0.75,1,1.5,2]
+    python examples/svzerod_closed_loop.py [OUT] [--model PATH/closedLoopHeart_singleVessel.json]
+                                                 [--factors 0.5,0.75,1,1.5,2]
+
+(about two minutes; the model is svZeroDSolver's test case, looked for in $SVZEROD_CASES/cases/.
+HEMOCIRCUIT_EXAMPLES_QUICK=1: Rd x 1 only and at most 6 Newton iterations by default;
+HEMOCIRCUIT_EXAMPLES_OUT=DIR: the default OUT.)
 """
 from __future__ import annotations
 
@@ -30,6 +34,9 @@ import numpy as np
 DEFAULT_MODEL = os.path.join(os.environ.get("SVZEROD_CASES", "/work/shared/svzerod"), "cases",
                              "closedLoopHeart_singleVessel.json")
 RD = "RCR_aorta.Rd"
+HERE = os.path.dirname(os.path.abspath(__file__))
+QUICK = os.environ.get("HEMOCIRCUIT_EXAMPLES_QUICK", "") not in ("", "0")  # the test suite's smoke run
+OUT = os.environ.get("HEMOCIRCUIT_EXAMPLES_OUT") or os.path.join(HERE, "out")
 
 
 def load(model_path):
@@ -91,16 +98,18 @@ def sweep(model_path, factors=(1.0,), rtol=1e-9, max_iter=25):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("out", help="folder for the CSV and the PNG")
+    ap.add_argument("out", nargs="?", default=OUT, help="folder for the CSV and the PNG (default: examples/out/)")
     ap.add_argument("--model", default=DEFAULT_MODEL, help="closedLoopHeart_singleVessel.json (theirs)")
-    ap.add_argument("--factors", default="0.5,0.75,1,1.5,2", help="scalings of the ClosedLoopRCR's Rd")
+    ap.add_argument("--factors", default="1" if QUICK else "0.5,0.75,1,1.5,2",
+                    help="scalings of the ClosedLoopRCR's Rd")
+    ap.add_argument("--max-iter", type=int, default=6 if QUICK else 25, help="Newton iterations per orbit")
     args = ap.parse_args(argv)
     if not os.path.isfile(args.model):
         raise SystemExit(f"{args.model}: not found (their closedLoopHeart_singleVessel.json; --model PATH)")
     os.makedirs(args.out, exist_ok=True)
     factors = [float(v) for v in args.factors.split(",")]
     t0 = time.perf_counter()
-    rows = sweep(args.model, factors)
+    rows = sweep(args.model, factors, max_iter=args.max_iter)
     print(f"{len(rows)} periodic states in {time.perf_counter() - t0:.1f} s")
     keys = list(rows[0][0])
     with open(os.path.join(args.out, "svzerod_closed_loop.csv"), "w", newline="") as fh:

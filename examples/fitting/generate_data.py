@@ -17,10 +17,12 @@ Each data set is written noiseless (``*_noise0.csv``) and with Gaussian noise of
 radius (``*_noise1um.csv``, seed stated in the file's header comment).  Columns carry units:
 ``P [cmH2O]``, ``Pup [cmH2O]``, ``Pdown [cmH2O]``, ``r [um]``, ``t [s]``.
 
-Run:  python examples/fitting/generate_data.py      (~10 s)
+Run:  python examples/fitting/generate_data.py [--out DIR]     (~10 s; default DIR: examples/fitting/data,
+the files the specs read; another DIR, e.g. examples/out/fitting_data, leaves those untouched)
 """
 from __future__ import annotations
 
+import argparse
 import os
 
 import numpy as np
@@ -28,6 +30,7 @@ import numpy as np
 import hemocircuit as hc
 from hemocircuit.fitting.datasets import write_table
 from hemocircuit.fitting.problem import _with_values
+from hemocircuit.protocol import Protocol
 from hemocircuit.units import conversion_factor
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -56,20 +59,24 @@ def steady_radius(base, preset, options, pup_mmhg, pdown_mmhg):
     return np.asarray(op["art.r"], dtype=float)
 
 
-def write_pair(name, columns, units, description, k):
-    """Write the noiseless file and the 1 um noise file of one data set."""
+def write_pair(name, columns, units, description, k, out=DATA):
+    """Write the noiseless file and the 1 um noise file of one data set into ``out``."""
     header = ["MODEL-GENERATED data (not measurements), examples/fitting/generate_data.py",
               description, "netlist: netlists/isolated_arteriole.yaml"]
-    write_table(os.path.join(DATA, f"{name}_noise0.csv"), columns, units, header + ["noise: none"])
+    write_table(os.path.join(out, f"{name}_noise0.csv"), columns, units, header + ["noise: none"])
     rng = np.random.default_rng([SEED, k])
     noisy = dict(columns)
     noisy["r"] = columns["r"] + rng.normal(0.0, NOISE_UM, size=len(columns["r"]))
-    write_table(os.path.join(DATA, f"{name}_noise1um.csv"), noisy, units,
+    write_table(os.path.join(out, f"{name}_noise1um.csv"), noisy, units,
                 header + [f"noise: Gaussian, sd {NOISE_UM:g} um on r, numpy default_rng([{SEED}, {k}])"])
 
 
-def main():
-    os.makedirs(DATA, exist_ok=True)
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", default=DATA,
+                    help="folder for the CSVs (default: examples/fitting/data, read by the specs)")
+    out = ap.parse_args(argv).out
+    os.makedirs(out, exist_ok=True)
     base = hc.load(NETLIST)
     mmhg_per_cmh2o = conversion_factor("cmH2O", "mmHg")
     k = 0
@@ -80,7 +87,7 @@ def main():
         write_pair(f"kuo91_{case}", {"P": P, "Pup": pup, "Pdown": pdown, "r": r},
                    {"P": "cmH2O", "Pup": "cmH2O", "Pdown": "cmH2O", "r": "um"},
                    f"preset kuo91, {case}{' (art.passive: true)' if opts else ''}, dP = {dP:g} cmH2O "
-                   "(Pup = P + dP/2, Pdown = P - dP/2)", k)
+                   "(Pup = P + dP/2, Pdown = P - dP/2)", k, out)
         k += 1
     for case in ("passive", "active"):
         opts, _ = CASES[case]
@@ -88,13 +95,13 @@ def main():
         r = steady_radius(base, "falcone91", opts, P, P)
         write_pair(f"falcone91_{case}", {"P": P, "Pup": P, "Pdown": P, "r": r},
                    {"P": "mmHg", "Pup": "mmHg", "Pdown": "mmHg", "r": "um"},
-                   f"preset falcone91, {case}, no flow (pressures 30-120 mmHg ASSUMED)", k)
+                   f"preset falcone91, {case}, no flow (pressures 30-120 mmHg ASSUMED)", k, out)
         k += 1
-    res = base.simulate(None, dt=1.0, protocol=PROTOCOL_A)
+    res = base.simulate(None, dt=1.0, protocol=Protocol.load(PROTOCOL_A, base))
     write_pair("kuo91_A", {"t": res.t, "r": np.asarray(res["art.r"])}, {"t": "s", "r": "um"},
                "preset kuo91, Kuo91 fig. 2A protocol examples/protocols/kuo91_A.yaml "
-               "(tau_Ca 230 s before 239 s, 1 s after; P 60 -> 80 cmH2O at 51 s, flow 239-300 s)", k)
-    print(f"wrote {len(os.listdir(DATA))} files in {DATA}")
+               "(tau_Ca 230 s before 239 s, 1 s after; P 60 -> 80 cmH2O at 51 s, flow 239-300 s)", k, out)
+    print(f"wrote {2 * (k + 1)} files in {out}")
 
 
 if __name__ == "__main__":
