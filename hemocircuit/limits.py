@@ -28,6 +28,9 @@ DEFAULTS = {
     "EXPR_DEPTH": 250,        # nesting depth of one expression (a sum of N terms is N deep)
     "TABLE_ROWS": 1_000_000,  # rows of one waveform table
     "RESULT_MB": 1024,        # size of one result file read back (show, conformance) [MiB]
+    "SVZEROD_POINTS": 10_000_000,   # time points of one svZeroDSolver run (cycles x points per cycle)
+    "SVZEROD_PERIOD_S": 1_000_000,  # cardiac period of an svZeroDSolver model [s]
+    "SVZEROD_NAME_CHARS": 256,      # characters of one svZeroDSolver block name
 }
 
 

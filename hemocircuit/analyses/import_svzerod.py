@@ -15,9 +15,11 @@ def register_cli(sub, common):
 
 
 def cmd_import_svzerod(args):
+    from ..io import prepare_output
     from ..svzerod import import_svzerod, write_netlist
 
+    prepare_output(args.out, "-o/--out")  # before the import: a name that cannot be written is refused first
     model = import_svzerod(args.model, units=args.units)
-    write_netlist(model.netlist, args.out)
+    write_netlist(model.netlist, args.out)  # atomic; never through a link leading out of its folder
     print(f"wrote {args.out}: {len(model.netlist['elements'])} elements, cardiac period {model.period:g} s, "
           f"{model.n_cycles} cycles of {model.points} points", file=sys.stderr)

@@ -23,13 +23,15 @@ node after the junction.  ``SvzModel.columns`` maps their output names (``pressu
 from __future__ import annotations
 
 import json
+import math
 import os
 import re
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import NetlistError
+from .. import limits
+from ..errors import NetlistError, did_you_mean, excerpt
 from ..units import parse_quantity
 
 UNIT_SYSTEMS = {
@@ -56,6 +58,13 @@ CLOSED_LOOP_CORONARY = ("ClosedLoopCoronaryLeft", "ClosedLoopCoronaryRight")
 _CORONARY_SIDE = {"ClosedLoopCoronaryLeft": ("iml", "Elv_s", "Vlv_u", "V_LV"),
                   "ClosedLoopCoronaryRight": ("imr", "Erv_s", "Vrv_u", "V_RV")}
 SUPPORTED_VESSELS = ("BloodVessel", "BloodVesselCRL", "BloodVesselRC", "ChamberSphere")
+SUPPORTED_JUNCTIONS = ("NORMAL_JUNCTION", "internal_junction", "BloodVesselJunction")
+#: the model's lists of blocks, and the key naming a block in each
+SECTIONS = {"vessels": "vessel_name", "junctions": "junction_name", "boundary_conditions": "bc_name",
+            "valves": "name", "chambers": "name", "closed_loop_blocks": None}
+#: their simulation settings that are true or false (SimulationParameters.cpp)
+BOOL_SETTINGS = ("steady_initial", "output_all_cycles", "output_variable_based", "output_mean_only",
+                 "output_derivative", "use_cycle_to_cycle_error")
 
 
 @dataclass
@@ -99,10 +108,107 @@ def _err(msg, block=None, path=None):
 
 
 def _ident(name, path):
-    s = re.sub(r"\W", "_", str(name))
+    s = re.sub(r"[^A-Za-z0-9_]", "_", str(name))  # an element id: ASCII letters, digits, _
     if not s or s[0].isdigit():
         s = "b_" + s
     return s
+
+
+def _show(v, limit=40) -> str:
+    """A short, escaped excerpt of a value from the model, for an error message."""
+    if isinstance(v, int) and not isinstance(v, bool) and v.bit_length() > 64:
+        return f"an integer of {len(str(abs(v))) if v.bit_length() < 14000 else 'thousands of'} digits"
+    if isinstance(v, (dict, list)):
+        kind = "a mapping" if isinstance(v, dict) else "a list"
+        try:
+            return f"{kind} {excerpt(json.dumps(v, default=str, allow_nan=True), limit)}"
+        except (ValueError, RecursionError):
+            return kind
+    return excerpt(v, limit) if isinstance(v, str) else repr(v)
+
+
+def _as_float(v):
+    """``v`` as a float when it is a finite JSON number (not true/false), else None."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        return None
+    try:
+        f = float(v)
+    except OverflowError:  # an integer beyond the float range
+        return None
+    return f if math.isfinite(f) else None
+
+
+def _whole(v):
+    """``v`` as an int when it is a whole JSON number (3 or 3.0; not true/false, not 2.5), else None."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        return None
+    if isinstance(v, float):
+        return int(v) if math.isfinite(v) and v == int(v) else None
+    return v
+
+
+def check_points(cycles, points, path=None, what="simulation_parameters"):
+    """Refuse a run of more time points ((points - 1) cycles + 1) than the SVZEROD_POINTS limit:
+    their output has one row per point (per block or variable), our run one state per point."""
+    total = (points - 1) * cycles + 1
+    if total > limits.limit("SVZEROD_POINTS"):
+        def shown(n):
+            return f"{n:,}" if n < 10 ** 15 else f"about 10^{len(str(n)) - 1 if n < 10 ** 4000 else 'thousands'}"
+        raise _err(f"{what}: {shown(cycles)} cycles of {shown(points)} points per cycle are {shown(total)} time "
+                   f"points, more than allowed {limits.how_to_raise('SVZEROD_POINTS')}; lower "
+                   "number_of_cardiac_cycles or number_of_time_pts_per_cardiac_cycle", path=path)
+    return total
+
+
+def check_period(period, where, block=None, path=None):
+    """A cardiac period [s] must be a finite number > 0 and at most the SVZEROD_PERIOD_S limit
+    (``where``: what gives it, for the message)."""
+    if period is None or not (math.isfinite(period) and period > 0):
+        raise _err(f"{where}: the cardiac period is {period!r} s; it must be a finite number > 0", block, path)
+    if period > limits.limit("SVZEROD_PERIOD_S"):
+        raise _err(f"{where}: a cardiac period of {period:g} s is longer than allowed "
+                   f"{limits.how_to_raise('SVZEROD_PERIOD_S')}; give it in seconds", block, path)
+    return period
+
+
+def simulation_settings(raw, path=None) -> dict:
+    """Their ``simulation_parameters`` checked (with SIM_DEFAULTS): whole numbers of cycles (>= 1)
+    and points per cycle (>= 2) within the SVZEROD_POINTS limit, true/false flags, a positive
+    period, output interval and tolerances; errors name the key and say how to fix it."""
+    def bad(key, v, want):
+        return _err(f"simulation_parameters: '{key}' must be {want}, got {_show(v)}", path=path)
+
+    if not isinstance(raw, dict):
+        raise _err(f"'simulation_parameters' must be a mapping, got {_show(raw)}; e.g. "
+                   '{"number_of_cardiac_cycles": 10, "number_of_time_pts_per_cardiac_cycle": 101}', path=path)
+    sim = {**SIM_DEFAULTS, **raw}
+    for key, low, example in (("number_of_cardiac_cycles", 1, 10), ("number_of_time_pts_per_cardiac_cycle", 2, 101)):
+        if key not in raw:
+            raise _err(f"simulation_parameters: missing '{key}' (e.g. \"{key}\": {example})", path=path)
+        n = _whole(raw[key])
+        if n is None or n < low:
+            extra = " (not a whole number)" if _as_float(raw[key]) is not None and n is None else ""
+            raise bad(key, raw[key], f"a whole number >= {low}{extra}, e.g. {example}")
+        sim[key] = n
+    check_points(sim["number_of_cardiac_cycles"], sim["number_of_time_pts_per_cardiac_cycle"], path)
+    for key in BOOL_SETTINGS:
+        if not isinstance(sim[key] if key in sim else False, bool):
+            raise bad(key, sim[key], "true or false")
+    n = _whole(sim["output_interval"])
+    if n is None or n < 1:
+        raise bad("output_interval", sim["output_interval"], "a whole number >= 1 (write every n-th step)")
+    sim["output_interval"] = n
+    for key in ("absolute_tolerance", "cardiac_period", "sim_cycle_to_cycle_percent_error"):
+        if sim.get(key) is None and key != "absolute_tolerance":
+            sim.pop(key, None)  # not given (null): their default
+            continue
+        v = _as_float(sim[key])
+        if v is None or v <= 0 or (key == "sim_cycle_to_cycle_percent_error" and v >= 100):
+            raise bad(key, sim[key], "a number between 0 and 100 (percent)" if key.startswith("sim_cycle")
+                      else "a finite number > 0" + (" [s]" if key == "cardiac_period" else ""))
+        if key == "cardiac_period":
+            check_period(v, "simulation_parameters: 'cardiac_period'", path=path)
+    return sim
 
 
 def _fmt(x, unit):
@@ -126,53 +232,84 @@ class _Importer:
         self.element_block = {}  # element id -> the block type whose component it is (importer.add)
         self.extra_columns = {}  # their internal variable -> (our column, factor from its unit to theirs)
         self.factors = {}  # their name -> factor from our column's unit to theirs (not P, Q, Vc)
-        self.ids = {}
+        self.ids = {}  # block name -> element id
+        self.owner = {}  # element id -> block name (both ways: a model of many blocks imports in linear time)
         self.raw = {}  # (block, key) -> (times from 0, values, period) of a time series
+        self.means = {}  # id(waveform) -> (waveform, the constant of the steady variant)
         self.pinned_p, self.pinned_q = {}, {}  # node -> (BC name, its value key) of PRESSURE / FLOW
 
     # --- helpers ------------------------------------------------------------------------
     def id_of(self, name):
         ident = _ident(name, self.path)
-        if ident in self.ids.values() and self.ids.get(name) != ident:
-            raise _err(f"block names {name!r} and another one map to the same element id {ident!r}", name, self.path)
+        other = self.owner.get(ident)
+        if other is not None and other != name:
+            raise _err(f"block names {_show(name)} and {_show(other)} map to the same element id {_show(ident)} "
+                       "(characters other than letters, digits and _ become _); rename one", name, self.path)
         self.ids[name] = ident
+        self.owner[ident] = name
         return ident
 
     def value(self, block, values, key, default=None):
+        """The number ``values[key]`` of block ``block`` (a float), or ``default`` when missing
+        and a default is given; anything but a finite number is an error naming the key."""
         if key not in values:
             if default is not None:
-                return default
+                return float(default)
             raise _err(f"block '{block}': missing value '{key}'", block, self.path)
         v = values[key]
-        if isinstance(v, bool) or not isinstance(v, (int, float, list)):
-            raise _err(f"block '{block}': value '{key}' must be a number or a list, got {v!r}", block, self.path)
-        return v
+        f = _as_float(v)
+        if f is None:
+            raise _err(f"block '{block}': value '{key}' must be a finite number, got {_show(v)}", block, self.path)
+        return f
+
+    def numbers(self, block, items, key):
+        """The list ``items`` (value ``key`` of ``block``) as floats: each a finite number."""
+        out = []
+        for i, x in enumerate(items):
+            f = _as_float(x)
+            if f is None:
+                raise _err(f"block '{block}': '{key}[{i}]' must be a finite number, got {_show(x)}", block, self.path)
+            out.append(f)
+        return out
 
     def series(self, block, values, key, unit, steady=False):
         """A constant, or their periodic time series (one cycle, a ``periodic`` pwl waveform)."""
-        v = self.value(block, values, key)
+        if key not in values:
+            raise _err(f"block '{block}': missing value '{key}'", block, self.path)
+        v = values[key]
         if not isinstance(v, list):
-            return _fmt(v, unit), float(v)
+            f = self.value(block, values, key)
+            return _fmt(f, unit), f
+        if not v:
+            raise _err(f"block '{block}': time series '{key}' is an empty list; give a number, or values with a "
+                       "list 't' of their times", block, self.path)
+        vals = np.asarray(self.numbers(block, v, key))
         if len(v) == 1:
-            return _fmt(v[0], unit), float(v[0])
+            return _fmt(vals[0], unit), float(vals[0])
         t = values.get("t")
         if not isinstance(t, list) or len(t) != len(v):
             raise _err(f"block '{block}': time series '{key}' needs a list 't' of the same length "
                        f"({len(v)} values, {'no t' if not isinstance(t, list) else f'{len(t)} times'})",
                        block, self.path)
-        t = np.asarray(t, float)
-        vals = np.asarray(v, float)
-        if np.any(np.diff(t) <= 0):
-            raise _err(f"block '{block}': the times 't' must increase", block, self.path)
-        period = float(t[-1] - t[0])
+        t = np.asarray(self.numbers(block, t, "t"))
+        with np.errstate(over="ignore", invalid="ignore"):
+            if not np.all(np.diff(t) > 0):
+                raise _err(f"block '{block}': the times 't' must increase", block, self.path)
+            period = float(t[-1] - t[0])
+            mean = float(np.mean(vals))  # their Parameter::to_steady: mean of the samples
+        check_period(period, f"block '{block}': its time series 't'", block, self.path)
+        if not math.isfinite(mean):
+            raise _err(f"block '{block}': the values of '{key}' are too large (their mean overflows)", block,
+                       self.path)
         self.note_period(period, block)
-        mean = float(np.mean(vals))  # their Parameter::to_steady: mean of the samples
         if steady or np.all(vals == vals[0]):  # a constant series stays a constant
             return _fmt(mean, unit), mean
         self.raw[(block, key)] = (t - t[0], vals, period)
         # their Parameter::get: linear interpolation at fmod(t, period), i.e. one cycle repeated
         rows = [[_fmt(tt, "s"), _fmt(vv, unit)] for tt, vv in zip(t - t[0], vals)]
-        return {"periodic": {"period": _fmt(period, "s"), "pwl": rows}}, mean
+        wave = {"periodic": {"period": _fmt(period, "s"), "pwl": rows}}
+        self.means[id(wave)] = (wave, _fmt(mean, unit))
+        return wave, mean
 
     def note_period(self, period, block):
         if self.period is None:
@@ -188,15 +325,30 @@ class _Importer:
         if (block, key) not in self.raw:
             return _fmt(0.0, unit)
         t, v, period = self.raw[(block, key)]
-        d = factor * np.diff(v) / np.diff(t)
+        with np.errstate(over="ignore", invalid="ignore"):
+            d = factor * (np.diff(v) / np.diff(t))
+        if not np.all(np.isfinite(d)):
+            raise _err(f"block '{block}': the slopes of its time series '{key}' (times the vessel's C or L it "
+                       "carries) overflow; check the values and times of the series", block, self.path)
         rows = [[_fmt(tt, "s"), _fmt(dd, unit)] for tt, dd in zip(t[:-1], d)]
-        return {"periodic": {"period": _fmt(period, "s"), "steps": rows}}
+        wave = {"periodic": {"period": _fmt(period, "s"), "steps": rows}}
+        self.means[id(wave)] = (wave, _fmt(0.0, unit))
+        return wave
+
+    def mean_elements(self):
+        """The elements of the model with every time series at its mean (their steady_initial's
+        model): what run(steady=True) builds, from this run's elements (the waveforms replaced by
+        their means, the slopes of the index reduction by 0), without importing the model again."""
+        return [{k: self.means[id(v)][1] if isinstance(v, dict) and id(v) in self.means else
+                 (list(v) if isinstance(v, list) else v) for k, v in e.items()} for e in self.elements]
 
     def only_keys(self, block, values, keys):
         """A block's values may hold only ``keys`` (and ``_comment`` entries)."""
-        unknown = sorted(k for k in values if not str(k).startswith("_") and k not in keys)
+        unknown = sorted(str(k) for k in values if not str(k).startswith("_") and k not in keys)
         if unknown:
-            raise _err(f"block '{block}': unknown value(s) {unknown} (it takes {', '.join(keys)})", block, self.path)
+            shown = [excerpt(k, 40)[1:-1] for k in unknown[:5]] + (["..."] if len(unknown) > 5 else [])
+            raise _err(f"block '{block}': unknown value(s) {shown}{did_you_mean(unknown[0], keys)} (it takes "
+                       f"{', '.join(keys)})", block, self.path)
 
     def add(self, eid, block, nodes, **vals):
         """Element ``eid`` for their block type ``block``, of the component type that declares it
@@ -211,44 +363,166 @@ class _Importer:
         self.element_block[eid] = block
 
     # --- the model ------------------------------------------------------------------------
+    def structure(self):
+        """Check the shape of the model before anything is built: each list of blocks a list of
+        mappings; each block named by a short printable string used by no other block, with its
+        type a string and its values a mapping; connections naming blocks by string, junctions
+        naming vessels by their ids; the initial condition a mapping of numbers.  Errors name the
+        block (or its place, ``vessels[3]``) and the key.  Returns {section: its blocks}."""
+        cfg, path = self.cfg, self.path
+        max_chars = limits.limit("SVZEROD_NAME_CHARS")
+        names = {}  # block name -> where it is defined
+
+        def fail(where, msg, block=None):
+            return _err(f"{where}: {msg}", block, path)
+
+        def named(where, v, what, block=None):
+            if not isinstance(v, str) or not v:
+                raise fail(where, f"{what} must be a block name (a non-empty string), got {_show(v)}", block)
+            if len(v) > max_chars:
+                raise fail(where, f"{what} {_show(v)} is {len(v):,} characters long, longer than allowed "
+                                  f"{limits.how_to_raise('SVZEROD_NAME_CHARS')}", block)
+            if not v.isprintable():
+                raise fail(where, f"{what} {_show(v)} contains control characters; use letters, digits and _", block)
+            return v
+
+        def mapping(where, b, key, block, required=True):
+            v = b.get(key)
+            if v is None and not required:
+                return {}
+            if not isinstance(v, dict):
+                raise fail(where, (f"missing '{key}'" if key not in b else f"'{key}' must be a mapping ({{...}}), got "
+                                   f"{_show(v)}"), block)
+            return v
+
+        def name_list(where, b, key, block):
+            v = b.get(key, [])
+            if not isinstance(v, list):
+                raise fail(where, f"'{key}' must be a list of block names, got {_show(v)}", block)
+            return [named(where, x, f"'{key}[{i}]'", block) for i, x in enumerate(v)]
+
+        def kind(where, b, key, block, choices, default=None):
+            v = b.get(key, default)
+            if not isinstance(v, str) or v not in choices:
+                what = (f"missing '{key}'" if key not in b else f"unknown or unsupported '{key}' {_show(v)}"
+                        + (did_you_mean(v, choices) if isinstance(v, str) else ""))
+                raise fail(where, f"{what} (supported: {', '.join(choices)})", block)
+            return v
+
+        out = {}
+        for key, name_key in SECTIONS.items():
+            items = cfg.get(key)
+            if items is None:
+                out[key] = []
+                continue
+            if not isinstance(items, list):
+                raise _err(f"'{key}' must be a list of blocks ([{{...}}, ...]), got {_show(items)}", path=path)
+            for i, b in enumerate(items):
+                if not isinstance(b, dict):
+                    raise _err(f"{key}[{i}] must be a block (a mapping {{...}}), got {_show(b)}", path=path)
+                if name_key is None:
+                    continue
+                if name_key not in b:
+                    raise _err(f"{key}[{i}]: missing '{name_key}' (the block's name)", path=path)
+                name = named(f"{key}[{i}]", b[name_key], f"'{name_key}'")
+                if name in names:
+                    raise _err(f"{key}[{i}]: the block name {_show(name)} is used twice (also by {names[name]}); every "
+                               "block needs its own name", name, path)
+                names[name] = f"{key}[{i}]"
+            out[key] = items
+
+        ids = {}
+        for i, v in enumerate(out["vessels"]):
+            name = v["vessel_name"]
+            where = f"vessel '{name}'"
+            if "vessel_id" not in v:
+                raise fail(where, "missing 'vessel_id'", name)
+            vid = v["vessel_id"]
+            if isinstance(vid, bool) or not isinstance(vid, (int, str)):
+                raise fail(where, f"'vessel_id' must be a whole number (junctions name vessels by it), got "
+                                  f"{_show(vid)}", name)
+            if vid in ids:
+                raise fail(where, f"'vessel_id' {_show(vid)} is also the id of vessel {_show(ids[vid])}; every vessel "
+                                  "needs its own id", name)
+            ids[vid] = name
+            if not isinstance(v.get("zero_d_element_type"), str):
+                kind(where, v, "zero_d_element_type", name, SUPPORTED_VESSELS)
+            mapping(where, v, "zero_d_element_values", name)
+            bc = mapping(where, v, "boundary_conditions", name, required=False)
+            for end in ("inlet", "outlet"):
+                if end in bc:
+                    named(where, bc[end], f"'boundary_conditions.{end}'", name)
+        for j in out["junctions"]:
+            name = j["junction_name"]
+            where = f"junction '{name}'"
+            kind(where, j, "junction_type", name, SUPPORTED_JUNCTIONS, "NORMAL_JUNCTION")
+            for key in ("inlet_vessels", "outlet_vessels"):
+                lst = j.get(key, [])
+                if not isinstance(lst, list):
+                    raise fail(where, f"'{key}' must be a list of vessel ids, got {_show(lst)}", name)
+                for k, vid in enumerate(lst):
+                    if isinstance(vid, bool) or not isinstance(vid, (int, str)) or vid not in ids:
+                        raise fail(where, f"'{key}[{k}]': no vessel with id {_show(vid)}", name)
+            for key in ("inlet_blocks", "outlet_blocks"):
+                name_list(where, j, key, name)
+            mapping(where, j, "junction_values", name, required=False)
+        for b in out["boundary_conditions"]:
+            name = b["bc_name"]
+            where = f"boundary condition '{name}'"
+            if not isinstance(b.get("bc_type"), str):
+                kind(where, b, "bc_type", name, SUPPORTED_BC)
+            mapping(where, b, "bc_values", name)
+        for b in out["valves"]:
+            name = b["name"]
+            where = f"valve '{name}'"
+            kind(where, b, "type", name, SUPPORTED_VALVES)
+            prm = mapping(where, b, "params", name)
+            for key in ("upstream_block", "downstream_block"):
+                if key not in prm:
+                    raise fail(where, f"missing params.{key}", name)
+                named(where, prm[key], f"'params.{key}'", name)
+        for b in out["chambers"]:
+            name = b["name"]
+            where = f"chamber '{name}'"
+            kind(where, b, "type", name, SUPPORTED_CHAMBERS)
+            mapping(where, b, "values", name, required=False)
+        for i, b in enumerate(out["closed_loop_blocks"]):
+            where = f"closed_loop_blocks[{i}]"
+            kind(where, b, "closed_loop_type", HEART, SUPPORTED_CLOSED_LOOP)
+            if i:
+                raise _err("only one ClosedLoopHeartAndPulmonary block is allowed (as in svZeroDSolver)", HEART, path)
+            mapping(where, b, "parameters", HEART, required=False)
+            name_list(where, b, "outlet_blocks", HEART)
+            for reserved in (HEART, HEART_IN, HEART_OUT):
+                if reserved in names:
+                    raise _err(f"{names[reserved]}: the block name '{reserved}' is the closed-loop heart's own "
+                               "(svZeroDSolver names the heart and its junctions so); rename the block", reserved, path)
+        ic = cfg.get("initial_condition")
+        if ic is not None:
+            if not isinstance(ic, dict):
+                raise _err(f"'initial_condition' must be a mapping variable name -> value, got {_show(ic)}", path=path)
+            for k, v in ic.items():
+                if _as_float(v) is None:
+                    raise _err(f"initial_condition: '{excerpt(k, 60)[1:-1]}' must be a finite number, got {_show(v)}",
+                               path=path)
+        return out
+
     def run(self, steady=False):
         cfg, path = self.cfg, self.path
         if not isinstance(cfg, dict) or "simulation_parameters" not in cfg:
             raise _err("not an svZeroDSolver model: no 'simulation_parameters'", path=path)
-        sim = {**SIM_DEFAULTS, **cfg["simulation_parameters"]}
-        for key in ("number_of_cardiac_cycles", "number_of_time_pts_per_cardiac_cycle"):
-            if key not in sim:
-                raise _err(f"simulation_parameters: missing '{key}'", path=path)
-        self.sim = sim
-        self.n_cycles = int(sim["number_of_cardiac_cycles"])
+        self.sim = sim = simulation_settings(cfg["simulation_parameters"], path)
+        self.n_cycles = sim["number_of_cardiac_cycles"]
         self.period, self.period_block = None, None
         P = self.u["P"]
+        blocks = self.structure()
 
-        vessels = cfg.get("vessels") or []
-        by_id = {}
-        for v in vessels:
-            for key in ("vessel_name", "vessel_id", "zero_d_element_type", "zero_d_element_values"):
-                if key not in v:
-                    raise _err(f"vessel {v.get('vessel_name', v.get('vessel_id', '?'))!r}: missing '{key}'",
-                               v.get("vessel_name"), path)
-            by_id[v["vessel_id"]] = v["vessel_name"]
-        bcs = {b.get("bc_name"): b for b in cfg.get("boundary_conditions") or []}
-        valves = {b.get("name"): b for b in cfg.get("valves") or []}
-        chambers = {b.get("name"): b for b in cfg.get("chambers") or []}
-        for kind, blocks, types in (("valve", valves, SUPPORTED_VALVES), ("chamber", chambers, SUPPORTED_CHAMBERS)):
-            for name, b in blocks.items():
-                if b.get("type") not in types:
-                    raise _err(f"{kind} '{name}': unknown or unsupported type {b.get('type')!r} "
-                               f"(supported: {', '.join(types)})", name, path)
-        heart = None
-        for b in cfg.get("closed_loop_blocks") or []:
-            typ = b.get("closed_loop_type")
-            if typ not in SUPPORTED_CLOSED_LOOP:
-                raise _err(f"closed-loop block {typ!r}: unknown or unsupported closed_loop_type "
-                           f"(supported: {', '.join(SUPPORTED_CLOSED_LOOP)})", typ, path)
-            if heart is not None:
-                raise _err("only one ClosedLoopHeartAndPulmonary block is allowed (as in svZeroDSolver)", HEART, path)
-            heart = b
+        vessels = blocks["vessels"]
+        by_id = {v["vessel_id"]: v["vessel_name"] for v in vessels}
+        bcs = {b["bc_name"]: b for b in blocks["boundary_conditions"]}
+        valves = {b["name"]: b for b in blocks["valves"]}
+        chambers = {b["name"]: b for b in blocks["chambers"]}
+        heart = blocks["closed_loop_blocks"][0] if blocks["closed_loop_blocks"] else None
 
         # connections (upstream block, downstream block), as their SimulationParameters.cpp builds them
         conns = []
@@ -259,30 +533,21 @@ class _Importer:
             if "outlet" in bc:
                 conns.append((v["vessel_name"], bc["outlet"]))
         junctions = {}
-        for j in cfg.get("junctions") or []:
-            name = j.get("junction_name")
+        for j in blocks["junctions"]:
+            name = j["junction_name"]
             jt = j.get("junction_type", "NORMAL_JUNCTION")
-            if jt not in ("NORMAL_JUNCTION", "internal_junction", "BloodVesselJunction"):
-                raise _err(f"junction '{name}': unknown junction_type {jt!r} "
-                           "(NORMAL_JUNCTION, internal_junction, BloodVesselJunction)", name, path)
-            ins = [by_id.get(i, i) for i in j.get("inlet_vessels", [])] + list(j.get("inlet_blocks", []))
-            outs = [by_id.get(i, i) for i in j.get("outlet_vessels", [])] + list(j.get("outlet_blocks", []))
-            for i in j.get("inlet_vessels", []) + j.get("outlet_vessels", []):
-                if i not in by_id:
-                    raise _err(f"junction '{name}': no vessel with id {i}", name, path)
+            ins = [by_id[i] for i in j.get("inlet_vessels", [])] + list(j.get("inlet_blocks", []))
+            outs = [by_id[i] for i in j.get("outlet_vessels", [])] + list(j.get("outlet_blocks", []))
             junctions[name] = (jt, ins, outs, j)
             conns += [(i, name) for i in ins] + [(name, o) for o in outs]
             self.types.add(jt if jt != "internal_junction" else "NORMAL_JUNCTION")
         for name, b in valves.items():
-            prm = b.get("params") or {}
-            for key in ("upstream_block", "downstream_block"):
-                if key not in prm:
-                    raise _err(f"valve '{name}': missing params.{key}", name, path)
+            prm = b["params"]
             conns += [(prm["upstream_block"], name), (name, prm["downstream_block"])]
         # blocks that drain into the heart: ClosedLoopRCR with closed_loop_outlet, and always the
         # closed-loop coronaries (their SimulationParameters.cpp, create_boundary_conditions)
         closed_bcs = [n for n, b in bcs.items() if (b.get("bc_type") == "ClosedLoopRCR"
-                      and (b.get("bc_values") or {}).get("closed_loop_outlet") is True)
+                      and b["bc_values"].get("closed_loop_outlet") is True)
                       or b.get("bc_type") in CLOSED_LOOP_CORONARY]
         if heart is not None:
             self.types.add("ClosedLoopHeartAndPulmonary")
@@ -309,19 +574,21 @@ class _Importer:
         for a, b in conns:
             for x in (a, b):
                 if x not in known:
-                    raise _err(f"connection {a} -> {b}: no block named '{x}'", x, path)
+                    raise _err(f"connection {_show(a)} -> {_show(b)}: no block named {_show(x)}"
+                               f"{did_you_mean(x, known)}", x, path)
 
         def two_port(kind, name):
             ins, outs = inlet.get(name, []), outlet.get(name, [])
             if len(ins) != 1 or len(outs) != 1:
+                def few(lst):
+                    return (", ".join(map(_show, lst[:3])) + (f" and {len(lst) - 3} more" if len(lst) > 3 else "")
+                            if lst else "none")
                 raise _err(f"{kind} '{name}': needs exactly one upstream and one downstream block, has "
-                           f"{ins or 'none'} and {outs or 'none'}", name, path)
+                           f"{few(ins)} and {few(outs)}", name, path)
             return node(ins[0], name), node(name, outs[0])
 
         # their initial_condition: values by variable name (pressure_all / flow_all defaults)
-        ic_cfg = cfg.get("initial_condition") or {}
-        if not isinstance(ic_cfg, dict):
-            raise _err("'initial_condition' must be a mapping variable name -> value", path=path)
+        ic_cfg = cfg.get("initial_condition") or {}  # checked by structure(): numbers
 
         hits = []  # set when a value comes from their initial_condition (not a default)
 
@@ -352,8 +619,8 @@ class _Importer:
             name, typ = v["vessel_name"], v["zero_d_element_type"]
             self.types.add(typ)
             if typ not in SUPPORTED_VESSELS:
-                raise _err(f"vessel '{name}': unknown zero_d_element_type {typ!r} (supported: {SUPPORTED_VESSELS})",
-                           name, path)
+                raise _err(f"vessel '{name}': unknown zero_d_element_type {_show(typ)}"
+                           f"{did_you_mean(typ, SUPPORTED_VESSELS)} (supported: {', '.join(SUPPORTED_VESSELS)})", name, path)
             vals = v["zero_d_element_values"]
             if typ == "ChamberSphere":  # a chamber listed among their vessels
                 self.chamber_sphere(name, vals, two_port("vessel", name), ic, start)
@@ -369,8 +636,8 @@ class _Importer:
                 start(eid, "X", Cp * ic(f"pressure:{inlet[name][0]}:{name}"), V)
                 continue
             R = self.value(name, vals, "R_poiseuille")
-            C, L = float(vals.get("C", 0.0)), float(vals.get("L", 0.0))
-            S = float(vals.get("stenosis_coefficient", 0.0))
+            C, L = self.value(name, vals, "C", 0.0), self.value(name, vals, "L", 0.0)
+            S = self.value(name, vals, "stenosis_coefficient", 0.0)
             n_in, n_out = two_port("vessel", name)
             up, down = inlet[name][0], outlet[name][0]
             eid = self.id_of(name)
@@ -393,24 +660,28 @@ class _Importer:
             if len(ins) != 1:
                 raise _err(f"junction '{name}': a BloodVesselJunction has exactly one inlet", name, path)
             jv = j.get("junction_values") or {}
-            Rs = self.value(name, jv, "R_poiseuille")
-            Ls = jv.get("L", [0.0] * len(outs))
-            Ss = jv.get("stenosis_coefficient", [0.0] * len(outs))
-            for key, lst in (("R_poiseuille", Rs), ("L", Ls), ("stenosis_coefficient", Ss)):
+            lists = []
+            for key in ("R_poiseuille", "L", "stenosis_coefficient"):
+                if key == "R_poiseuille" and key not in jv:
+                    raise _err(f"junction '{name}': missing junction_values.R_poiseuille (one value per outlet)",
+                               name, path)
+                lst = jv.get(key, [0.0] * len(outs))
                 if not isinstance(lst, list) or len(lst) != len(outs):
-                    raise _err(f"junction '{name}': '{key}' needs one value per outlet ({len(outs)})", name, path)
-            for o, R, L, S in zip(outs, Rs, Ls, Ss):
+                    raise _err(f"junction '{name}': '{key}' needs a list of one value per outlet ({len(outs)}), got "
+                               f"{_show(lst)}", name, path)
+                lists.append(self.numbers(name, lst, key))
+            for o, R, L, S in zip(outs, *lists):
                 eid = self.id_of(f"{name}_{o}")
                 self.add(eid, "BloodVessel", [node(ins[0], name), node(name, o), "ground"],
                          R_poiseuille=_fmt(R, self.uR), L=_fmt(L, self.uL), stenosis_coefficient=_fmt(S, self.uS),
-                         inductive=float(L) != 0.0, stenotic=float(S) != 0.0)
+                         inductive=L != 0.0, stenotic=S != 0.0)
                 q_in[name + "->" + o] = f"{eid}.Q_out"
-                if float(L) != 0.0:
+                if L != 0.0:
                     start(eid, "Q_out", ic(f"flow:{name}:{o}"), Q)
 
         # valves
         for name, b in valves.items():
-            typ, prm = b["type"], b.get("params") or {}
+            typ, prm = b["type"], b["params"]
             self.types.add(typ)
             eid = self.id_of(name)
             kw = {k: _fmt(self.value(name, prm, k), self.uR) for k in ("Rmin", "Rmax")}
@@ -455,10 +726,12 @@ class _Importer:
             prm = heart.get("parameters") or {}
             eid = self.id_of(HEART)
             hp = self.heart_values(prm)
-            period = heart.get("cardiac_cycle_period")
-            if not isinstance(period, (int, float)) or isinstance(period, bool) or period <= 0:
-                raise _err("ClosedLoopHeartAndPulmonary: 'cardiac_cycle_period' must be a positive number", HEART, path)
-            self.note_period(float(period), HEART)
+            period = _as_float(heart.get("cardiac_cycle_period"))
+            if period is None or period <= 0:
+                raise _err(f"ClosedLoopHeartAndPulmonary: 'cardiac_cycle_period' must be a finite number > 0 [s], got "
+                           f"{_show(heart.get('cardiac_cycle_period'))}", HEART, path)
+            check_period(period, "ClosedLoopHeartAndPulmonary: 'cardiac_cycle_period'", HEART, path)
+            self.note_period(period, HEART)
             self.add(eid, "ClosedLoopHeartAndPulmonary", [node(HEART_IN, HEART), node(HEART, HEART_OUT), "ground"],
                      period=_fmt(period, "s"), **hp)
             q_in[HEART], q_out[HEART] = f"{eid}.Q_in", f"{eid}.Q_out"
@@ -466,18 +739,19 @@ class _Importer:
                 start(eid, st, ic(f"{st}:{HEART}"), V, store=True)
             for st in ("Q_RA", "Q_RV", "Q_LA", "Q_LV"):
                 start(eid, st, ic(f"{st}:{HEART}"), Q)
-            start(eid, "V_pul", float(prm["Cp"]) * ic(f"P_pul:{HEART}"), V)
-            start(eid, "V_ao", float(prm["Cpa"]) * ic(f"pressure:{HEART}:{HEART_OUT}"), V, store=True)
+            start(eid, "V_pul", self.value(HEART, prm, "Cp") * ic(f"P_pul:{HEART}"), V)
+            start(eid, "V_ao", self.value(HEART, prm, "Cpa") * ic(f"pressure:{HEART}:{HEART_OUT}"), V, store=True)
 
         # boundary conditions
         flow_col = {}
         self.closed = not any(b.get("bc_type") not in ("ClosedLoopRCR",) + CLOSED_LOOP_CORONARY for b in bcs.values())
         for name, b in bcs.items():
             typ = b.get("bc_type")
+            if typ not in SUPPORTED_BC:
+                raise _err(f"boundary condition '{name}': unknown or unsupported bc_type {_show(typ)}"
+                           f"{did_you_mean(typ, SUPPORTED_BC)} (supported: {', '.join(SUPPORTED_BC)})", name, path)
             self.types.add(typ)
-            vals = b.get("bc_values")
-            if not isinstance(vals, dict):
-                raise _err(f"boundary condition '{name}': missing 'bc_values'", name, path)
+            vals = b["bc_values"]  # a mapping (structure())
             eid = self.id_of(name)
             if typ == "ClosedLoopRCR":
                 n_in, n_out = two_port("boundary condition", name)
@@ -493,8 +767,8 @@ class _Importer:
                 continue
             ins, outs = inlet.get(name, []), outlet.get(name, [])
             if len(ins) + len(outs) != 1:
-                raise _err(f"boundary condition '{name}': connected to {len(ins) + len(outs)} blocks, needs 1",
-                           name, path)
+                raise _err(f"boundary condition '{name}': connected to {len(ins) + len(outs)} blocks, needs 1 (a "
+                           "boundary condition is the inlet or the outlet of one block)", name, path)
             nd = node(name, outs[0]) if outs else node(ins[0], name)
             if typ == "FLOW":
                 q, _ = self.series(name, vals, "Q", Q, steady)
@@ -530,12 +804,9 @@ class _Importer:
                          Pim=pim, P_v=_fmt(self.value(name, vals, "P_v"), P))
                 self.timed_elements.append(eid)  # Ram(t) uses the model's cardiac period
                 self.coronary_start(name, eid, vals, float(self.value(name, vals, "Ra2_min")), ins, outs, ic, start)
-            else:
-                raise _err(f"boundary condition '{name}': unknown or unsupported bc_type {typ!r} "
-                           f"(supported: {', '.join(SUPPORTED_BC)})", name, path)
 
         # cardiac period: from the time series or the heart, else simulation_parameters, else 1 s
-        sp = sim.get("cardiac_period")
+        sp = sim.get("cardiac_period")  # a finite number > 0 (simulation_settings)
         if sp is not None and self.period is not None and float(sp) != self.period:
             raise _err(f"simulation_parameters: cardiac_period {sp!r} s differs from the period "
                        f"{self.period!r} s of block '{self.period_block}'", self.period_block, path)
@@ -732,7 +1003,7 @@ class _Importer:
         self.initial_given.pop(f"{eid}.{state}", None)
 
     def block_of(self, eid):
-        return next(name for name, ident in self.ids.items() if ident == eid)
+        return self.owner[eid]
 
     def activation(self, name, af):
         """Their activation_function mapping -> the chamber's option and parameters."""
@@ -743,12 +1014,14 @@ class _Importer:
                        name, self.path)
         kind = af["type"]
         if kind not in KINDS:
-            raise _err(f"chamber '{name}': activation function {kind!r} is not supported "
-                       f"(supported: {', '.join(KINDS)})", name, self.path)
-        unknown = sorted(k for k in af if k != "type" and not k.startswith("_") and k not in USED[kind])
+            raise _err(f"chamber '{name}': activation function {_show(kind)} is not supported"
+                       f"{did_you_mean(kind, KINDS)} (supported: {', '.join(KINDS)})", name, self.path)
+        unknown = sorted(str(k) for k in af if k != "type" and not str(k).startswith("_") and k not in USED[kind])
         if unknown:
-            raise _err(f"chamber '{name}': unknown parameter(s) {unknown} for activation {kind} "
-                       f"(it takes {', '.join(USED[kind]) or 'none'})", name, self.path)
+            shown = [excerpt(k, 40)[1:-1] for k in unknown[:5]] + (["..."] if len(unknown) > 5 else [])
+            raise _err(f"chamber '{name}': unknown parameter(s) {shown} for activation {kind}"
+                       f"{did_you_mean(unknown[0], USED[kind])} (it takes {', '.join(USED[kind]) or 'none'})",
+                       name, self.path)
         units = dict(ACT_PARAMS)
         out = {"activation": kind}
         for k in USED[kind]:
@@ -769,9 +1042,11 @@ class _Importer:
                 continue
             v = self.value(HEART, prm, k)
             out[k] = float(v) if unit == "dimensionless" else _fmt(v, ours[unit])
-        unknown = sorted(k for k in prm if not k.startswith("_") and k not in _P)
+        unknown = sorted(str(k) for k in prm if not str(k).startswith("_") and k not in _P)
         if unknown:
-            raise _err(f"ClosedLoopHeartAndPulmonary: unknown parameter(s) {unknown}", HEART, self.path)
+            shown = [excerpt(k, 40)[1:-1] for k in unknown[:5]] + (["..."] if len(unknown) > 5 else [])
+            raise _err(f"ClosedLoopHeartAndPulmonary: unknown parameter(s) {shown}{did_you_mean(unknown[0], _P)}",
+                       HEART, self.path)
         return out
 
 
@@ -790,8 +1065,11 @@ def import_svzerod(path_or_cfg, units: str | None = None, name=None, source=None
     convention, unless the model says m^3).  ``name``/``source``: the model's name and file
     when a parsed dict is given."""
     cfg, path = _read(path_or_cfg)
-    units = units or guess_units(cfg)
     path = path or source
+    if not isinstance(cfg, dict):
+        raise _err(f"not an svZeroDSolver model: a JSON object {{\"simulation_parameters\": ..., \"vessels\": ...}} "
+                   f"is expected, got {_show(cfg)}", path=path)
+    units = units or guess_units(cfg)
     imp = _Importer(cfg, path, units)
     vessels = imp.run()
     name = name or (os.path.splitext(os.path.basename(path))[0] if path else "svzerod_model")
@@ -800,7 +1078,7 @@ def import_svzerod(path_or_cfg, units: str | None = None, name=None, source=None
         "name": _ident(name, path),
         "description": (f"imported from svZeroDSolver model {os.path.basename(path) if path else '(dict)'} "
                         f"(units {units}: pressure {imp.u['P']}); cardiac period {imp.period_value!r} s; "
-                        f"their simulation_parameters: {json.dumps(cfg['simulation_parameters'])}"),
+                        f"their simulation_parameters: {_settings_text(cfg['simulation_parameters'])}"),
         "parameters": {"cardiac_period": _fmt(imp.period_value, "s"),
                        "number_of_cardiac_cycles": imp.n_cycles,
                        "number_of_time_pts_per_cardiac_cycle": int(sim["number_of_time_pts_per_cardiac_cycle"])},
@@ -810,15 +1088,23 @@ def import_svzerod(path_or_cfg, units: str | None = None, name=None, source=None
         netlist["derived"] = imp.derived
     if imp.closed:  # the conserved blood volume is that of their initial condition
         netlist["constraints"] = [{"node": imp.law_node, "volume": _fmt(imp.store_volume, imp.u["V"])}]
-    steady = _Importer(cfg, path, units)
-    steady.run(steady=True)
-    mean_netlist = {**header, "name": header["name"] + "_mean", "elements": steady.elements}
-    if steady.derived:
-        mean_netlist["derived"] = steady.derived
+    mean_netlist = {**header, "name": header["name"] + "_mean", "elements": imp.mean_elements()}
+    if imp.derived:
+        mean_netlist["derived"] = {k: dict(v) for k, v in imp.derived.items()}
     if imp.closed:
         mean_netlist["constraints"] = netlist["constraints"]
     return SvzModel(name, netlist, imp.period_value, sim, imp.columns, imp.factors, sorted(imp.types), vessels,
                     imp.u, mean_netlist, imp.initial, imp.closed, imp.initial_given)
+
+
+def _settings_text(raw, limit=2000) -> str:
+    """Their simulation_parameters as JSON for the netlist's description (at most ``limit``
+    characters: the description is a netlist value)."""
+    try:
+        text = json.dumps(raw, default=str)
+    except ValueError:  # an integer of thousands of digits
+        text = "{...}"
+    return text if len(text) <= limit else text[:limit] + "...}"
 
 
 def is_svzerod_model(data) -> bool:
@@ -833,7 +1119,8 @@ def guess_units(cfg) -> str:
     """Unit system of a model: 'SI' when its top-level comments say m^3 (their Regazzoni
     models), else 'cgs' (their convention).  Models in mmHg need no special case: every
     pressure-carrying parameter scales together, so 'cgs' gives the same numbers."""
-    text = " ".join(str(v) for k, v in cfg.items() if str(k).startswith("_"))
+    text = " ".join(v if isinstance(v, str) else " ".join(x for x in v if isinstance(x, str))
+                    for k, v in cfg.items() if str(k).startswith("_") and isinstance(v, (str, list)))
     return "SI" if re.search(r"m\^3|m\*\*3", text) else "cgs"
 
 
@@ -847,11 +1134,16 @@ def netlist_of(cfg: dict, path=None, units=None) -> dict:
 
 
 def write_netlist(netlist: dict, out_path: str):
-    """Write a netlist dict as YAML (block style, one element per mapping)."""
+    """Write a netlist dict as YAML (block style, one element per mapping), atomically
+    (:func:`hemocircuit.io.atomic_write`: a temporary file renamed over the target; only a
+    regular file, or a link to one in the same folder, is replaced)."""
     import yaml
 
-    with open(out_path, "w") as fh:
-        yaml.safe_dump(netlist, fh, sort_keys=False, default_flow_style=None, width=120)
+    from ..io import atomic_write
+
+    dumper = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
+    return atomic_write(out_path, yaml.dump(netlist, Dumper=dumper, sort_keys=False, default_flow_style=None,
+                                            width=120, allow_unicode=False))
 
 
 def load_svzerod(path, units: str | None = None, mean: bool = False):
