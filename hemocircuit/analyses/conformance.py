@@ -20,6 +20,8 @@ def cmd_conformance(args):
 
     if not os.path.isdir(os.path.join(args.folder, "cases")):
         raise NetlistError(f"{args.folder}: no cases/ folder (expected cases/*.json and results/ or converged/)")
+    if args.repeat < 1:
+        raise NetlistError(f"--repeat {args.repeat}: give the number of timed runs per case, 1 or more")
     rows = run_folder(args.folder, args.against, args.case, timed_runs=args.repeat)
     print(format_table(rows))
     return 0 if all(r.ok for r in rows) else 1

@@ -23,7 +23,6 @@ relative: chamber_sphere's constant 2150 moves by 0.002).
 from __future__ import annotations
 
 import glob
-import json
 import os
 import re
 import time
@@ -31,8 +30,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import HemocircuitError
-from .importer import import_svzerod, write_netlist
+from .. import inputs
+from ..errors import HemocircuitError, NetlistError, did_you_mean, excerpt
+from .importer import _as_float, _show, import_svzerod, write_netlist
 
 VALVE_CHAMBER_TYPES = {"ValveTanh", "PiecewiseValve", "ChamberElastanceInductor", "LinearElastanceChamber",
                        "ChamberSphere", "ClosedLoopRCR", "ClosedLoopHeartAndPulmonary", "ClosedLoopCoronaryLeft",
@@ -64,40 +64,85 @@ def tolerances(name, model):
     return (1e-6, 1e-6) if steady else (1e-3, 1e-3)
 
 
-def their_times(readme):
-    """{case: their time text} from the README's speed table, when present."""
+def their_times(readme, access=None):
+    """{case: their time text} from the README's speed table, when present (read under the
+    input policy: a README that is not a regular file, or too large, is an error naming it)."""
     out = {}
-    if os.path.isfile(readme):
-        for line in open(readme):
+    if os.path.lexists(readme):
+        text = inputs.read_text(readme, "svZeroDSolver cases README", access)
+        for line in text.splitlines():
             m = re.match(r"\|\s*(\w+)\s*\|[^|]*\|\s*([^|]+?)\s*\|\s*$", line)
             if m and m.group(1) not in ("case",):
-                out[m.group(1)] = m.group(2)
+                out[m.group(1)] = m.group(2)[:40]
     return out
 
 
-def read_result(path):
-    """{their variable name: (times, values)} of a result file."""
-    with open(path) as fh:
-        return parse_result(json.load(fh))
+def read_result(path, access=None):
+    """{their variable name: (times, values)} of a result file (read under the input policy,
+    within the RESULT_MB limit; a malformed file is an error naming it and what is wrong)."""
+    return parse_result(inputs.read_json(path, "svZeroDSolver result file", access, size_limit="RESULT_MB"), path)
 
 
-def parse_result(d):
+RESULT_COLUMNS = ("flow_in", "flow_out", "pressure_in", "pressure_out")
+
+
+def parse_result(d, path=None):
     """{their variable name: (times, values)} of a result in their layout: pandas ``to_json`` of
     their DataFrame (a result file's content, or ``json.loads(df.to_json())`` of
-    ``pysvzerod.simulate``'s)."""
-    rows = sorted(d["name"], key=int)
-    names = [d["name"][r] for r in rows]
-    times = np.array([np.nan if d["time"][r] is None else d["time"][r] for r in rows], float)
+    ``pysvzerod.simulate``'s): {"name": {row: name}, "time": {row: t or null}, and "y" (per
+    variable) or flow_in, flow_out, pressure_in, pressure_out (per block): {row: number}}.
+    ``path``: the file, for messages.  Anything else is an error saying what is wrong."""
+    def bad(msg):
+        return NetlistError(f"not an svZeroDSolver result: {msg} (their layout: pandas to_json of their output, "
+                            '{"name": {"0": ...}, "time": {"0": ...}, "y": {"0": ...}} or per block flow_in, '
+                            "flow_out, pressure_in, pressure_out)", file=None if path is None else str(path))
+
+    if not isinstance(d, dict):
+        raise bad(f"a JSON object is expected, got {_show(d)}")
+    cols = ("y",) if "y" in d else RESULT_COLUMNS
+    for key in ("name", "time") + cols:
+        if not isinstance(d.get(key), dict):
+            raise bad(f"'{key}' " + ("is missing" if key not in d else f"must map rows to values, got {_show(d[key])}"))
+    def numbered(r):
+        try:
+            return int(r)
+        except (TypeError, ValueError):
+            raise bad(f"the rows of 'name' must be numbered (\"0\", \"1\", ...), got {_show(r)}") from None
+
+    rows = sorted(d["name"], key=numbered)
+    names = []
+    for r in rows:
+        n = d["name"][r]
+        if not isinstance(n, str):
+            raise bad(f"name of row {excerpt(str(r), 20)[1:-1]} must be a variable or block name, got {_show(n)}")
+        names.append(n)
+
+    def column(key, allow_null=False):
+        out = np.empty(len(rows))
+        col = d[key]
+        for i, r in enumerate(rows):
+            if r not in col:
+                raise bad(f"'{key}' has no row {excerpt(str(r), 20)[1:-1]}")
+            v = col[r]
+            if v is None and allow_null:
+                out[i] = np.nan  # their output_mean_only rows: time null
+                continue
+            f = _as_float(v)
+            if f is None:
+                raise bad(f"'{key}' of row {excerpt(str(r), 20)[1:-1]} ({excerpt(names[i], 40)}) must be a finite "
+                          f"number, got {_show(v)}")
+            out[i] = f
+        return out
+
+    times = column("time", allow_null=True)
+    where = {}  # name -> its row positions, in order (one pass: linear in the rows)
+    for i, n in enumerate(names):
+        where.setdefault(n, []).append(i)
     out = {}
-    if "y" in d:
-        for n in dict.fromkeys(names):
-            idx = [i for i, x in enumerate(names) if x == n]
-            out[n] = (times[idx], np.array([d["y"][rows[i]] for i in idx], float))
-    else:
-        for n in dict.fromkeys(names):
-            idx = [i for i, x in enumerate(names) if x == n]
-            for col in ("flow_in", "flow_out", "pressure_in", "pressure_out"):
-                out[f"{n}:{col}"] = (times[idx], np.array([d[col][rows[i]] for i in idx], float))
+    for col in cols:
+        values = column(col)
+        for n, idx in where.items():
+            out[n if col == "y" else f"{n}:{col}"] = (times[idx], values[idx])
     return out
 
 
@@ -411,41 +456,73 @@ def case_rtol(model):
     return 1e-8 if tolerances(model.name, model)[0] <= 1e-6 else 1e-5
 
 
+def _block_types(cfg):
+    """The block types a (maybe malformed) model names, for the table of a case that failed."""
+    if not isinstance(cfg, dict):
+        return []
+    found = set()
+    for k in ("vessels", "junctions", "boundary_conditions", "chambers", "valves", "closed_loop_blocks"):
+        blocks = cfg.get(k)
+        for b in blocks if isinstance(blocks, list) else []:
+            if isinstance(b, dict):
+                t = next((b.get(key) for key in ("zero_d_element_type", "junction_type", "bc_type", "type",
+                                                  "closed_loop_type") if isinstance(b.get(key), str)), "?")
+                found.add(t[:40])
+    return sorted(found)
+
+
 def run_case(case_path, against="converged", timed_runs=1, rtol=None):
+    """Run one case (``FOLDER/cases/NAME.json``) and compare it with ``FOLDER/AGAINST/result_NAME.json``.
+    Every file is read under the input policy, inside FOLDER (a link leading out of it is
+    refused); an error of the case or of its result is the case's note (the row fails)."""
     name = os.path.splitext(os.path.basename(case_path))[0]
     folder = os.path.dirname(os.path.dirname(os.path.abspath(case_path)))
+    access = inputs_access(folder)
     r = CaseResult(name)
-    r.theirs = their_times(os.path.join(folder, "README.md")).get(name, "")
+    r.theirs = their_times(os.path.join(folder, "README.md"), access).get(name, "")
+    cfg = None
     try:
-        model = import_svzerod(case_path)
+        cfg = inputs.read_json(case_path, "svZeroDSolver model file", access)
+        model = import_svzerod(cfg, name=name, source=case_path)
         r.types = model.block_types
         r.tol_p, r.tol_q = tolerances(name, model)
-        with open(case_path) as fh:
-            cfg = json.load(fh)
         res, keep, t_out, times = simulate_case(model, rtol=rtol, timed_runs=timed_runs, cfg=cfg)
         r.ours_s = float(times[:, 0].min())
-        theirs = read_result(os.path.join(folder, against, f"result_{name}.json"))
+        theirs = read_result(os.path.join(folder, against, f"result_{name}.json"), access)
         r.err_p, r.err_q, r.worst, r.note = compare(model, res, keep, t_out, theirs)
         r.ok = r.err_p <= r.tol_p and r.err_q <= r.tol_q and not r.note
     except HemocircuitError as exc:
         r.note = f"{type(exc).__name__}: {exc}"
-        try:
-            with open(case_path) as fh:
-                cfg = json.load(fh)
-            r.types = sorted({b.get("zero_d_element_type") or b.get("junction_type") or b.get("bc_type")
-                              or b.get("type") or b.get("closed_loop_type") or "?"
-                              for k in ("vessels", "junctions", "boundary_conditions", "chambers", "valves",
-                                        "closed_loop_blocks") for b in cfg.get(k) or []})
-        except (OSError, ValueError):
-            pass
+        r.types = r.types or _block_types(cfg)
     return r
 
 
+def inputs_access(folder):
+    """The allowed folders of a conformance run: the case folder itself."""
+    from ..access import Access
+
+    return Access([folder])
+
+
+def case_names(folder):
+    """The names of the cases in ``folder``/cases (``NAME.json``), sorted."""
+    return [os.path.splitext(os.path.basename(p))[0] for p in sorted(glob.glob(os.path.join(glob.escape(folder),
+                                                                                            "cases", "*.json")))]
+
+
 def run_folder(folder, against="converged", cases=None, timed_runs=1, rtol=None):
-    paths = sorted(glob.glob(os.path.join(folder, "cases", "*.json")))
+    """Run the cases of ``folder`` (``cases``: only these names; each must exist: a typo is an
+    error listing the known cases, not a run of nothing)."""
+    known = case_names(folder)
+    if not known:
+        raise NetlistError(f"{folder}: no svZeroDSolver cases (cases/*.json) to run")
     if cases:
-        paths = [p for p in paths if os.path.splitext(os.path.basename(p))[0] in cases]
-    return [run_case(p, against, timed_runs, rtol) for p in paths]
+        unknown = [c for c in dict.fromkeys(cases) if c not in known]
+        if unknown:
+            raise NetlistError(f"--case {_show(unknown[0])}: no such case in {os.path.join(folder, 'cases')}"
+                               f"{did_you_mean(unknown[0], known)}; the cases are: {', '.join(known)}")
+        known = [k for k in known if k in cases]
+    return [run_case(os.path.join(folder, "cases", k + ".json"), against, timed_runs, rtol) for k in known]
 
 
 def format_table(rows):
