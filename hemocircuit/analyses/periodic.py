@@ -364,16 +364,16 @@ def _forced_by_period(args, c, output):
 def _svzerod_model(path, units=None):
     """(SvzModel, their config) when ``path`` is an svZeroDSolver JSON model, else None;
     ``units``: --svzerod-units (default the importer's guess)."""
-    import json
+    import os
 
     if not str(path).endswith(".json"):
         return None
+    from ..inputs import read_json
     from ..svzerod.importer import import_svzerod, is_svzerod_model
-    with open(path) as fh:
-        cfg = json.load(fh)
+    cfg = read_json(path, "svZeroDSolver model file")  # under the input policy, as the netlist's first read
     if not is_svzerod_model(cfg):
         return None
-    return import_svzerod(cfg, units=units, source=path), cfg
+    return import_svzerod(cfg, units=units, name=os.path.splitext(os.path.basename(str(path)))[0], source=path), cfg
 
 
 def compute_periodic(args, sets):

@@ -588,10 +588,11 @@ def cmd_tran_svzerod(args):
     span and grid come from their simulation_parameters, so --t-end, --dt, --ic, --protocol
     and --grid do not apply) and their result layout (hemocircuit.svzerod.output); --out and
     --plot get the whole run as usual."""
-    import json
+    import os
 
     from ..cli import _sets, save_outputs
     from ..errors import HemocircuitError
+    from ..inputs import read_json
     from ..svzerod.importer import import_svzerod, is_svzerod_model
     from ..svzerod.output import simulate_svzerod, write_svzerod_output
 
@@ -600,16 +601,13 @@ def cmd_tran_svzerod(args):
         raise HemocircuitError(f"--svzerod-output runs their simulation settings; {', '.join(given)} cannot be "
                                "combined with it (change number_of_cardiac_cycles etc. in the model)")
     cfg = None
-    if str(args.netlist).endswith(".json"):
-        try:
-            with open(args.netlist) as fh:
-                cfg = json.load(fh)
-        except (OSError, ValueError) as exc:
-            raise HemocircuitError(f"{args.netlist}: cannot read it as JSON: {exc}") from None
+    if str(args.netlist).lower().endswith(".json"):  # read once, under the input policy
+        cfg = read_json(args.netlist, "svZeroDSolver model file")
     if not is_svzerod_model(cfg):
         raise HemocircuitError(f"--svzerod-output: {args.netlist} is not an svZeroDSolver JSON model "
                                "(simulation_parameters and blocks)")
-    model = import_svzerod(cfg, units=getattr(args, "svzerod_units", None), source=args.netlist)
+    model = import_svzerod(cfg, units=getattr(args, "svzerod_units", None),
+                           name=os.path.splitext(os.path.basename(str(args.netlist)))[0], source=args.netlist)
     c, res = simulate_svzerod(model, sets=_sets(args.set), start=args.svzerod_start, cfg=cfg)
     path = write_svzerod_output(args.svzerod_output, model, c, res, cfg)
     layout = "per variable" if model.sim.get("output_variable_based") else "per block"

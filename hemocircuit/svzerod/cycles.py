@@ -63,7 +63,12 @@ def pfaller_cycles(taus, period, tol):
     ceil(-tau_max/T ln tol), or None without one (Solver.cpp constructor)."""
     if not taus:
         return None
-    return int(math.ceil(-max(taus) / period * math.log(tol)))
+    n = -max(taus) / period * math.log(tol)
+    if not math.isfinite(n) or n > 1e15:
+        raise HemocircuitError(f"use_cycle_to_cycle_error: their cycle count ceil(-tau/T ln tol) is {n:g} for the "
+                               f"RCR time constant tau = {max(taus):g} s, period T = {period:g} s, tol = {tol:g}: "
+                               "check the RCR's Rd and C (tau = Rd C) or turn use_cycle_to_cycle_error off")
+    return max(1, int(math.ceil(n)))
 
 
 def cycle_means(y, N):

@@ -38,7 +38,7 @@ import os
 import numpy as np
 
 from ..errors import HemocircuitError
-from .importer import HEART, HEART_IN, HEART_OUT, _ident
+from .importer import HEART, HEART_IN, HEART_OUT, _ident, check_points
 
 #: their blocks written by to_vessel_csv (a dynamic_cast list in csv_writer.cpp)
 VESSEL_OUTPUT_TYPES = ("BloodVessel", "BloodVesselCRL", "PiecewiseValve", "LinearElastanceChamber", "ChamberSphere")
@@ -50,8 +50,9 @@ HEART_VARIABLES = ("V_RA", "Q_RA", "P_RV", "V_RV", "Q_RV", "P_pul", "P_LA", "V_L
 def _read_config(path_or_cfg):
     if isinstance(path_or_cfg, dict):
         return path_or_cfg
-    with open(path_or_cfg) as fh:
-        return json.load(fh)
+    from ..inputs import read_json
+
+    return read_json(path_or_cfg, "svZeroDSolver model file")
 
 
 def connections(cfg):
@@ -378,6 +379,8 @@ def their_extra_cycles(model, cfg, c, res, rtol=None, atol=None, max_extra=1000)
             break
         if extra >= max_extra:
             raise HemocircuitError(f"{model.name}: their cycle-to-cycle criterion not met in {max_extra} extra cycles")
+        check_points(n + extra + 1, N, what=f"{model.name}: use_cycle_to_cycle_error: {extra + 1} extra cycle(s) "
+                                             f"after {n}")
         t_a = (n + extra) * T
         r = simulate(c, t_a + T, t0=t_a, dt=dt, x0=xs[-1][-1], rtol=rtol, atol=atol, progress=False)
         kr = np.rint(np.asarray(r.t) / dt).astype(int)
@@ -407,6 +410,8 @@ def their_cycles(model, circuit):
     if model.sim.get("use_cycle_to_cycle_error"):
         n = pfaller_cycles(rcr_time_constants(circuit), model.period, their_tolerance(model.sim))
         if n is not None:
+            check_points(n, model.points, what=f"{model.name}: use_cycle_to_cycle_error: their cycle count "
+                                               "ceil(-tau/T ln tol) of the RCR's time constant tau")
             return model.with_sim(number_of_cardiac_cycles=n)
     return model
 
@@ -426,8 +431,9 @@ def svzerod_output(model_path, out_path, rtol=None, start="operating-point", uni
     layout to ``out_path``.  Returns (the model with the cycles the run made, circuit, result)."""
     from .importer import import_svzerod
 
-    cfg = _read_config(model_path)
-    model = import_svzerod(model_path, units=units)
+    cfg = _read_config(model_path)  # read once, under the input policy
+    model = import_svzerod(cfg, units=units, name=os.path.splitext(os.path.basename(str(model_path)))[0],
+                           source=str(model_path))
     c, res = simulate_svzerod(model, sets=sets, rtol=rtol, start=start, cfg=cfg)
     write_svzerod_output(out_path, model, c, res, cfg)
     return ran_model(model, res), c, res
