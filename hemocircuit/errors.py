@@ -52,8 +52,9 @@ class SolverError(HemocircuitError):
 
 
 class FitSpecError(NetlistError):
-    """A fit specification (hemocircuit fit) or one of its data files is malformed.  The message
-    names the spec file and the key (``datasets[1].sigma``), or the data file and its column."""
+    """A fit or sensitivity specification (hemocircuit fit, hemocircuit sensitivity) or a file it
+    names is malformed.  The message names the spec file and the key (``datasets[1].sigma``,
+    ``method.n``), and the data file and its column where one is at fault."""
 
     def __init__(self, message: str, file=None, key=None):
         self.key = key

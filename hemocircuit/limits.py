@@ -28,6 +28,15 @@ DEFAULTS = {
     "EXPR_DEPTH": 250,        # nesting depth of one expression (a sum of N terms is N deep)
     "TABLE_ROWS": 1_000_000,  # rows of one waveform table
     "RESULT_MB": 1024,        # size of one result file read back (show, conformance) [MiB]
+    "FIT_STARTS": 10_000,     # multi-starts of one fit (settings.starts, --starts)
+    "FIT_ROWS": 100_000,      # data rows of one fit, all datasets (a Jacobian solves (p + 1) x rows)
+    "SENS_RUNS": 1_000_000,   # model evaluations of one sensitivity analysis (n (k + 1), r (k + 1), ...)
+    "SENS_OUTPUTS": 100_000,  # output components of one sensitivity analysis (columns x settings x times)
+    "SENS_VALUES": 20_000_000,  # model evaluations x output components of one sensitivity analysis
+    "SENS_DESIGNS": 10_000,   # Latin hypercubes a constellation design chooses from
+    "SENS_DESIGN_POINTS": 10_000_000,  # points of a constellation design (designs x n)
+    "SENS_RESAMPLES": 10_000,  # Sobol bootstrap resamples
+    "SENS_TIME_POINTS": 10_000_000,  # time points of one envelope run of a sensitivity output (t_end / dt)
     "SVZEROD_POINTS": 10_000_000,   # time points of one svZeroDSolver run (cycles x points per cycle)
     "SVZEROD_PERIOD_S": 1_000_000,  # cardiac period of an svZeroDSolver model [s]
     "SVZEROD_NAME_CHARS": 256,      # characters of one svZeroDSolver block name

@@ -9,15 +9,24 @@ from __future__ import annotations
 import os
 
 
-def sensitivity(circuit, spec, netlist_path=None, scheduler=None, workers=None, progress=False, overrides=None):
-    """Run a sensitivity spec (path or Spec) on ``circuit``.  Returns a Result."""
+def sensitivity(circuit, spec, netlist_path=None, scheduler=None, workers=None, progress=False, overrides=None,
+                allow_paths=None):
+    """Run a sensitivity spec (path or Spec) on ``circuit``.  Returns a Result.
+
+    The files the spec names (a tran ``protocol``, a ``fit_error`` spec and that spec's data)
+    must lie in the spec's project, the netlist's project, the bundled netlists or
+    ``allow_paths`` (``--allow-path``)."""
     from ..sensitivity import run
     from ..sensitivity.outputs import make_objective
     from ..sensitivity.spec import load_spec
+    from ..spec_inputs import integer, spec_access
 
-    if isinstance(spec, str):
-        spec = load_spec(spec, overrides)
-    objective = make_objective(spec, circuit, netlist_path or circuit.file, scheduler, workers)
+    netlist_path = netlist_path or circuit.file
+    if workers is not None:
+        workers = integer(workers, None, "workers", lo=1, flag="--workers")
+    if isinstance(spec, (str, os.PathLike)):
+        spec = load_spec(str(spec), overrides, spec_access(spec, netlist_path, allow_paths))
+    objective = make_objective(spec, circuit, netlist_path, scheduler, workers, allow_paths)
     return run(spec, objective, scheduler=scheduler, workers=workers, progress=progress)
 
 
@@ -66,14 +75,19 @@ def cmd_sensitivity(args):
 
     from ..cli import _load
 
+    from .. import io
+
+    for flag, path in (("--series", args.series), ("--failures", args.failures)):
+        if path is not None:  # checked before the run, as --out and --plot
+            io.prepare_output(path, flag)
     c, _ = _load(args)
     over = {"name": args.method, "scheme": args.scheme, "range": args.range, "n": args.n,
             "trajectories": args.trajectories, "seed": args.seed}
     res = sensitivity(c, args.spec, os.path.abspath(args.netlist), scheduler=args.scheduler, workers=args.workers,
-                      progress=True, overrides=over)
+                      progress=None, overrides=over, allow_paths=getattr(args, "allow_path", None))
     s = res.space
     print(f"{res.method} ({s.scheme}{', +/-%g %%' % s.range_pct if s.scheme == 'multiplicative' else ''}): "
-          f"{res.n_runs} model runs, {len(res.failures)} failed")
+          f"{res.n_runs} model evaluations, {len(res.failures)} failed")
     for reason in res.failures[:5]:
         print(f"  failed: {reason[0]}: {reason[1]}", file=sys.stderr)
     key = res.extra.get("rank_key", "mu_star")

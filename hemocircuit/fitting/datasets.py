@@ -17,7 +17,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .. import limits
 from ..errors import FitSpecError
+from ..spec_inputs import read, shown
 from ..units import UnitError, check_unit, conversion_factor
 
 _HEADER = re.compile(r"^\s*([^\[\]]+?)\s*(?:\[\s*([^\]]*)\s*\])?\s*$")
@@ -39,46 +41,63 @@ class Table:
         """Column ``name`` converted to ``unit`` (if given).  An unknown column or a unit of the
         wrong dimension is a FitSpecError naming the spec key that asked for it."""
         if name not in self.columns:
-            raise FitSpecError(f"the data file {self.file} has no column {name!r} (columns: "
-                               f"{', '.join(repr(c) for c in self.columns)})", file=spec_file, key=key)
+            raise FitSpecError(f"the data file {self.file} has no column {shown(name, 60)} (columns: "
+                               f"{_names(self.columns)})", file=spec_file, key=key)
         values = self.columns[name]
         if unit is None:
             return values
         try:
             return values * conversion_factor(self.units[name] or "dimensionless", unit or "dimensionless")
         except UnitError:
-            raise FitSpecError(f"column {name!r} of {self.file} is in [{self.units[name]}], which cannot be "
-                               f"converted to {unit}", file=spec_file, key=key) from None
+            raise FitSpecError(f"column {shown(name, 60)} of {self.file} is in [{shown(self.units[name], 60)}], "
+                               f"which cannot be converted to {unit}", file=spec_file, key=key) from None
 
 
-def read_table(path, spec_file=None, key=None) -> Table:
-    """Read a data CSV (see the module docstring)."""
+def _names(columns, n=12):
+    """The first column names, each a short escaped excerpt (a data file may hold anything)."""
+    cols = list(columns)
+    return ", ".join(shown(c, 24) for c in cols[:n]) + (f", ... ({len(cols)} columns)" if len(cols) > n else "")
+
+
+def read_table(path, spec_file=None, key=None, access=None) -> Table:
+    """Read a data CSV (see the module docstring) under the input policy (regular file, size,
+    UTF-8; inside ``access`` if given).  Errors name the spec file and key and quote at most a
+    short escaped excerpt of the file (a misnamed file may hold anything)."""
+    spec_file = spec_file or path
+
+    def err(msg):
+        return FitSpecError(f"data file {path}: {msg}", file=spec_file, key=key)
+
     if not os.path.exists(path):
         raise FitSpecError(f"data file not found: {path}", file=spec_file, key=key)
-    with open(path, newline="") as fh:
-        lines = fh.read().splitlines()
+    lines = read("text", path, "data file", access, spec_file, key).splitlines()
     comments = []
     while lines and (lines[0].lstrip().startswith("#") or not lines[0].strip()):
         if lines[0].strip():
-            comments.append(lines[0].lstrip()[1:].strip())
+            comments.append(lines[0].lstrip()[1:].strip()[:500])
         lines.pop(0)
     if not lines:
-        raise FitSpecError(f"data file {path} has no header line 'name [unit],...'", file=spec_file, key=key)
-    rows = list(csv.reader(lines))
+        raise err("no header line 'name [unit],...'")
+    if len(lines) - 1 > limits.limit("TABLE_ROWS"):
+        raise err(f"{len(lines) - 1:,} data lines, more than allowed {limits.how_to_raise('TABLE_ROWS')}")
+    try:
+        rows = list(csv.reader(lines))
+    except csv.Error as exc:
+        raise err(f"not valid CSV ({exc})") from None
     names, units = [], {}
     for h in rows[0]:
         m = _HEADER.match(h)
-        if not m:
-            raise FitSpecError(f"data file {path}: cannot read the column header {h!r}; write 'name [unit]'",
-                               file=spec_file, key=key)
+        if not m or len(h) > 200:
+            raise err(f"cannot read the column header {shown(h, 40)}; write 'name [unit]'")
         name, unit = m.group(1), (m.group(2) or "").strip()
         if name in units:
-            raise FitSpecError(f"data file {path}: column {name!r} appears twice", file=spec_file, key=key)
+            raise err(f"column {shown(name, 40)} appears twice")
         if unit:
             try:
                 check_unit(unit)
-            except UnitError as exc:
-                raise FitSpecError(f"data file {path}, column {name!r}: {exc}", file=spec_file, key=key) from None
+            except UnitError:
+                raise err(f"column {shown(name, 40)}: {shown(unit, 40)} is not a unit (write e.g. 'r [um]')") \
+                    from None
         names.append(name)
         units[name] = unit
     data = []
@@ -86,25 +105,37 @@ def read_table(path, spec_file=None, key=None) -> Table:
         if not row or all(not c.strip() for c in row):
             continue
         if len(row) != len(names):
-            raise FitSpecError(f"data file {path}, data line {i}: {len(row)} cells for {len(names)} columns",
-                               file=spec_file, key=key)
+            raise err(f"data line {i}: {len(row)} cells for {len(names)} columns")
         try:
             data.append([float(c) for c in row])
         except ValueError:
-            raise FitSpecError(f"data file {path}, data line {i}: a cell is not a number: {row}",
-                               file=spec_file, key=key) from None
+            bad = next(j for j, c in enumerate(row) if not _is_number(c))
+            raise err(f"data line {i}, column {shown(names[bad], 40)}: the cell {shown(row[bad], 30)} is not a "
+                      "number") from None
     if not data:
-        raise FitSpecError(f"data file {path} has no data rows", file=spec_file, key=key)
+        raise err("no data rows")
     arr = np.array(data, dtype=float)
     if not np.all(np.isfinite(arr)):
-        raise FitSpecError(f"data file {path} contains NaN or infinite values", file=spec_file, key=key)
+        i, j = np.argwhere(~np.isfinite(arr))[0]
+        raise err(f"contains NaN or infinite values (column {shown(names[j], 40)}, data row {i + 1}); every "
+                  "cell must be a finite number")
     return Table({n: arr[:, j] for j, n in enumerate(names)}, units, path, comments)
 
 
+def _is_number(text):
+    try:
+        float(text)
+        return True
+    except ValueError:
+        return False
+
+
 def write_table(path, columns: dict, units: dict, comments=()):
-    """Write a data CSV (comments first, then 'name [unit]' header, then rows)."""
+    """Write a data CSV (comments first, then 'name [unit]' header, then rows), atomically."""
+    from ..io import atomic_file
+
     names = list(columns)
-    with open(path, "w", newline="") as fh:
+    with atomic_file(path, "w", newline="", encoding="utf-8") as fh:
         for c in comments:
             fh.write(f"# {c}\n")
         w = csv.writer(fh)

@@ -152,11 +152,11 @@ def run_starts(problem, Z0, settings, workers=None, progress=False):
     Returns the results in the order of Z0."""
     from ..execution import default_workers, run_chunks, split
 
-    workers = workers or settings.get("workers") or default_workers()
     items = list(enumerate(np.asarray(Z0, float)))
+    workers = max(1, min(workers or settings.get("workers") or default_workers(), len(items)))  # no idle workers
     _WORKER.update(problem=problem, settings=settings)
     try:
-        chunks = split(items, min(workers, len(items)))
+        chunks = split(items, workers)
         results = run_chunks(_run_chunk, chunks, workers=workers, progress=progress, desc="starts")
     finally:
         _WORKER.clear()
@@ -212,7 +212,11 @@ def fit_problem(problem, settings=None, workers=None, progress=False):
     """Multi-start weighted least squares.  Returns a dict with 'starts' (every run),
     'best' (its index), 'z', 'p', the uncertainty at the best point, 'bounds_hit', 'rms'
     (per dataset), 'predictions' and 'seconds'."""
-    settings = {**problem.spec.settings, **(settings or {})}
+    from .spec import check_settings
+
+    given = {k: v for k, v in (settings or {}).items() if v is not None}
+    settings = check_settings({**problem.spec.settings, **given}, problem.spec.file,
+                              {k: f"--{k.replace('_', '-')}" for k in given})
     space = Space(problem)
     t0 = time.perf_counter()
     Z0 = latin_starts(space, settings["starts"], settings["seed"])

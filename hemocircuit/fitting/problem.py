@@ -22,9 +22,10 @@ import os
 import re
 
 import numpy as np
-import yaml
 
+from .. import inputs
 from ..errors import FitSpecError, HemocircuitError, NetlistError
+from ..spec_inputs import check_limit, read, shown
 from .datasets import read_table
 from .experiments import SteadyExperiment, TransientExperiment, observed_unit
 from .spec import load_spec, parse_value
@@ -45,21 +46,26 @@ def _options_and_values(circuit, mapping):
     return opts, {k: v for k, v in mapping.items() if k not in opts}
 
 
-def read_fragment(path, spec_file=None):
-    """The ``change:`` block of a fitted netlist fragment as {ID.PARAM: value}."""
+def read_fragment(path, spec_file=None, access=None):
+    """The ``change:`` block of a fitted netlist fragment as {ID.PARAM: value} (read under the
+    input policy, inside ``access`` if given)."""
     key = "start_from"
     if not os.path.exists(path):
         raise FitSpecError(f"the fragment {path} does not exist (run the previous stage first)", spec_file, key)
-    try:
-        with open(path) as fh:
-            data = yaml.safe_load(fh)
-    except yaml.YAMLError as exc:
-        raise FitSpecError(f"{path} is not valid YAML: {exc}", spec_file, key) from None
-    change = (data or {}).get("change") if isinstance(data, dict) else None
-    if not isinstance(change, dict):
-        raise FitSpecError(f"{path} has no 'change:' block (a fitted fragment written by hemocircuit fit)",
-                           spec_file, key)
-    return {f"{eid}.{k}": v for eid, body in change.items() for k, v in (body or {}).items()}
+    data = read("yaml", path, "fitted fragment", access, spec_file or path, key)
+    change = data.get("change") if isinstance(data, dict) else None
+    if not isinstance(change, dict) or not all(isinstance(e, str) and (b is None or isinstance(b, dict))
+                                               for e, b in change.items()):
+        raise FitSpecError(f"{path} has no 'change:' block {{ID: {{param: value}}}} (a fitted fragment written "
+                           "by hemocircuit fit)", spec_file, key)
+    out = {}
+    for eid, body in change.items():
+        for k, v in (body or {}).items():
+            if not isinstance(k, str) or not isinstance(v, (str, int, float, bool)):
+                raise FitSpecError(f"{path}: change.{shown(eid, 40)}.{shown(k, 40)} is not a value (a quantity, "
+                                   "number or option)", spec_file, key)
+            out[f"{eid}.{k}"] = v
+    return out
 
 
 class Dataset:
@@ -76,15 +82,16 @@ class FitProblem:
 
     def __init__(self, spec, circuit, netlist_path):
         self.spec, self.netlist_path = spec, os.path.abspath(str(netlist_path))
+        self.base_circuit = circuit  # as given (netlist, --set, --protocol): what fitted.yaml extends
         err = lambda msg, key=None: FitSpecError(msg, file=spec.file, key=key)  # noqa: E731
         c = circuit
         # 1. global structural options, the previous stage's values, fixed values
         if spec.options:
-            c = c.with_options({k: _yaml_literal(v) for k, v in spec.options.items()})
-        self.start_from = read_fragment(spec.start_from, spec.file) if spec.start_from else {}
+            c = self._options(c, spec.options, "options")
+        self.start_from = read_fragment(spec.start_from, spec.file, spec.access) if spec.start_from else {}
         opts, vals = _options_and_values(c, self.start_from)
         if opts:
-            c = c.with_options({k: _yaml_literal(v) for k, v in opts.items()})
+            c = self._options(c, opts, "start_from")
         c = self._set(c, vals, "start_from")
         fixed = {}
         for p, v in spec.fixed.items():
@@ -99,10 +106,20 @@ class FitProblem:
             key = f"parameters.{p.path}"
             unit = self._unit(c, p.base_path, key)
             a, b = (parse_value(v, unit, spec.file, f"{key}.bounds") for v in p.bounds)
+            if not (np.isfinite(a) and np.isfinite(b)):
+                raise err(f"the bounds must be finite numbers, got [{a:g}, {b:g}] {unit}", f"{key}.bounds")
             if not a < b:
-                raise err(f"lower bound {p.bounds[0]} is not below the upper bound {p.bounds[1]}", f"{key}.bounds")
+                raise err(f"lower bound {shown(p.bounds[0])} is not below the upper bound {shown(p.bounds[1])}",
+                          f"{key}.bounds")
             if p.log and a <= 0:
                 raise err("a log-scaled parameter needs a positive lower bound", f"{key}.bounds")
+            for v, side in ((a, "lower"), (b, "upper")):
+                if p.epoch is None:
+                    try:
+                        _with_values(c, {p.base_path: v})
+                    except NetlistError as exc:
+                        raise err(f"the {side} bound {v:.6g} {unit} is not a value {p.base_path} may take "
+                                  f"({exc.bare_message}); narrow the bounds", f"{key}.bounds") from None
             self.units.append(unit)
             lo.append(a)
             hi.append(b)
@@ -110,24 +127,42 @@ class FitProblem:
         self.lower, self.upper, self.log = np.array(lo), np.array(hi), np.array(self.log, bool)
         self.tied = {}
         for p, expr in spec.tied.items():
-            self._unit(c, p, f"tied.{p}")
-            for q in _PATH.findall(expr):
+            key = f"tied.{p}"
+            self._unit(c, p, key)
+            refs = _PATH.findall(expr)
+            if p in refs:
+                raise err(f"{p} is tied to itself ({shown(expr)}); write it in terms of estimated or fixed "
+                          "parameters", key)
+            for q in refs:
+                if q in spec.tied:
+                    raise err(f"the expression refers to {q}, which is tied too; write {p} in terms of estimated "
+                              "or fixed parameters", key)
                 if q not in self.parameters:
-                    self._unit(c, q, f"tied.{p}")
+                    self._unit(c, q, key)
             self.tied[p] = expr.lstrip("= ").strip()
         # 3. datasets
         self.datasets = [self._dataset(d) for d in spec.datasets]
         self._check_epochs()
+        rows = sum(d.n for d in self.datasets)
+        check_limit(rows, "FIT_ROWS", spec.file, "datasets", "data rows in all datasets")
+        if rows < len(self.parameters):
+            raise err(f"{rows} data row(s) in all, fewer than the {len(self.parameters)} estimated parameters: "
+                      "the fit is not determined; add data or estimate fewer parameters", "datasets")
         # 4. start values: the spec's 'start', else the current value (netlist, start_from)
-        self.start = np.array([self._start_value(p, u) for p, u in zip(spec.parameters, self.units)])
+        self.start = np.array([self._start_value(p, u, a, b) for p, u, a, b in
+                               zip(spec.parameters, self.units, self.lower, self.upper)])
+        self._check_tied()
         names = {d.name: i for i, d in enumerate(self.datasets)}
         self._norm_ref = [None if not d.spec.normalise else
                           (names.get(d.spec.normalise.get("dataset"), i), d.spec.normalise["row"])
                           for i, d in enumerate(self.datasets)]
         for i, ref in enumerate(self._norm_ref):
             if ref is not None and not 0 <= ref[1] < self.datasets[ref[0]].n:
-                raise err(f"row {ref[1]} does not exist in dataset {self.datasets[ref[0]].name!r} "
+                raise err(f"row {ref[1]} does not exist in dataset {shown(self.datasets[ref[0]].name)} "
                           f"({self.datasets[ref[0]].n} rows)", f"{self.datasets[i].spec.key}.normalise")
+            if ref is not None and self.datasets[ref[0]].y[ref[1]] == 0:
+                raise err(f"the data are normalised by row {ref[1]} of dataset {shown(self.datasets[ref[0]].name)}, "
+                          "whose value is 0; choose another row", f"{self.datasets[i].spec.key}.normalise")
 
     # ------------------------------------------------------------------ building ----
     def _unit(self, c, path, key):
@@ -142,14 +177,37 @@ class FitProblem:
         except NetlistError as exc:
             raise FitSpecError(exc.bare_message, file=self.spec.file, key=key) from None
 
+    def _options(self, c, mapping, key):
+        """``c`` with structural options (values as YAML literals), errors naming ``key``."""
+        try:
+            return c.with_options({k: _yaml_literal(v, self.spec.file) for k, v in mapping.items()})
+        except NetlistError as exc:
+            raise FitSpecError(exc.bare_message, file=self.spec.file, key=key) from None
+
+    def _check_tied(self):
+        """Every tied expression evaluates, at the start values, to a value its parameter may take."""
+        if not self.tied:
+            return
+        values = self.values_from_array(self.start)
+        try:
+            B, assign, _ = self._split(values)
+        except HemocircuitError as exc:
+            raise FitSpecError(getattr(exc, "bare_message", str(exc)), file=self.spec.file, key="tied") from None
+        for p in self.tied:
+            v = float(assign[p][0])
+            if not np.isfinite(v):
+                raise FitSpecError(f"the expression {shown(self.tied[p])} is {v} at the start values; write one "
+                                   "that is finite over the bounds", file=self.spec.file, key=f"tied.{p}")
+            self._set(self.circuit, {p: v}, f"tied.{p}")
+
     def _dataset(self, d):
         spec_file = self.spec.file
         key = d.key
-        table = read_table(d.file, spec_file, f"{key}.file")
+        table = read_table(d.file, spec_file, f"{key}.file", self.spec.access)
         exp = d.experiment
         c = self.circuit
         if exp["options"]:
-            c = c.with_options({k: _yaml_literal(v) for k, v in exp["options"].items()})
+            c = self._options(c, exp["options"], f"{key}.experiment.options")
         c = self._set(c, {p: parse_value(v, self._unit(c, p, f"{key}.experiment.set"), spec_file,
                                          f"{key}.experiment.set.{p}") for p, v in exp["set"].items()},
                       f"{key}.experiment.set")
@@ -172,8 +230,8 @@ class FitProblem:
                 raise FitSpecError(str(exc), spec_file, f"{key}.experiment.protocol") from None
             opts, vals = _options_and_values(c, proto.initial)
             if opts:
-                c = c.with_options({k: _yaml_literal(v) for k, v in opts.items()})
-            c = _with_values(c, vals)
+                c = self._options(c, opts, f"{key}.experiment.protocol")
+            c = self._set(c, vals, f"{key}.experiment.protocol")
             times = table.column(exp["time"], "s", f"{key}.experiment.time", spec_file)
             if np.any(np.diff(times) < 0) or times[0] < 0:
                 raise FitSpecError(f"the times in column {exp['time']!r} must be >= 0 and increasing",
@@ -197,8 +255,8 @@ class FitProblem:
             sigma = table.column(d.sigma, unit, f"{key}.sigma", spec_file)
         else:
             sigma = np.full(len(y), parse_value(d.sigma, unit, spec_file, f"{key}.sigma"))
-        if not np.all(sigma > 0):
-            raise FitSpecError("standard deviations must be positive", spec_file, f"{key}.sigma")
+        if not np.all((sigma > 0) & np.isfinite(sigma)):
+            raise FitSpecError("standard deviations must be positive and finite", spec_file, f"{key}.sigma")
         sigma = sigma / np.sqrt(d.weight)
         return Dataset(d, experiment, y, sigma, unit, table, x_label, x)
 
@@ -214,10 +272,14 @@ class FitProblem:
                 raise FitSpecError(f"an epoch parameter must name a time at which a protocol sets it; {where}",
                                    self.spec.file, f"parameters.{p.path}")
 
-    def _start_value(self, p, unit):
+    def _start_value(self, p, unit, lower, upper):
         key = f"parameters.{p.path}"
         if p.start is not None:
             v = parse_value(p.start, unit, self.spec.file, f"{key}.start")
+            if not lower <= v <= upper:
+                raise FitSpecError(f"the start {shown(p.start)} is outside the bounds [{lower:.6g}, {upper:.6g}] "
+                                   f"{unit}; give a start within them (or widen the bounds)", self.spec.file,
+                                   f"{key}.start")
         elif p.epoch is not None:
             v = self._protocol_value(p, unit)
         else:
@@ -325,16 +387,26 @@ class FitProblem:
         return self.rms_per_dataset(values).sum(axis=1)
 
 
-def _yaml_literal(v):
-    return yaml.safe_load(v) if isinstance(v, str) else v
+def _yaml_literal(v, file=None):
+    """An option value written as text ('true', '2') as its YAML value (within the input limits)."""
+    return inputs.parse_yaml(v, file or "option value") if isinstance(v, str) else v
 
 
-def load_problem(netlist_path, spec_path, sets=None, protocol=None, svzerod_units=None) -> FitProblem:
+def load_problem(netlist_path, spec_path, sets=None, protocol=None, svzerod_units=None, allow_paths=None,
+                 circuit=None, named_by=None, key=None) -> FitProblem:
     """The fit problem of a netlist and a fit spec.  ``sets`` ({ID.PARAM: value}), ``protocol``
     (its 'initial' settings) and ``svzerod_units`` (an svZeroDSolver JSON's unit system) are
-    applied to the netlist as in every command (hemocircuit.cli.load_circuit)."""
+    applied to the netlist as in every command (hemocircuit.cli.load_circuit); ``circuit``: the
+    circuit already loaded (then those three are not used).  The files the spec names must lie
+    in the spec's project, the netlist's project, the bundled netlists or ``allow_paths``
+    (``--allow-path``); ``named_by``/``key``: the spec naming this fit spec (a sensitivity
+    spec's ``fit_error``, which has checked the path against its own folders), for messages."""
     from ..cli import load_circuit
+    from ..spec_inputs import spec_access
 
-    spec = load_spec(spec_path)
-    circuit, _ = load_circuit(str(netlist_path), sets, protocol, svzerod_units=svzerod_units)
+    access = spec_access(spec_path, netlist_path, allow_paths)
+    spec = load_spec(spec_path, access, named_by, key)
+    if circuit is None:
+        circuit, _ = load_circuit(str(netlist_path), sets, protocol, allow_paths=allow_paths,
+                                  svzerod_units=svzerod_units)
     return FitProblem(spec, circuit, netlist_path)

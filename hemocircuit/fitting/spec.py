@@ -32,9 +32,11 @@ import os
 import re
 from dataclasses import dataclass, field
 
-import yaml
+import numpy as np
 
+from .. import inputs
 from ..errors import FitSpecError
+from ..spec_inputs import integer, number, read_spec, resolve, shown, spec_access, text, unknown_keys
 from ..units import UnitError, parse_quantity
 
 TOP_KEYS = {"name", "description", "start_from", "options", "fixed", "tied", "parameters", "datasets",
@@ -94,6 +96,8 @@ class FitSpec:
     parameters: list
     datasets: list
     settings: dict
+    #: the folders the files it names may lie in (hemocircuit.spec_inputs.spec_access)
+    access: object = None
 
     def dataset(self, name):
         return next(d for d in self.datasets if d.name == name)
@@ -112,30 +116,61 @@ def _spaced(v):
     return f"{m.group(1)} {m.group(2)}" if m else str(v)
 
 
-def load_spec(path) -> FitSpec:
+def load_spec(path, access=None, named_by=None, key=None) -> FitSpec:
     """Read and validate a fit spec (structure only; values are checked against the circuit
-    by :func:`resolve_values`)."""
-    path = os.path.abspath(str(path))
-    if not os.path.exists(path):
-        raise FitSpecError(f"fit spec not found: {path}")
-    try:
-        with open(path) as fh:
-            data = yaml.safe_load(fh)
-    except yaml.YAMLError as exc:
-        raise FitSpecError(f"not valid YAML: {exc}", file=path) from None
-    return parse_spec(data, path)
+    by :class:`~hemocircuit.fitting.problem.FitProblem`).  The spec is read under the input
+    policy (:mod:`hemocircuit.spec_inputs`); the files it names must lie in ``access`` (default:
+    the spec's project and the bundled netlists; :func:`~hemocircuit.fitting.load_problem` adds
+    the netlist's project and ``allow_paths``).  ``named_by``/``key``: the spec naming this one
+    (a sensitivity spec's ``fit_error``): then this file itself must lie in ``access`` too."""
+    path = os.path.abspath(inputs.check_path(path, "fit spec"))
+    data = read_spec(path, "fit spec", access if named_by else None, named_by, key)
+    return parse_spec(data, path, access)
 
 
-def parse_spec(data, path) -> FitSpec:
+def check_settings(settings, path, flags=None):
+    """Validate fit settings (the spec's, or merged with overrides: ``flags`` {key: '--starts'}
+    names the command-line option that set a key).  Returns the settings with numbers as
+    numbers."""
+    flags = flags or {}
+    out = dict(settings)
+
+    def key(k):
+        return f"settings.{k}"
+
+    if out["bounds"] not in ("transform", "reflective"):
+        raise FitSpecError(f"'bounds' must be transform or reflective, got {shown(out['bounds'])}", path,
+                           key("bounds"))
+    out["starts"] = integer(out["starts"], path, key("starts"), lo=0 if "starts" in flags else 1,
+                            limit_name="FIT_STARTS", flag=flags.get("starts"))
+    if out["starts"] == 0 and not out.get("start_current", True):
+        raise FitSpecError("no start: 'starts' is 0 and 'start_current' is false; give starts >= 1", path,
+                           key("starts"))
+    out["seed"] = integer(out["seed"], path, key("seed"), lo=0, hi=2 ** 32 - 1, flag=flags.get("seed"))
+    out["max_nfev"] = integer(out["max_nfev"], path, key("max_nfev"), lo=1, flag=flags.get("max_nfev"))
+    if out["workers"] is not None:
+        out["workers"] = integer(out["workers"], path, key("workers"), lo=1, flag=flags.get("workers"))
+    if not isinstance(out["start_current"], bool):
+        raise FitSpecError(f"'start_current' must be true or false, got {shown(out['start_current'])}", path,
+                           key("start_current"))
+    for k in ("ftol", "xtol", "gtol"):
+        out[k] = number(out[k], path, key(k), lo=0.0, hi=1.0, lo_open=False, what="a tolerance (e.g. 1e-12)")
+    if max(out["ftol"], out["xtol"], out["gtol"]) < 2.3e-16:
+        raise FitSpecError("at least one of ftol, xtol, gtol must exceed the machine epsilon 2.2e-16 (scipy's "
+                           "least_squares); e.g. ftol: 1e-12", path, "settings")
+    return out
+
+
+def parse_spec(data, path, access=None) -> FitSpec:
     def err(msg, key=None):
         return FitSpecError(msg, file=path, key=key)
 
-    here = os.path.dirname(path)
+    path = os.path.abspath(str(path))
+    if access is None:
+        access = spec_access(path)
     if not isinstance(data, dict):
         raise err("a fit spec is a mapping with 'parameters' and 'datasets'")
-    unknown = set(data) - TOP_KEYS
-    if unknown:
-        raise err(f"unknown key(s) {sorted(unknown)}; allowed: {sorted(TOP_KEYS)}")
+    unknown_keys(data, TOP_KEYS, path)
     for k in ("parameters", "datasets"):
         if not data.get(k):
             raise err(f"'{k}' is missing or empty", k)
@@ -151,23 +186,24 @@ def parse_spec(data, path) -> FitSpec:
     fixed = mapping("fixed", data.get("fixed"))
     tied = mapping("tied", data.get("tied"))
     for k, v in tied.items():
-        if not isinstance(v, str):
-            raise err(f"expected an expression string of other parameters (e.g. \"2 * art.f1\"), got {v!r}",
+        if not isinstance(v, str) or not v.lstrip("= ").strip():
+            raise err(f"expected an expression string of other parameters (e.g. \"2 * art.f1\"), got {shown(v)}",
                       f"tied.{k}")
+    for k in tied:
+        if k in fixed:
+            raise err(f"{k} is both tied and fixed; keep one", f"tied.{k}")
     # ---- parameters -------------------------------------------------------------------
     if not isinstance(data["parameters"], dict):
         raise err("expected a mapping {ID.PARAM: {bounds: [lower, upper], log: false, start: value}}",
                   "parameters")
     params = []
     for p, body in data["parameters"].items():
+        if not isinstance(p, str) or "." not in p or len(p) > 200:
+            raise err(f"{shown(p)} is not an ID.PARAM path", "parameters")
         key = f"parameters.{p}"
-        if not isinstance(p, str) or "." not in p:
-            raise err(f"{p!r} is not an ID.PARAM path", "parameters")
         if not isinstance(body, dict):
             raise err("expected {bounds: [lower, upper], log: true|false, start: value}", key)
-        unknown = set(body) - PARAM_KEYS
-        if unknown:
-            raise err(f"unknown key(s) {sorted(unknown)}; allowed: {sorted(PARAM_KEYS)}", key)
+        unknown_keys(body, PARAM_KEYS, path, key)
         b = body.get("bounds")
         if not isinstance(b, (list, tuple)) or len(b) != 2:
             raise err("'bounds' must be [lower, upper] (with units, e.g. [5e-9 N, 2e-7 N])", key)
@@ -176,9 +212,11 @@ def parse_spec(data, path) -> FitSpec:
         ps = ParamSpec(p, tuple(b), bool(body.get("log", False)), body.get("start"))
         if _EPOCH.match(p):
             try:
-                ps.epoch
+                t = ps.epoch
             except UnitError as exc:
                 raise err(f"the epoch time after '@' is not a time: {exc}", key) from None
+            if not (np.isfinite(t) and t >= 0):
+                raise err(f"the epoch time after '@' must be finite and >= 0, got {t:g} s", key)
         for where in (fixed, tied):
             if ps.base_path in where and ps.epoch is None:
                 raise err(f"{p} is estimated and also listed under "
@@ -192,30 +230,28 @@ def parse_spec(data, path) -> FitSpec:
         key = f"datasets[{i}]"
         if not isinstance(d, dict):
             raise err("expected a mapping with file, experiment, observe, column", key)
-        unknown = set(d) - DATASET_KEYS
-        if unknown:
-            raise err(f"unknown key(s) {sorted(unknown)}; allowed: {sorted(DATASET_KEYS)}", key)
+        unknown_keys(d, DATASET_KEYS, path, key)
         for k in ("file", "experiment", "observe", "column"):
             if k not in d:
                 raise err(f"'{k}' is missing", key)
-        name = str(d.get("name", f"dataset{i}"))
+        name = text(d.get("name", f"dataset{i}"), path, f"{key}.name")
         if name in names:
-            raise err(f"the name {name!r} is used twice", key)
+            raise err(f"the name {shown(name)} is used twice", key)
         names.add(name)
         exp = d["experiment"]
-        if not isinstance(exp, dict) or exp.get("type") not in EXPERIMENT_KEYS:
+        if not isinstance(exp, dict) or not isinstance(exp.get("type"), str) or exp["type"] not in EXPERIMENT_KEYS:
             raise err(f"'experiment' needs a type, one of {sorted(EXPERIMENT_KEYS)}", f"{key}.experiment")
         exp = dict(exp)
-        unknown = set(exp) - EXPERIMENT_KEYS[exp["type"]]
-        if unknown:
-            raise err(f"unknown key(s) {sorted(unknown)} for type {exp['type']}; allowed: "
-                      f"{sorted(EXPERIMENT_KEYS[exp['type']])}", f"{key}.experiment")
+        unknown_keys(exp, EXPERIMENT_KEYS[exp["type"]], path, f"{key}.experiment",
+                     f"key(s) for type {exp['type']}:")
         exp["options"] = mapping(f"{key}.experiment.options", exp.get("options"))
         exp["set"] = mapping(f"{key}.experiment.set", exp.get("set"))
         if exp["type"] == "op":
             exp["inputs"] = mapping(f"{key}.experiment.inputs", exp.get("inputs"))
             if not exp["inputs"]:
                 raise err("an op experiment needs inputs {ID.PARAM: data column}", f"{key}.experiment.inputs")
+            exp["inputs"] = {p: text(c, path, f"{key}.experiment.inputs.{p}", "a data column name")
+                             for p, c in exp["inputs"].items()}
         elif exp["type"] == "dc":
             if not isinstance(exp.get("sweep"), str) or not isinstance(exp.get("column"), str):
                 raise err("a dc experiment needs 'sweep: ID.PARAM' and 'column: NAME' (the swept values)",
@@ -225,45 +261,44 @@ def parse_spec(data, path) -> FitSpec:
             if not isinstance(exp.get("protocol"), str) or not isinstance(exp.get("time"), str):
                 raise err("a tran experiment needs 'protocol: FILE' and 'time: COLUMN' (the data's times)",
                           f"{key}.experiment")
-            exp["protocol"] = os.path.normpath(os.path.join(here, exp["protocol"]))
+            exp["protocol"] = resolve(exp["protocol"], path, access, "protocol file", f"{key}.experiment.protocol")
             if not os.path.exists(exp["protocol"]):
                 raise err(f"protocol file not found: {exp['protocol']}", f"{key}.experiment.protocol")
-            try:
-                exp["rtol"] = float(exp.get("rtol", 1e-8))
-            except (TypeError, ValueError):
-                raise err("'rtol' must be a number", f"{key}.experiment.rtol") from None
+            exp["rtol"] = number(exp.get("rtol", 1e-8), path, f"{key}.experiment.rtol", lo=0.0, hi=0.1,
+                                 hi_open=False, what="a relative tolerance (e.g. 1e-8)")
         weight = d.get("weight", 1.0)
-        if isinstance(weight, bool) or not isinstance(weight, (int, float)) or not weight > 0:
-            raise err(f"'weight' must be a positive number, got {weight!r}", f"{key}.weight")
+        if isinstance(weight, bool) or not isinstance(weight, (int, float)) or not weight > 0 or \
+                not np.isfinite(weight):
+            raise err(f"'weight' must be a positive finite number, got {shown(weight)}", f"{key}.weight")
         if "sigma" in d and "weight" in d:
             raise err("give either 'sigma' (standard deviation) or 'weight', not both", key)
-        datasets.append(DatasetSpec(name, os.path.normpath(os.path.join(here, str(d["file"]))), exp,
-                                    str(d["observe"]), str(d["column"]), d.get("sigma"), float(weight),
-                                    _normalise(d.get("normalise"), err, f"{key}.normalise"), key))
+        if d.get("sigma") is not None and (isinstance(d["sigma"], bool)
+                                           or not isinstance(d["sigma"], (str, int, float))):
+            raise err(f"'sigma' must be a quantity (e.g. 1 um) or a data column name, got {shown(d['sigma'])}",
+                      f"{key}.sigma")
+        file = resolve(d["file"], path, access, "data file", f"{key}.file")
+        datasets.append(DatasetSpec(name, file, exp, text(d["observe"], path, f"{key}.observe",
+                                                          "an output column or a derived quantity"),
+                                    text(d["column"], path, f"{key}.column", "a data column name"), d.get("sigma"),
+                                    float(weight), _normalise(d.get("normalise"), err, f"{key}.normalise"), key))
     for d in datasets:
         ref = d.normalise.get("dataset")
         if ref is not None and ref not in names:
-            raise err(f"refers to the dataset {ref!r}, which does not exist (datasets: {sorted(names)})",
+            raise err(f"refers to the dataset {shown(ref)}, which does not exist (datasets: {sorted(names)})",
                       f"{d.key}.normalise")
     # ---- settings ---------------------------------------------------------------------
-    settings = dict(SETTINGS)
     s = data.get("settings") or {}
     if not isinstance(s, dict):
         raise err("expected a mapping", "settings")
-    unknown = set(s) - set(SETTINGS)
-    if unknown:
-        raise err(f"unknown key(s) {sorted(unknown)}; allowed: {sorted(SETTINGS)}", "settings")
-    settings.update(s)
-    if settings["bounds"] not in ("transform", "reflective"):
-        raise err(f"'bounds' must be transform or reflective, got {settings['bounds']!r}", "settings.bounds")
-    for k in ("starts", "seed", "max_nfev"):
-        if isinstance(settings[k], bool) or not isinstance(settings[k], int) or settings[k] < (0 if k == "seed" else 1):
-            raise err(f"'{k}' must be a positive integer, got {settings[k]!r}", f"settings.{k}")
+    unknown_keys(s, SETTINGS, path, "settings")
+    settings = check_settings({**SETTINGS, **s}, path)
     start_from = data.get("start_from")
     if start_from is not None:
-        start_from = os.path.normpath(os.path.join(here, str(start_from)))
-    return FitSpec(path, str(data.get("name", os.path.splitext(os.path.basename(path))[0])),
-                   str(data.get("description", "")), start_from, options, fixed, tied, params, datasets, settings)
+        start_from = resolve(start_from, path, access, "fitted fragment", "start_from")
+    name = data.get("name", os.path.splitext(os.path.basename(path))[0])
+    description = data.get("description", "")
+    return FitSpec(path, text(name, path, "name"), description if isinstance(description, str) else shown(description),
+                   start_from, options, fixed, tied, params, datasets, settings, access)
 
 
 def _normalise(v, err, key):
@@ -272,14 +307,27 @@ def _normalise(v, err, key):
         return {}
     if v == "first":
         return {"row": 0, "dataset": None}
-    if isinstance(v, dict) and set(v) <= {"row", "dataset"} and isinstance(v.get("row", 0), int):
+    if isinstance(v, dict) and set(v) <= {"row", "dataset"} and isinstance(v.get("row", 0), int) \
+            and not isinstance(v.get("row", 0), bool) and (v.get("dataset") is None or isinstance(v["dataset"], str)):
         return {"row": int(v.get("row", 0)), "dataset": v.get("dataset")}
-    raise err(f"expected none, first, {{row: k}} or {{dataset: NAME, row: k}}, got {v!r}", key)
+    raise err(f"expected none, first, {{row: k}} or {{dataset: NAME, row: k}}, got {shown(v)}", key)
 
 
 def parse_value(value, unit, spec_file, key):
     """A value written in the spec (quantity string, or bare number if dimensionless) in ``unit``."""
+    if isinstance(value, bool) or not isinstance(value, (str, int, float)):
+        raise FitSpecError(f"expected a quantity in {unit or 'dimensionless units'} (a number with its unit), got "
+                           f"{shown(value)}", file=spec_file, key=key)
+    if isinstance(value, str) and len(value) > 1000:
+        raise FitSpecError(f"a quantity of {len(value):,} characters; write a number and its unit", file=spec_file,
+                           key=key)
     try:
         return parse_quantity(_spaced(value) if isinstance(value, str) else value, unit, key)
     except UnitError as exc:
-        raise FitSpecError(str(exc), file=spec_file, key=key) from None
+        msg = str(exc)
+        msg = msg[len(key) + 2:] if msg.startswith(f"{key}: ") else msg  # the key is named once
+        raise FitSpecError(_cut(msg), file=spec_file, key=key) from None
+
+
+def _cut(message, n=300):
+    return message if len(message) <= n else message[:n] + "..."

@@ -16,13 +16,31 @@ import functools
 from .spec import load_spec, parse_spec  # noqa: F401
 
 
+def prepare(spec, objective):
+    """The resolved parameter space of ``spec`` on ``objective`` and the number of model
+    evaluations its method will make, checked against the limits (SENS_RUNS, SENS_VALUES):
+    everything :func:`run` checks before the first model evaluation."""
+    from .. import limits
+    from ..errors import FitSpecError
+    from .space import resolve
+    from .spec import _check_runs
+
+    space = resolve(spec, objective)
+    runs = _check_runs(spec.method, space.k, spec.file)
+    if runs * len(objective.labels) > limits.limit("SENS_VALUES"):
+        raise FitSpecError(f"{runs:,} model evaluations x {len(objective.labels):,} output components = "
+                           f"{runs * len(objective.labels):,} values, more than allowed "
+                           f"{limits.how_to_raise('SENS_VALUES')}; fewer points or output components",
+                           file=spec.file, key="method")
+    return space, runs
+
+
 def run(spec, objective, scheduler=None, workers=None, progress=False):
     """Run the spec's method on ``objective``; returns a :class:`result.Result`."""
     from . import constellation, dynamic, local, salib_methods
     from .outputs import evaluate
-    from .space import resolve
 
-    space = resolve(spec, objective)
+    space, _ = prepare(spec, objective)
     ev = functools.partial(evaluate, objective, scheduler=scheduler, workers=workers, progress=progress)
     m = dict(spec.method)
     name = m.pop("name")

@@ -27,8 +27,9 @@ import warnings
 
 import numpy as np
 
-from ..errors import HemocircuitError, NetlistError
+from ..errors import FitSpecError, HemocircuitError, NetlistError
 from ..execution import default_workers, run_chunks, split
+from ..spec_inputs import check_limit, number, shown, unknown_keys
 from ..units import UnitError, parse_quantity
 
 
@@ -213,7 +214,7 @@ def dc_points(circuit, sweep):
     if len(n) != 1:
         raise NetlistError(f"the swept paths have different numbers of points {sorted(n)}")
     N = n.pop()
-    return [{p: f"{v[i]!r} {u}" for p, (v, u) in cols.items()} for i in range(N)]
+    return [{p: f"{float(v[i])!r} {u}" for p, (v, u) in cols.items()} for i in range(N)]
 
 
 class TranObjective(CircuitObjective):
@@ -313,10 +314,12 @@ class FitErrorObjective(Objective):
     Kuo flow and no-flow data), through the fit package's problem interface:
     ``load_problem(netlist, fitspec)``, ``.parameters``, ``.bounds``, ``.rms_error(values)``."""
 
-    def __init__(self, circuit, netlist_path, fit_spec_path):
+    def __init__(self, circuit, netlist_path, fit_spec_path, allow_paths=None, named_by=None, key=None):
         from ..fitting import load_problem
         self.circuit = circuit
-        self.problem = load_problem(netlist_path, fit_spec_path)
+        # the circuit as given (with --set and --protocol), the fit spec's files in its folders
+        self.problem = load_problem(netlist_path or circuit.file, fit_spec_path, circuit=circuit,
+                                    allow_paths=allow_paths, named_by=named_by, key=key)
         self.labels, self.units = ["rms error"], [getattr(self.problem, "rms_unit", "")]
         self._bounds = _bounds_map(self.problem)
 
@@ -409,25 +412,30 @@ class AnalysisObjective(CircuitObjective):
         return Y, _nonfinite(Y, errors)
 
 
-def make_objective(spec, circuit=None, netlist_path=None, scheduler=None, workers=None):
-    """The objective named by ``spec.output`` for ``circuit``."""
+def make_objective(spec, circuit=None, netlist_path=None, scheduler=None, workers=None, allow_paths=None):
+    """The objective named by ``spec.output`` for ``circuit``.  Files the output names (a tran
+    ``protocol``, a ``fit_error`` spec) are read relative to the spec, inside its allowed
+    folders (``spec.access``); ``allow_paths``: more folders for the fit spec's own files."""
     kind, cfg = next(iter(spec.output.items()))
+    key = f"output.{kind}"
+
+    def err(msg, k=None):
+        return FitSpecError(msg, file=spec.file, key=f"{key}.{k}" if k else key)
+
     if kind == "function":
-        raise NetlistError("output 'function' is for the Python API: pass objective=FunctionObjective(...)",
-                           file=spec.file)
+        raise err("output 'function' is for the Python API: pass objective=FunctionObjective(...)")
     if kind == "fit_error":
         if not isinstance(cfg, str):
-            raise NetlistError("output fit_error: give the fit spec's path (fit_error: fit.yaml)", file=spec.file)
-        return FitErrorObjective(circuit, netlist_path, spec.path_of(cfg))
+            raise err("give the fit spec's path (fit_error: fit.yaml)")
+        path = spec.path_of(cfg, "fit spec", key)
+        return FitErrorObjective(circuit, netlist_path, path, allow_paths, spec.file, key)
     if not isinstance(cfg, dict):
-        raise NetlistError(f"output {kind}: expected a mapping of settings", file=spec.file)
+        raise err(f"expected a mapping of settings, got {shown(cfg)}")
     allowed = {"op": {"column", "at"}, "dc": {"column", "sweep"}, "tran": {"column", "protocol", "times", "rtol"},
                "freq": {"column", "frequency", "measure", "input", "step", "amplitude"},
                "envelope": {"column", "measure", "t_end", "dt"}}[kind]
-    unknown = set(cfg) - allowed
-    if unknown:
-        raise NetlistError(f"output {kind}: unknown setting(s) {sorted(unknown)}; allowed: {sorted(allowed)}",
-                           file=spec.file)
+    unknown_keys(cfg, allowed, spec.file, key, "setting(s)")
+    cfg = _checked_settings(kind, cfg, spec, key, err)
     try:
         if kind == "op":
             obj = OpObjective(circuit, cfg.get("column"), cfg.get("at"))
@@ -435,21 +443,88 @@ def make_objective(spec, circuit=None, netlist_path=None, scheduler=None, worker
             obj = OpObjective(circuit, cfg.get("column"), dc_points(circuit, cfg.get("sweep")))
         elif kind == "tran":
             if "protocol" not in cfg or "times" not in cfg:
-                raise NetlistError("output tran needs 'protocol' (a protocol YAML) and 'times' (e.g. '0:450:5 s')")
-            obj = TranObjective(circuit, spec.path_of(cfg["protocol"]), cfg.get("column"), cfg["times"],
-                                cfg.get("rtol", 1e-6))
+                raise err("output tran needs 'protocol' (a protocol YAML) and 'times' (e.g. '0:450:5 s')")
+            obj = TranObjective(circuit, spec.path_of(cfg["protocol"], "protocol file", f"{key}.protocol"),
+                                cfg.get("column"), cfg["times"], cfg.get("rtol", 1e-6))
         else:
             obj = AnalysisObjective(circuit, kind, cfg, scheduler, workers)
+    except FitSpecError:
+        raise
     except NetlistError as exc:
-        if exc.file:
-            raise
-        raise NetlistError(f"output {kind}: {exc.bare_message}", file=spec.file, element=exc.element) from None
-    for p in spec.parameters:
+        msg = exc.bare_message if not exc.file or exc.file == spec.file else str(exc)
+        raise err(msg[:1000]) from None
+    check_limit(len(obj.labels), "SENS_OUTPUTS", spec.file, key, "output components (columns x settings x times)")
+    for i, p in enumerate(spec.parameters):
         if p.event is not None and kind != "tran":
-            raise NetlistError(f"parameter {p.name!r}: 'event' applies to a tran output only", file=spec.file)
+            raise FitSpecError(f"parameter {shown(p.name)}: 'event' applies to a tran output only", file=spec.file,
+                               key=f"parameters[{i}].event")
     if isinstance(obj, OpObjective):
-        obj.check_keys([p.key for p in spec.parameters] + [t.path for t in spec.ties])
+        try:
+            obj.check_keys([p.key for p in spec.parameters] + [t.path for t in spec.ties])
+        except NetlistError as exc:
+            raise err(exc.bare_message) from None
     return obj
+
+
+def _checked_settings(kind, cfg, spec, key, err):
+    """The output's settings checked for their types and ranges (before any model run)."""
+    cfg = dict(cfg)
+    col = cfg.get("column")
+    cols = col if isinstance(col, list) else [col]
+    if col is None or not cols or not all(isinstance(c, str) and c.strip() and len(c) <= 200 for c in cols):
+        raise err(f"'column' must be an output column (e.g. art.r) or a list of them, got {shown(col)}", "column")
+    if kind == "op":
+        at = cfg.get("at")
+        if at is not None and not (isinstance(at, dict) or (isinstance(at, list) and at
+                                                            and all(isinstance(a, dict) for a in at))):
+            raise err("'at' must be a mapping {ID.PARAM: value} or a non-empty list of them, got " + shown(at), "at")
+    elif kind == "dc":
+        sweep = cfg.get("sweep")
+        if not isinstance(sweep, dict) or not sweep or not all(
+                isinstance(k, str) and (isinstance(v, str) or (isinstance(v, list) and v)) for k, v in sweep.items()):
+            raise err("'sweep' must map ID.PARAM to a range or a list of values, e.g. "
+                      "{Pup.value: '20:140:20 cmH2O', Pdown.value: '20:140:20 cmH2O'}", "sweep")
+    elif kind == "tran":
+        times = cfg.get("times")
+        if not (isinstance(times, str) or (isinstance(times, list) and times and all(
+                isinstance(t, (str, int, float)) and not isinstance(t, bool) for t in times))):
+            raise err(f"'times' must be a range ('0:450:5 s') or a list of times, got {shown(times)}", "times")
+        if isinstance(times, list):
+            check_limit(len(times), "SENS_OUTPUTS", spec.file, f"{key}.times", "times")
+        cfg["rtol"] = number(cfg.get("rtol", 1e-6), spec.file, f"{key}.rtol", lo=0.0, hi=0.1, hi_open=False,
+                             what="a relative tolerance (e.g. 1e-6)")
+    elif kind == "freq":
+        f = _quantity(cfg.get("frequency", "0.1 Hz"), "Hz", spec, f"{key}.frequency")
+        if not f > 0:
+            raise err(f"the frequency must be > 0, got {f:g} Hz", "frequency")
+        for k, default in (("step", 10), ("amplitude", 10)):
+            cfg[k] = number(cfg.get(k, default), spec.file, f"{key}.{k}", lo=0.0, hi=100.0, hi_open=False,
+                            what="a percentage (e.g. 10)")
+        if cfg.get("input") is not None and not isinstance(cfg["input"], str):
+            raise err(f"'input' must be a source id or ID.PARAM, got {shown(cfg['input'])}", "input")
+    elif kind == "envelope":
+        t_end = _quantity(cfg.get("t_end", "1000 s"), "s", spec, f"{key}.t_end")
+        dt = _quantity(cfg.get("dt", "0.1 s"), "s", spec, f"{key}.dt")
+        if not (t_end > 0 and dt > 0):
+            raise err(f"t_end and dt must be > 0, got {t_end:g} s and {dt:g} s", "t_end" if not t_end > 0 else "dt")
+        check_limit(int(min(t_end / dt, 1e18)), "SENS_TIME_POINTS", spec.file, f"{key}.dt",
+                    "time points of each run (t_end / dt)")
+    if kind in ("freq", "envelope") and not isinstance(cfg.get("measure", ""), str):
+        raise err(f"'measure' must be a name, got {shown(cfg['measure'])}", "measure")
+    return cfg
+
+
+def _quantity(value, unit, spec, key):
+    """A quantity of the spec in ``unit``, finite."""
+    if isinstance(value, bool) or not isinstance(value, (str, int, float)):
+        raise FitSpecError(f"expected a quantity in {unit}, got {shown(value)}", file=spec.file, key=key)
+    try:
+        v = parse_quantity(value, unit, key)
+    except UnitError as exc:
+        raise FitSpecError(str(exc)[:300], file=spec.file, key=key) from None
+    if not np.isfinite(v):
+        raise FitSpecError(f"expected a finite quantity in {unit}, got {shown(value)}", file=spec.file, key=key)
+    return v
 
 
 # ------------------------------------------------------------------------ the runner ----
@@ -470,7 +545,7 @@ def evaluate(objective, values, scheduler=None, workers=None, progress=False, ma
     Returns (Y (B, m), errors: [str or None] * B)."""
     B = len(next(iter(values.values())))
     serial = scheduler == "serial" or not objective.parallel
-    n_workers = 1 if serial else (workers or default_workers())
+    n_workers = 1 if serial else max(1, min(workers or default_workers(), B))  # no idle workers
     n_chunks = max(n_workers, -(-B // max_chunk))
     chunks = []
     for idx in split(list(range(B)), n_chunks):
@@ -478,8 +553,9 @@ def evaluate(objective, values, scheduler=None, workers=None, progress=False, ma
         ch.values = {k: np.asarray(v)[idx] for k, v in values.items()}
         chunks.append(ch)
     fn = functools.partial(_run_chunk, objective)
+    # the bar counts model evaluations (parameter sets), not chunks
     results = run_chunks(fn, chunks, scheduler="serial" if serial else scheduler, workers=n_workers,
-                         progress=progress, desc="model runs")
+                         progress=progress, desc="model evaluations", sizes=[len(ch) for ch in chunks])
     Y = np.full((B, len(objective.labels)), np.nan)
     errors = [None] * B
     for ch, (y, e) in zip(chunks, results):
