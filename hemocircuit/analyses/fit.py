@@ -17,18 +17,28 @@ def default_out(spec_path):
 
 
 def fit(netlist, spec, out=None, sets=None, protocol=None, settings=None, workers=None, plot=True,
-        progress=False, svzerod_units=None):
+        progress=False, svzerod_units=None, allow_paths=None):
     """Fit ``spec`` (path of a fit spec) on ``netlist``; write the report into ``out`` (default
-    :func:`default_out`).  ``settings`` override the spec's settings (starts, seed, max_nfev,
-    ...); ``svzerod_units``: the unit system of an svZeroDSolver JSON netlist.  Returns
-    (problem, result dict, {kind: path written})."""
+    :func:`default_out`; a new or empty folder, or one holding a previous fit's outputs, which
+    are replaced).  ``settings`` override the spec's settings (starts, seed, max_nfev, ...);
+    ``svzerod_units``: the unit system of an svZeroDSolver JSON netlist; ``allow_paths``: more
+    folders the netlist and the spec may read files from (``--allow-path``; by default the
+    spec's project, the netlist's project and the bundled netlists).  Returns (problem, result
+    dict, {kind: path written})."""
     from ..fitting import load_problem
     from ..fitting.optimizer import fit_problem
-    from ..fitting.report import write
+    from ..fitting.report import check_out_dir, write
+    from ..spec_inputs import integer
 
-    problem = load_problem(netlist, spec, sets, protocol, svzerod_units)
+    if workers is not None:
+        workers = integer(workers, None, "workers", lo=1, flag="--workers")
+    problem = load_problem(netlist, spec, sets, protocol, svzerod_units, allow_paths=allow_paths)
+    if out is None:
+        out = default_out(spec)
+        os.makedirs(os.path.dirname(out), exist_ok=True)  # <spec folder>/output
+    check_out_dir(out)  # before the fit, not after it
     result = fit_problem(problem, settings, workers=workers, progress=progress)
-    paths = write(problem, result, out or default_out(spec), plot_png=plot)
+    paths = write(problem, result, out, plot_png=plot)
     return problem, result, paths
 
 
@@ -38,9 +48,10 @@ def cmd_fit(args):
 
     settings = {k: v for k, v in (("starts", args.starts), ("seed", args.seed), ("max_nfev", args.max_nfev))
                 if v is not None}
-    problem, result, paths = fit(args.netlist, args.spec, args.out, _sets(args.set), args.protocol, settings,
+    problem, result, paths = fit(args.netlist, args.spec, args.out_dir, _sets(args.set), args.protocol, settings,
                                  args.workers, plot=not args.no_plot, progress=args.progress,
-                                 svzerod_units=getattr(args, "svzerod_units", None))
+                                 svzerod_units=getattr(args, "svzerod_units", None),
+                                 allow_paths=getattr(args, "allow_path", None))
     print(text(problem, result))
     for kind, path in paths.items():
         print(f"wrote {kind}: {path}")
@@ -50,7 +61,11 @@ def register_cli(sub, common):
     sp = common(sub.add_parser("fit", help="estimate parameters from data (fit spec YAML; docs/fitting.md)"),
                 outputs=False, grid=False)
     sp.add_argument("spec", help="fit spec YAML: parameters with bounds, datasets, settings")
-    sp.add_argument("--out", help="output folder (default: <spec folder>/output/<spec name>/)")
+    # dest out_dir: a folder, checked by fit() (a previous fit's folder may be written again),
+    # not by the command line's check of output files
+    sp.add_argument("--out", dest="out_dir", metavar="DIR",
+                    help="output folder (default: <spec folder>/output/<spec name>/); a new or empty folder, or a "
+                         "previous fit's folder (its outputs are replaced)")
     sp.add_argument("--starts", type=int, help="number of Latin-hypercube starts (overrides the spec)")
     sp.add_argument("--seed", type=int, help="seed of the Latin hypercube (overrides the spec)")
     sp.add_argument("--max-nfev", type=int, help="evaluations per start (overrides the spec)")

@@ -13,38 +13,18 @@ from __future__ import annotations
 
 import datetime
 import json
+import math
 import os
-import tempfile
+import re
 
 import numpy as np
 import yaml
 
+from ..io import atomic_write, save_figure
 
-def _atomic_write(path, text):
-    d = os.path.dirname(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(dir=d, prefix=".tmp_", suffix=os.path.basename(path))
-    try:
-        with os.fdopen(fd, "w") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
-def _atomic_figure(fig, path):
-    from ..io import save_figure
-    d = os.path.dirname(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(dir=d, prefix=".tmp_", suffix=".png")
-    os.close(fd)
-    try:
-        save_figure(fig, tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+#: the files a fit writes into its folder (a folder holding only these may be written again)
+OUTPUT_FILES = ("report.json", "fitted.yaml", "netlist.yaml", "fit.csv", "fit.png")
+_OUTPUT_PATTERN = re.compile(r"^(protocol_.+\.yaml)$")
 
 
 def _q(value, unit):
@@ -99,9 +79,10 @@ def _version():
     return __version__
 
 
-def fragment(problem, result, out_dir):
-    """The fitted netlist fragment (YAML text): extends the netlist, changes every value the fit
-    set (start_from, fixed, estimated without an epoch, tied) and the global options."""
+def fragment(problem, result, out_dir, extends=None):
+    """The fitted netlist fragment (YAML text): extends the netlist (or ``extends``, a path
+    relative to ``out_dir``), changes every value the fit set (start_from, fixed, estimated
+    without an epoch, tied) and the global options."""
     change = {}
 
     def put(path, text):
@@ -119,16 +100,53 @@ def fragment(problem, result, out_dir):
             put(p.base_path, _q(val, unit))
     for path, v in result["tied"].items():
         put(path, _q(v, problem.circuit.param_unit(path)))
-    rel = os.path.relpath(problem.netlist_path, os.path.abspath(out_dir))
+    rel = extends or os.path.relpath(problem.netlist_path, os.path.abspath(out_dir))
     epochs = [f"{p.path} = {_q(v, u)}" for p, v, u in zip(problem.spec.parameters, result["p"], problem.units)
               if p.epoch is not None]
     head = [f"# written by hemocircuit fit: {problem.spec.name}",
             f"# spec: {problem.spec.file}", f"# netlist: {problem.netlist_path}",
             f"# rms error (sum over datasets): {result['rms_error']:.6g}"]
+    if extends:
+        head.append(f"# {extends}: a copy of the netlist (its folder cannot be read from here)")
     if epochs:
         head.append("# epoch values (in the protocol_*.yaml files, not in this netlist): " + ", ".join(epochs))
     body = {"name": f"{problem.circuit.netlist.name}-fit", "extends": rel, "change": change}
     return "\n".join(head) + "\n" + yaml.safe_dump(body, sort_keys=False, default_flow_style=None)
+
+
+def needs_copy(problem, out_dir) -> bool:
+    """Whether ``out_dir/fitted.yaml`` could not extend the netlist itself: a netlist loads
+    files only inside its own project (hemocircuit.access), so when the output folder lies
+    outside the project of the netlist (or of a file its loading read: extends chain, tables)
+    the fragment extends a copy instead.  An svZeroDSolver JSON model is always copied (its
+    numbers' unit system was an option of the fit, which the fragment could not carry)."""
+    from ..access import Access
+
+    if problem.netlist_path.lower().endswith(".json"):
+        return True
+    access = Access.for_netlist(os.path.join(os.path.abspath(out_dir), "fitted.yaml"))
+    netlist = problem.base_circuit.netlist
+    read = list(getattr(netlist.sources, "paths", None) or []) or [problem.netlist_path]
+    return not all(access.allows(f) for f in read)
+
+
+def flattened(circuit) -> str:
+    """The netlist of ``circuit`` (as loaded: extends chain resolved, ${} substituted, table
+    files as absolute paths) as one self-contained YAML netlist."""
+    n = circuit.netlist
+    body = {"name": n.name}
+    if n.description:
+        body["description"] = n.description
+    if n.parameters:
+        body["parameters"] = dict(n.parameters)
+    body["elements"] = [{"id": e.id, "type": e.type, "nodes": list(e.nodes), **e.values} for e in n.elements]
+    for k in ("constraints", "outputs", "derived", "ic"):
+        if getattr(n, k):
+            body[k] = getattr(n, k)
+    if n.input:
+        body["input"] = n.input
+    head = f"# the netlist {n.file}, as loaded (extends chain resolved), for fitted.yaml to extend\n"
+    return head + yaml.safe_dump(body, sort_keys=False, default_flow_style=None)
 
 
 def fitted_protocols(problem, result):
@@ -143,8 +161,8 @@ def fitted_protocols(problem, result):
         e = d.experiment
         if not isinstance(e, TransientExperiment):
             continue
-        with open(e.protocol.file) as fh:
-            data = yaml.safe_load(fh)
+        from ..inputs import read_yaml
+        data = read_yaml(e.protocol.file, "protocol file", problem.spec.access)
         for (path, t), text in epochs.items():
             if t == 0.0 and path in (data.get("initial") or {}):
                 data["initial"][path] = text
@@ -174,7 +192,7 @@ def plot(problem, result, path):
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
     fig.suptitle(f"{problem.spec.name}", fontsize=10)
-    _atomic_figure(fig, path)
+    save_figure(fig, path)
 
 
 def table_csv(problem, result):
@@ -186,30 +204,78 @@ def table_csv(problem, result):
     return "\n".join(lines) + "\n"
 
 
+def check_out_dir(out_dir, flag="--out"):
+    """The output folder of a fit, checked before fitting: created if missing (its parent must
+    exist); an existing folder may hold only a previous fit's outputs (they are replaced), not
+    other files; a file is refused."""
+    from ..errors import HemocircuitError
+    from ..io import prepare_folder
+
+    out_dir = str(out_dir)
+    if os.path.isdir(out_dir):
+        other = sorted(f for f in os.listdir(out_dir) if not is_output_file(f))
+        if other:
+            raise HemocircuitError(f"{flag} {out_dir}: the folder holds files a fit does not write "
+                                   f"({', '.join(repr(f) for f in other[:5])}{' ...' if len(other) > 5 else ''}); "
+                                   "give an empty or new folder, or the folder of a previous fit (its outputs "
+                                   "are replaced)")
+    return prepare_folder(out_dir, flag)
+
+
+def is_output_file(name) -> bool:
+    """A file a fit writes (or the temporary file of one, left by an interrupted write)."""
+    m = re.match(r"^\.(.+)\.[^.]+\.tmp$", name)
+    base = m.group(1) if m else name
+    return base in OUTPUT_FILES or bool(_OUTPUT_PATTERN.match(base))
+
+
 def write(problem, result, out_dir, plot_png=True):
-    """Write every output (atomically) into out_dir; returns {kind: path}."""
-    os.makedirs(out_dir, exist_ok=True)
+    """Write every output (atomically, replacing a previous fit's) into out_dir; returns {kind: path}."""
+    check_out_dir(out_dir, "output folder")
     paths = {"report": os.path.join(out_dir, "report.json"), "fragment": os.path.join(out_dir, "fitted.yaml"),
              "csv": os.path.join(out_dir, "fit.csv")}
-    _atomic_write(paths["report"], json.dumps(summary(problem, result), indent=1, default=_json_default))
-    _atomic_write(paths["fragment"], fragment(problem, result, out_dir))
-    _atomic_write(paths["csv"], table_csv(problem, result))
+    atomic_write(paths["report"], json.dumps(_finite(summary(problem, result)), indent=1, allow_nan=False,
+                                             default=_json_default))
+    extends = None
+    if needs_copy(problem, out_dir):
+        paths["netlist"] = os.path.join(out_dir, "netlist.yaml")
+        atomic_write(paths["netlist"], flattened(problem.base_circuit))
+        extends = "netlist.yaml"
+    atomic_write(paths["fragment"], fragment(problem, result, out_dir, extends))
+    atomic_write(paths["csv"], table_csv(problem, result))
     for name, text in fitted_protocols(problem, result).items():
-        paths[f"protocol {name}"] = os.path.join(out_dir, f"protocol_{name}.yaml")
-        _atomic_write(paths[f"protocol {name}"], text)
+        paths[f"protocol {name}"] = os.path.join(out_dir, f"protocol_{_safe_name(name)}.yaml")
+        atomic_write(paths[f"protocol {name}"], text)
     if plot_png:
         paths["plot"] = os.path.join(out_dir, "fit.png")
         plot(problem, result, paths["plot"])
     return paths
 
 
-def _json_default(o):
+def _safe_name(name):
+    """A dataset name as part of a file name (letters, digits, '-', '_', '.')."""
+    return re.sub(r"[^A-Za-z0-9_.-]", "_", str(name))[:80] or "dataset"
+
+
+def _finite(o):
+    """``o`` with every non-finite number as None (JSON has no NaN or Infinity: a standard
+    error that does not exist is null)."""
+    if isinstance(o, dict):
+        return {k: _finite(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [_finite(v) for v in o]
     if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, (np.floating, np.integer)):
-        return o.item()
+        return _finite(o.tolist())
+    if isinstance(o, (float, np.floating)):
+        return float(o) if math.isfinite(o) else None
+    if isinstance(o, np.integer):
+        return int(o)
     if isinstance(o, np.bool_):
         return bool(o)
+    return o
+
+
+def _json_default(o):
     return str(o)
 
 
@@ -229,6 +295,9 @@ def text(problem, result):
     for d, r in zip(problem.datasets, result["rms"]):
         lines.append(f"  rms {d.name}: {r:.6g} {d.unit}")
     lines.append(f"  rms error (sum over datasets, the thesis's objective): {result['rms_error']:.6g}")
+    if result["dof"] <= 0:
+        lines.append(f"  no standard errors: {problem.n_residuals} data row(s) for {len(problem.parameters)} "
+                     "parameter(s) leave no degrees of freedom for the residual variance (null in report.json)")
     corr = np.nan_to_num(result["corr"])
     hi = [(problem.parameters[i], problem.parameters[j], corr[i, j]) for i in range(len(corr))
           for j in range(i + 1, len(corr)) if abs(corr[i, j]) > 0.95]

@@ -1,33 +1,15 @@
-"""Writing sensitivity results: CSV tables (units in the headers) and plots, each written to
-a temporary file in the target folder and moved into place (os.replace), so a reader never
-sees a half-written file."""
+"""Writing sensitivity results: CSV tables (units in the headers) and plots, through
+hemocircuit.io (atomic: a temporary file in the target folder moved into place, so a reader
+never sees a half-written file; only a regular file is replaced; the usual mode, 0644)."""
 from __future__ import annotations
 
-import contextlib
 import csv
 import math
-import os
-import tempfile
 
 import numpy as np
 
-from ..io import pyplot
-
-
-@contextlib.contextmanager
-def atomic_path(path):
-    """A temporary path next to ``path`` (same extension); moved onto ``path`` on success."""
-    folder = os.path.dirname(os.path.abspath(path))
-    os.makedirs(folder, exist_ok=True)
-    root, ext = os.path.splitext(os.path.basename(path))
-    fd, tmp = tempfile.mkstemp(prefix=f".{root}.", suffix=ext, dir=folder)
-    os.close(fd)
-    try:
-        yield tmp
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
+from ..errors import HemocircuitError
+from ..io import atomic_file, pyplot, save_figure
 
 
 def _fmt(v):
@@ -38,28 +20,28 @@ def _fmt(v):
 
 def write_table(path, rows, columns):
     """rows: list of dicts; columns: {key: unit} -> header 'key [unit]' (or 'key')."""
-    with atomic_path(path) as tmp:
-        with open(tmp, "w", newline="") as fh:
+    try:
+        with atomic_file(path, "w", newline="", encoding="utf-8") as fh:
             w = csv.writer(fh)
             w.writerow([f"{k} [{u}]" if u else k for k, u in columns.items()])
             for r in rows:
                 w.writerow([_fmt(r.get(k, "")) for k in columns])
+    except OSError as exc:
+        raise HemocircuitError(f"cannot write {path}: {exc.strerror or exc}") from None
 
 
 def write_failures(path, failures):
-    with atomic_path(path) as tmp:
-        with open(tmp, "w", newline="") as fh:
+    try:
+        with atomic_file(path, "w", newline="", encoding="utf-8") as fh:
             w = csv.writer(fh)
             w.writerow(["sample", "reason"])
             w.writerows(failures)
+    except OSError as exc:
+        raise HemocircuitError(f"cannot write {path}: {exc.strerror or exc}") from None
 
 
 def _save(fig, path):
-    with atomic_path(path) as tmp:
-        fig.tight_layout()
-        fig.savefig(tmp, dpi=110)
-    import matplotlib.pyplot as plt
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def plot(result, path, max_outputs=6):
