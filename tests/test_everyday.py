@@ -181,3 +181,13 @@ def test_unknown_result_format_is_refused_before_computing(tmp_path, capsys):
     assert main(["tran", str(BASE_RC), "--t-end", "1", "--out", str(tmp_path / "r.xlsx"), "--quiet"]) == 2
     assert "unknown result format '.xlsx'" in capsys.readouterr().err
     assert not (tmp_path / "r.xlsx").exists()
+
+
+def test_simulate_takes_a_protocol_path_and_per_state_atol(tmp_path):
+    import hemocircuit as hc
+    proto = tmp_path / "p.yaml"
+    proto.write_text("events:\n  - {at: 1 s, set: {Ps.value: 100 mmHg}}\n")
+    c = hc.load(str(BASE_RC))
+    res = c.simulate(3.0, dt=0.5, protocol=str(proto), atol=np.full(c.nx, 1e-10), rtol=1e-8)
+    # from 40 mL at 80 mmHg towards 50 mL after the step at 1 s, R C = 1 s
+    np.testing.assert_allclose(res["V(C1)"][-1], 50 - 10 * np.exp(-2.0), rtol=1e-6)

@@ -134,9 +134,9 @@ def simulate(circuit, t_end, dt=None, t0=0.0, x0=None, protocol=None, method="BD
     engine, method, compiled_method = resolve_integrator(integrator, method, engine)
     if not (isinstance(rtol, (int, float, np.number)) and 0 < rtol < 1):
         raise SolverError(f"rtol = {rtol!r}: the relative tolerance must be a number between 0 and 1 (e.g. 1e-6)")
-    if atol is not None and not (isinstance(atol, (int, float, np.number)) and 0 < atol < np.inf):
-        raise SolverError(f"atol = {atol!r}: the absolute tolerance must be a positive number (per unit of each "
-                          "state's scale, e.g. 1e-9)")
+    if atol is not None and not (np.size(atol) and np.all(np.isfinite(atol)) and np.all(np.asarray(atol) > 0)):
+        raise SolverError(f"atol = {atol!r}: the absolute tolerance must be positive (per unit of each state's "
+                          "scale, e.g. 1e-9; or one per state)")
     if not (isinstance(max_step, (int, float, np.number)) and max_step > 0):
         raise SolverError(f"max_step = {max_step!r}: the largest step must be a positive time [s]")
     settings = {"t_end": t_end, "dt": dt, "t0": t0, "integrator": integrator, "method": method, "engine": engine,
@@ -168,8 +168,9 @@ def simulate(circuit, t_end, dt=None, t0=0.0, x0=None, protocol=None, method="BD
         raise SolverError("implausible solution: " + "; ".join(map(str, bad)),
                           partial=stamp(res, "tran", circuit, settings, started, status="partial"))
     plausibility.add_warnings(res, findings)
-    if x0 is None and not ic and not circuit.netlist.ic and not (protocol is not None and getattr(protocol, "events",
-                                                                                                  None)):
+    if isinstance(protocol, str):
+        protocol = Protocol.load(protocol, circuit)
+    if x0 is None and not ic and not circuit.netlist.ic and not (protocol is not None and protocol.events):
         unstable = _unstable_start(protocol.apply_initial(circuit) if protocol is not None else circuit, t0)
         if unstable:
             res.metadata.setdefault("warnings", []).append(unstable)
