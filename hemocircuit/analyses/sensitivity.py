@@ -7,6 +7,7 @@ error); see :mod:`hemocircuit.sensitivity`.
 from __future__ import annotations
 
 import os
+import re
 
 
 def sensitivity(circuit, spec, netlist_path=None, scheduler=None, workers=None, progress=False, overrides=None,
@@ -22,6 +23,11 @@ def sensitivity(circuit, spec, netlist_path=None, scheduler=None, workers=None, 
     from ..spec_inputs import integer, spec_access
 
     netlist_path = netlist_path or circuit.file
+    if isinstance(scheduler, str) and scheduler not in ("serial", "processes") and \
+            not re.match(r"^[a-z]+://[^\s/:]+:\d+$", scheduler):
+        from ..errors import HemocircuitError
+        raise HemocircuitError(f"--scheduler {scheduler[:80]!r}: give 'serial' (this process), 'processes' (local "
+                               "worker processes, the default) or a Dask scheduler's address tcp://HOST:PORT")
     if workers is not None:
         workers = integer(workers, None, "workers", lo=1, flag="--workers")
     if isinstance(spec, (str, os.PathLike)):

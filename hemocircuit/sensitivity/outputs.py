@@ -214,6 +214,9 @@ def dc_points(circuit, sweep):
     if len(n) != 1:
         raise NetlistError(f"the swept paths have different numbers of points {sorted(n)}")
     N = n.pop()
+    from .. import limits
+    if N > limits.limit("SENS_OUTPUTS"):
+        raise NetlistError(f"sweep: {N:,} points, more than allowed {limits.how_to_raise('SENS_OUTPUTS')}")
     return [{p: f"{float(v[i])!r} {u}" for p, (v, u) in cols.items()} for i in range(N)]
 
 
