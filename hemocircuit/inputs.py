@@ -299,24 +299,16 @@ def _no_constant(name):
 
 
 def _json_depth(text) -> int:
-    depth = best = 0
-    in_str = esc = False
-    for ch in text:
-        if in_str:
-            if esc:
-                esc = False
-            elif ch == "\\":
-                esc = True
-            elif ch == '"':
-                in_str = False
-        elif ch == '"':
-            in_str = True
-        elif ch in "[{":
-            depth += 1
-            best = max(best, depth)
-        elif ch in "]}":
-            depth -= 1
-    return best
+    """The deepest bracket nesting of JSON ``text``, strings left out (vectorised: a 5 MB model
+    in tens of milliseconds)."""
+    import numpy as np
+
+    b = np.frombuffer(text.replace("\\\\", "").replace('\\"', "").encode(), dtype=np.uint8)
+    quote = b == ord('"')
+    outside = (np.cumsum(quote) - quote) % 2 == 0  # before an opening quote, or after a closing one
+    step = np.where(outside & ((b == ord("[")) | (b == ord("{"))), 1, 0) - \
+        np.where(outside & ((b == ord("]")) | (b == ord("}"))), 1, 0)
+    return int(np.cumsum(step).max()) if b.size else 0
 
 
 def read_json(path, what="file", access=None, where=None, size_limit="FILE_MB", allow_nan=False):
