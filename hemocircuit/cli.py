@@ -551,7 +551,7 @@ def main(argv=None):
     args.argv = argv
     from . import progress
     progress.enable(not getattr(args, "quiet", False))
-    from .execution import catch_signals, restore_signals
+    from .execution import catch_signals, leave_if_stuck, restore_signals
     previous = catch_signals()
     try:
         _check_outputs(args)
@@ -564,7 +564,7 @@ def main(argv=None):
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_ERROR
     except KeyboardInterrupt as exc:  # SIGINT, or SIGTERM (execution.catch_signals)
-        return _interrupted(args, Interrupted.of(exc))
+        return leave_if_stuck(_interrupted(args, Interrupted.of(exc)))  # exit cannot hang on a stopped pool
     except BrokenPipeError:  # output piped into a command that stopped reading (| head)
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0

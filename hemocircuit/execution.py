@@ -13,14 +13,22 @@ Failures and signals (the caller turns both into rows marked failed or not run):
   reason) in the returned list; the other chunks finish.
 * SIGINT / SIGTERM (a KeyboardInterrupt; the CLI turns SIGTERM into one, see
   :class:`hemocircuit.errors.Interrupted`): the worker processes are terminated and joined
-  (none is left running), and :class:`~hemocircuit.errors.Interrupted` is raised with
-  ``chunk_results`` (None for the chunks that had not finished).  Workers ignore SIGINT (a
-  Ctrl-C reaches the whole process group; the parent decides) and, on Linux, die with the
-  parent even if it is killed outright (``PR_SET_PDEATHSIG``).
+  (none is left running), the executor's manager thread is made to end (see
+  :func:`stop_workers`: a worker killed while sending its result would otherwise leave it
+  waiting forever, and the interpreter's exit waiting for it), and
+  :class:`~hemocircuit.errors.Interrupted` is raised with ``chunk_results`` (None for the
+  chunks that had not finished).  Workers ignore SIGINT (a Ctrl-C reaches the whole process
+  group; the parent decides) and, on Linux, die with the parent even if it is killed
+  outright (``PR_SET_PDEATHSIG``).
+
+The number of local worker processes is checked here (:func:`check_workers`, for the command
+line's ``--workers`` and the API's ``workers=`` alike): at least 1, at most the WORKERS limit
+(:mod:`hemocircuit.limits`).
 """
 from __future__ import annotations
 
 import os
+import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 
 from .errors import HemocircuitError, Interrupted
@@ -28,6 +36,26 @@ from .errors import HemocircuitError, Interrupted
 
 def default_workers() -> int:
     return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))
+
+
+def check_workers(workers):
+    """The number of local worker processes to use: ``workers`` checked (a whole number from 1
+    to the WORKERS limit), or :func:`default_workers` for None."""
+    if workers is None:
+        return default_workers()
+    import numbers
+
+    from .limits import how_to_raise, limit
+    if isinstance(workers, bool) or not isinstance(workers, numbers.Integral):
+        raise HemocircuitError(f"the number of worker processes (--workers, workers=) must be a whole number, "
+                               f"got {workers!r}")
+    workers = int(workers)
+    if workers < 1:
+        raise HemocircuitError(f"--workers {workers}: the number of worker processes must be at least 1 "
+                               f"(omit it for one per core, {default_workers()} here)")
+    if workers > limit("WORKERS"):
+        raise HemocircuitError(f"--workers {workers}: more worker processes than allowed {how_to_raise('WORKERS')}")
+    return workers
 
 
 def split(items, n_chunks, interleave=False):
@@ -64,7 +92,7 @@ def run_chunks(fn, chunks, scheduler=None, workers=None, progress=None, desc="ru
 
     from . import progress as _progress
 
-    workers = workers or default_workers()
+    workers = check_workers(workers)
     results = [None] * len(chunks)
     try:
         with _progress.Tracker(sizes or [1] * len(chunks), desc, progress) as bar:
@@ -168,25 +196,89 @@ def _run_processes(fn, chunks, workers, done, failures, bar):
         futs = {ex.submit(partial(_progress.call_in_chunk, fn, i), c): i for i, c in enumerate(chunks)}
         for f in as_completed(futs):
             done(futs[f], _outcome(f, failures))
+        ex.shutdown(wait=True)
     except BaseException:
         stop_workers(ex)
         raise
-    ex.shutdown(wait=True)
 
 
-def stop_workers(executor, timeout=5.0):
-    """Terminate (SIGTERM, then SIGKILL after ``timeout`` s) and join every worker process of a
-    ProcessPoolExecutor, and drop its queued work: no worker outlives this call."""
+def stop_workers(executor, timeout=2.0):
+    """Stop a ProcessPoolExecutor now: drop its queued work, terminate (SIGTERM, then SIGKILL
+    after ``timeout`` s) and join every worker process, and make its manager thread end.  No
+    worker outlives this call, and the interpreter's exit does not wait for the executor.
+
+    Why the manager thread needs help: it reads the workers' results from one pipe, a message
+    at a time.  A worker killed while writing its result (a grid member's is megabytes, written
+    in pieces as the thread reads them) leaves half a message, and the thread waits in
+    ``recv()`` for the rest forever: this process holds the pipe's write end too (the queue was
+    made here), so no end-of-file comes.  concurrent.futures joins that thread at exit
+    (``_python_exit``, then threading's join of non-daemon threads): SIGTERM during a grid
+    wrote the partial result, then hung at exit (2 of 7 runs; one for 770 s).  Closing this
+    process's copy of the write end once the workers are dead ends the read (EOF): the thread
+    marks the pool broken and returns."""
     procs = list((getattr(executor, "_processes", None) or {}).values())
-    executor.shutdown(wait=False, cancel_futures=True)
+    manager = getattr(executor, "_executor_manager_thread", None)
+    result_queue = getattr(executor, "_result_queue", None)
+    lock = getattr(executor, "_shutdown_lock", None)
+    if lock is None or lock.acquire(timeout=1.0):  # not held by a submit() the signal cut short
+        if lock is not None:
+            lock.release()
+        executor.shutdown(wait=False, cancel_futures=True)
     for p in procs:
         if p.is_alive():
             p.terminate()
+    deadline = time.monotonic() + timeout
     for p in procs:
-        p.join(timeout)
+        p.join(max(0.0, deadline - time.monotonic()))
+    for p in procs:
         if p.is_alive():
             p.kill()
             p.join(1.0)
+    if result_queue is not None and not any(p.is_alive() for p in procs):
+        try:
+            result_queue._writer.close()
+        except (AttributeError, OSError):
+            pass
+    if manager is not None and manager.is_alive():
+        manager.join(timeout)
+        if manager.is_alive():
+            _abandon(manager)
+
+
+_abandoned = []  # executor manager threads that did not end when their executor was stopped
+
+
+def _abandon(thread):
+    """Exit must not wait for ``thread`` (an executor's manager thread that did not end): take
+    it off concurrent.futures' exit-time join and, where threading keeps its shutdown locks in
+    a set (Python 3.10-3.12), off threading's join of non-daemon threads.  Otherwise (newer
+    Pythons) :func:`leave_if_stuck` lets the command line leave without waiting for it."""
+    import threading
+    from concurrent.futures import process as _cfp
+    _abandoned.append(thread)
+    getattr(_cfp, "_threads_wakeups", {}).pop(thread, None)
+    locks, guard = getattr(threading, "_shutdown_locks", None), getattr(threading, "_shutdown_locks_lock", None)
+    tlock = getattr(thread, "_tstate_lock", None)
+    if isinstance(locks, set) and guard is not None and tlock is not None:
+        with guard:
+            locks.discard(tlock)
+        _abandoned.remove(thread)
+
+
+def leave_if_stuck(code):
+    """For the command line, after an interruption's partial result was written: if a stopped
+    executor's thread could not be ended nor taken off the interpreter's exit-time joins,
+    flush the output and leave now with ``code`` (exit would wait for that thread forever);
+    otherwise return ``code``."""
+    if any(t.is_alive() for t in _abandoned):
+        import sys
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (OSError, ValueError):
+                pass
+        os._exit(code)
+    return code
 
 
 def _worker_init(parent_pid):

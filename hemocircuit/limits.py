@@ -16,6 +16,9 @@ import yaml
 
 from .errors import NetlistError
 
+# usable cores (the default number of worker processes, hemocircuit.execution.default_workers)
+_CORES = max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))
+
 DEFAULTS = {
     "FILE_MB": 16,            # size of one netlist / protocol / table file [MiB]
     "ELEMENTS": 200_000,      # elements of a circuit (the whole extends chain)
@@ -28,6 +31,12 @@ DEFAULTS = {
     "EXPR_DEPTH": 250,        # nesting depth of one expression (a sum of N terms is N deep)
     "TABLE_ROWS": 1_000_000,  # rows of one waveform table
     "RESULT_MB": 1024,        # size of one result file read back (show, conformance) [MiB]
+    # worker processes of one batch (--workers, workers=): 4 per usable core.  A member is
+    # CPU-bound, so processes beyond the cores only add memory (a forked worker with the
+    # compiled engine loaded holds a few hundred MB) and start-up time; 4x still leaves room to
+    # experiment, while a slip (--workers 42 on 2 cores started 42 processes) cannot fill the
+    # machine with processes
+    "WORKERS": 4 * _CORES,
     "FIT_STARTS": 10_000,     # multi-starts of one fit (settings.starts, --starts)
     "FIT_ROWS": 100_000,      # data rows of one fit, all datasets (a Jacobian solves (p + 1) x rows)
     "SENS_RUNS": 1_000_000,   # model evaluations of one sensitivity analysis (n (k + 1), r (k + 1), ...)
