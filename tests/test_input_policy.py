@@ -1,10 +1,8 @@
 """The one input policy (hemocircuit.inputs) and output policy (hemocircuit.io) as the command
 line meets them: result files re-run as data (show --rerun), provenance that lists only what
 was loaded, special files never read or replaced, clear errors for names no file can have."""
-import contextlib
 import json
 import os
-import signal
 import stat
 
 import pytest
@@ -15,6 +13,7 @@ from hemocircuit.cli import main
 from hemocircuit.errors import HemocircuitError, NetlistError
 from hemocircuit.results import Result
 
+from guards import deadline
 from paths import NETLISTS
 
 BASE_RC = NETLISTS / "base_rc.yaml"
@@ -36,20 +35,6 @@ def project(tmp_path):
     outside = tmp_path / "outside"
     outside.mkdir()
     return proj, outside
-
-
-@contextlib.contextmanager
-def deadline(seconds):
-    """Fail (instead of hanging the suite) when the block takes longer than ``seconds``."""
-    def boom(*_):
-        raise TimeoutError(f"took longer than {seconds} s")
-    old = signal.signal(signal.SIGALRM, boom)
-    signal.alarm(seconds)
-    try:
-        yield
-    finally:
-        signal.alarm(0)
-        signal.signal(signal.SIGALRM, old)
 
 
 def _result_with_argv(path, argv, cwd):

@@ -7,7 +7,6 @@ import contextlib
 import json
 import os
 import shutil
-import signal
 import stat
 import subprocess
 import sys
@@ -29,6 +28,7 @@ from hemocircuit.sensitivity import parse_spec, run
 from hemocircuit.sensitivity.outputs import FunctionObjective, evaluate, make_objective
 from hemocircuit.sensitivity.spec import load_spec as load_sensitivity_spec
 
+from guards import deadline
 from paths import ROOT
 
 LINEAR = ROOT / "tests" / "fitting" / "linear.yaml"
@@ -36,20 +36,6 @@ ARTERIOLE = ROOT / "netlists" / "isolated_arteriole.yaml"
 TOKEN = "SECRET-TOKEN-4f1c9e2ab7d35e60"
 
 pytestmark = pytest.mark.filterwarnings("ignore::RuntimeWarning")
-
-
-@contextlib.contextmanager
-def deadline(seconds):
-    """Fail (instead of hanging the suite) when the block takes longer than ``seconds``."""
-    def boom(*_):
-        raise TimeoutError(f"took longer than {seconds} s")
-    old = signal.signal(signal.SIGALRM, boom)
-    signal.alarm(seconds)
-    try:
-        yield
-    finally:
-        signal.alarm(0)
-        signal.signal(signal.SIGALRM, old)
 
 
 @pytest.fixture
