@@ -23,10 +23,11 @@ import os
 import random
 import re
 import shutil
-import signal
 import sys
 import time
 import traceback
+
+from fork_children import wait_one as _wait  # noqa: E402 - a sibling module (benchmarks/)
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
@@ -278,24 +279,6 @@ def run(cases, seed, folder, jobs, timeout, mem_gib, quiet=False, commands=("che
     with open(os.path.join(folder, "report.json"), "w") as fh:
         json.dump(report, fh, indent=1)
     return report
-
-
-def _wait(running, timeout, reap):
-    while True:
-        for pid, (_, started, _, _) in list(running.items()):
-            if time.time() - started > timeout:
-                os.kill(pid, signal.SIGKILL)
-                _, st, ru = os.wait4(pid, 0)
-                reap(pid, None, ru, "timeout")
-                return
-        # its own children only: wait4(-1) would also reap other children of this process (a
-        # test run's background engine builds), which are not in ``running``
-        for pid in list(running):
-            got, st, ru = os.wait4(pid, os.WNOHANG)
-            if got:
-                reap(pid, st, ru, "")
-                return
-        time.sleep(0.01)
 
 
 def main(argv=None):

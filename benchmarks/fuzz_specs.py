@@ -44,6 +44,8 @@ import sys
 import time
 import traceback
 
+from fork_children import wait_one as _wait  # noqa: E402 - a sibling module (benchmarks/)
+
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
 ARTERIOLE = os.path.join(ROOT, "netlists", "isolated_arteriole.yaml")
@@ -624,22 +626,6 @@ def run(cases, seed, folder, jobs=2, timeout=20.0, mem_gib=2.0, mode="run", quie
     with open(os.path.join(folder, "report.json"), "w") as fh:
         json.dump(report, fh, indent=1)
     return report
-
-
-def _wait(running, timeout, reap):
-    while True:
-        for pid, (_, started, _, _) in list(running.items()):
-            if time.time() - started > timeout:
-                os.kill(pid, signal.SIGKILL)
-                _, st, ru = os.wait4(pid, 0)
-                reap(pid, None, ru, "timeout")
-                return
-        for pid in list(running):  # its own children only (not a test run's background builds)
-            got, st, ru = os.wait4(pid, os.WNOHANG)
-            if got:
-                reap(pid, st, ru, "")
-                return
-        time.sleep(0.01)
 
 
 def main(argv=None):
