@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from hemocircuit.component import Component, Observable, Option, Param, State, Storage, pressure_branch
+from hemocircuit.component import Component, Observable, Option, Param, State, Storage
 from hemocircuit.kernels.jit import njit
 
 _jit = njit(cache=True, nogil=True, error_model="numpy", _nrt=False)  # numba imported on first use
@@ -60,30 +60,13 @@ class _Store(Component):
             out[..., 0] |= x[..., 0] <= 0.0
         return out
 
-    def pressure(self, p, V):
-        raise NotImplementedError
-
     def volume(self, p, dP):
         raise NotImplementedError
-
-    def stamp(self, p, x, u, t, src=None):
-        return pressure_branch(self.pressure(p, x[..., 0]))
-
-    def derivatives(self, p, x, u, t, src=None):
-        q = u[..., 2]
-        if self.opts["clamp_at_zero"]:
-            q = np.where((x[..., 0] <= 0.0) & (q < 0.0), 0.0, q)
-        return q[..., None]
 
     def initial_states(self, p, u, flows=None, x=None):
         return self.volume(p, u[..., 0] - u[..., 1])[..., None]
 
-    def observe(self, p, x, u, t, src=None):
-        V = x[..., 0]
-        collapsed = self.opts["clamp_at_zero"] or self.opts.get("extended", False)
-        return {"V": np.maximum(V, 0.0) if collapsed else V, "C": self.compliance(p, V)}
-
-    # --- compiled path (hemocircuit.kernels; functions at the end of this module) ----------
+    # --- the equations: kernel functions at the end of this module (hemocircuit.kernels) ----
     def kernel_options(self):
         """[clamp_at_zero (0|1), extended (0|1)] (``extended`` is always 0 for the linear law)."""
         return np.array([int(bool(self.opts["clamp_at_zero"])), int(bool(self.opts.get("extended", False)))],
@@ -97,34 +80,13 @@ class LinearCompliance(_Store):
     parameters = {"C": Param("mL/mmHg", lower=0.0, lower_open=True, doc="compliance"),
                   "V0": Param("mL", default="0 mL", doc="unstressed volume")}
 
-    def pressure(self, p, V):
-        return (V - p["V0"]) / p["C"]
-
     def kernel(self):
         from hemocircuit.kernels import Kernel
         return Kernel(stamp=linear_stamp, derivs=store_derivs, observe=linear_observe, observables=("V", "C"))
 
     def volume(self, p, dP):
+        """The inverse law V(dP) (the DC guess's state): V0 + C dP."""
         return p["V0"] + p["C"] * dP
-
-    def compliance(self, p, V):
-        return p["C"] + 0.0 * V
-
-    def state_partials(self, p, x, u, t, src=None):
-        """Branch P_node - P_ref = (V - V0)/C: d b_loc[branch]/dV = 1/C; dV/dt = q (the branch
-        flow, local unknown 2), held at 0 by the clamp where V <= 0 and q < 0."""
-        V = x[..., 0]
-        shape = V.shape
-        dA = np.zeros(shape + (3, 3, 1))
-        db = np.zeros(shape + (3, 1))
-        db[..., 2, 0] = 1.0 / p["C"]
-        df_dx = np.zeros(shape + (1, 1))
-        df_du = np.zeros(shape + (1, 3))
-        flowing = np.ones(shape)
-        if self.opts["clamp_at_zero"]:
-            flowing = np.where((V <= 0.0) & (u[..., 2] < 0.0), 0.0, 1.0)
-        df_du[..., 0, 2] = flowing
-        return {"dA": dA, "db": db, "df_dx": df_dx, "df_du": df_du}
 
 
 class LogCompliance(_Store):
@@ -146,30 +108,18 @@ class LogCompliance(_Store):
         from hemocircuit.kernels import Kernel
         return Kernel(stamp=log_stamp, derivs=store_derivs, observe=log_observe, observables=("V", "C"))
 
-    def pressure(self, p, V):
-        k, P0, Vn = p["k"], p["P0"], p["Vn"]
-        if not self.opts["extended"]:
-            return P0 + np.exp(np.minimum(k * (V - Vn), 700.0))
-        V_eps = Vn + np.log(self.EPS) / k
-        # C1 continuation: slope d(dP)/dV = k EPS at V_eps
-        return P0 + np.where(V >= V_eps, np.exp(np.minimum(k * (np.maximum(V, V_eps) - Vn), 700.0)), self.EPS * (1 + k * (V - V_eps)))
-
     def volume(self, p, dP):
+        """The inverse law V(dP) (the DC guess's state), continued linearly below EPS as log_pressure."""
         k, P0, Vn = p["k"], p["P0"], p["Vn"]
         e = dP - P0
         V_eps = Vn + np.log(self.EPS) / k
         return np.where(e >= self.EPS, Vn + np.log(np.maximum(e, self.EPS)) / k, V_eps + (e / self.EPS - 1) / k)
 
-    def compliance(self, p, V):
-        k = p["k"]
-        V_eps = p["Vn"] + np.log(self.EPS) / k
-        return np.where(V >= V_eps, np.exp(-k * (np.maximum(V, V_eps) - p["Vn"])) / k, 1.0 / (k * self.EPS))
 
-
-# --- compiled path (hemocircuit.kernels contract) -------------------------------------------
+# --- the equations (hemocircuit.kernels contract) -------------------------------------------
 # Local unknowns [P_node, P_ref, q] (q: flow node -> ref through the store), state [V] (mL).
 # p: compliance [C, V0]; log_compliance [k, P0, Vn].  iopt: [clamp_at_zero, extended].
-# Observables (state-only, in order): V, C.  Every expression follows the numpy code above.
+# Observables (state-only, in order): V, C.
 _EPS = LogCompliance.EPS  # compile-time constants of the kernels [mmHg], and numpy's log of it
 _LOG_EPS = float(np.log(_EPS))
 
@@ -219,7 +169,7 @@ def _exp_clipped(a):
 
 @_jit
 def log_pressure(k, P0, Vn, V, extended):
-    """LogCompliance.pressure for one element."""
+    """dP = P0 + exp(k (V - Vn)) (thesis eqs. Cv, P2), continued linearly below dP - P0 = EPS."""
     if not extended:
         return P0 + _exp_clipped(k * (V - Vn))
     V_eps = Vn + _LOG_EPS / k

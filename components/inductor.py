@@ -6,13 +6,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from hemocircuit.component import Component, Observable, Param, State, flow_branch
+from hemocircuit.component import Component, Observable, Param, State
 from hemocircuit.kernels.jit import njit
 
 _jit = njit(cache=True, nogil=True, error_model="numpy", _nrt=False)  # numba imported on first use
 
 
-# --- compiled path (hemocircuit.kernels contract) -------------------------------------------
+# --- the equations (hemocircuit.kernels contract) -------------------------------------------
 # p = [L], state [q], local unknowns [P_a, P_b], no options; observables (state-only): q.
 @_jit
 def kernel_stamp(p, x, u, t, iopt, A, b):
@@ -43,12 +43,6 @@ class Inductor(Component):
     def observables(self):
         return (Observable("q", "mL/s", "flow a -> b", state_only=True),)
 
-    def stamp(self, p, x, u, t, src=None):
-        return flow_branch(x[..., 0])
-
-    def derivatives(self, p, x, u, t, src=None):
-        return ((u[..., 0] - u[..., 1]) / p["L"])[..., None]
-
     def dc_short(self):
         return True
 
@@ -69,9 +63,6 @@ class Inductor(Component):
     def initial_states(self, p, u, flows=None, x=None):
         # DC: the inductor is a short circuit; its flow is what the guess network sends through it.
         return (np.zeros(u.shape[:2]) if flows is None else flows[..., 0])[..., None]
-
-    def observe(self, p, x, u, t, src=None):
-        return {"q": x[..., 0]}
 
     def kernel(self):
         from hemocircuit.kernels import Kernel

@@ -1,13 +1,13 @@
 """Linear hydraulic resistor: q = (P_a - P_b) / R  (thesis eq. Poiseuille, R = dP/Q)."""
 from __future__ import annotations
 
-from hemocircuit.component import Component, Param, two_terminal_conductance
+from hemocircuit.component import Component, Param
 from hemocircuit.kernels.jit import njit
 
 _jit = njit(cache=True, nogil=True, error_model="numpy", _nrt=False)  # numba imported on first use
 
 
-# --- compiled path (hemocircuit.kernels contract; p = [R], no states, no options) --------------
+# --- the equations (hemocircuit.kernels contract; p = [R], no states, no options) -----------
 @_jit
 def kernel_stamp(p, x, u, t, iopt, A, b):
     g = 1.0 / p[0]
@@ -17,8 +17,6 @@ def kernel_stamp(p, x, u, t, iopt, A, b):
     A[1, 1] = g
 
 
-
-
 class Resistor(Component):
     """Flow q [mL/s] from terminal ``a`` to ``b``: q = (P_a - P_b)/R, with R [mmHg*s/mL] > 0."""
 
@@ -26,9 +24,6 @@ class Resistor(Component):
     terminals = ("a", "b")
     parameters = {"R": Param("mmHg*s/mL", lower=0.0, lower_open=True, doc="resistance")}
     role = "conductive"
-
-    def stamp(self, p, x, u, t, src=None):
-        return two_terminal_conductance(1.0 / p["R"])
 
     def kernel(self):
         from hemocircuit.kernels import Kernel

@@ -10,17 +10,11 @@ import math
 
 import numpy as np
 
-from hemocircuit.component import Component, Drive, Param, flow_branch, pressure_branch
+from hemocircuit.component import Component, Drive, Param
 from hemocircuit.kernels.jit import njit
 from hemocircuit.netlist import GROUND
 
 _jit = njit(cache=True, nogil=True, error_model="numpy", _nrt=False)  # numba imported on first use
-
-
-def _sine_term(p, t):
-    t = np.asarray(t, dtype=float)
-    on = t >= p["start"]
-    return np.where(on, p["amplitude"] * np.sin(2 * np.pi * p["frequency"] * (t - p["start"]) + p["phase"]), 0.0)
 
 
 #: a source's input is its value; its built-in sine term has the parameters below
@@ -43,13 +37,13 @@ def _sine_params(unit):
     }
 
 
-# --- compiled path (hemocircuit.kernels contract) -------------------------------------------
+# --- the equations (hemocircuit.kernels contract) -------------------------------------------
 # p = [value, amplitude, frequency, phase, start] (the ``parameters`` order); the circuit kernel
 # has already added the waveform value ``src`` to p[0].  No states, options or observables.
 # pressure_source: local unknowns [P_node, P_ref, q]; flow_source: [P_a, P_b].
 @_jit
 def kernel_value(p, t):
-    """value(t) = p[value] + the built-in sine term (as PressureSource.value with src in p[0])."""
+    """value(t) = p[value] (with the waveform's value added) + the built-in sine term."""
     s = 0.0
     if t >= p[4]:
         s = p[1] * math.sin(2 * np.pi * p[2] * (t - p[4]) + p[3])
@@ -99,12 +93,6 @@ class PressureSource(Component):
         """P(node) when the reference is ground (otherwise no column holds the difference)."""
         return f"P({nodes[0]})" if nodes[1] == GROUND and nodes[0] != GROUND else None
 
-    def value(self, p, t, src):
-        return p["value"] + (0.0 if src is None else src) + _sine_term(p, t)
-
-    def stamp(self, p, x, u, t, src=None):
-        return pressure_branch(self.value(p, t, src) + np.zeros(x.shape[:2]))
-
     def kernel(self):
         from hemocircuit.kernels import Kernel
         from hemocircuit.kernels.stateless import no_derivs, no_observables
@@ -128,9 +116,6 @@ class FlowSource(Component):
 
     def drive_output(self, eid, nodes):
         return f"Q({eid})"
-
-    def stamp(self, p, x, u, t, src=None):
-        return flow_branch(PressureSource.value(self, p, t, src) + np.zeros(x.shape[:2]))
 
     def kernel(self):
         from hemocircuit.kernels import Kernel

@@ -238,19 +238,24 @@ class Component:
         return []
 
     # --- numerical hooks (vectorised: see module docstring) -----------------------------
+    # By default they run the type's kernel functions (hemocircuit.elementwise): the equations
+    # are written once, as the kernel.  A legacy type without a kernel overrides them.
     def stamp(self, p, x, u, t, src=None):
         """(A_loc, b_loc): see the module docstring.  ``u`` is None for elements affine in the
         pressures; for ``linear_in_pressure = False`` it is the current Newton iterate of the
         local unknowns and the stamp is the linearisation there."""
-        raise NotImplementedError
+        from . import elementwise
+        return elementwise.stamp(self, p, x, u, t, src)
 
     def derivatives(self, p, x, u, t, src=None) -> np.ndarray:
         """dx/dt, shape (B, E, S)."""
-        return np.zeros(x.shape)
+        from . import elementwise
+        return elementwise.derivatives(self, p, x, u, t, src)
 
     def observe(self, p, x, u, t, src=None) -> dict[str, np.ndarray]:
         """Observables (B, E) each.  ``u`` is None when only state_only ones are wanted."""
-        return {}
+        from . import elementwise
+        return elementwise.observe(self, p, x, u, t, src)
 
     def default_states(self, p) -> np.ndarray:
         """States to start the DC-guess iteration from, shape (B, E, S)."""
@@ -272,24 +277,6 @@ class Component:
         to the rest of the circuit only through opened stores.  Default: the normal stamp.
         Volume stores open their branches (no flow); inductors short themselves."""
         return A_loc, b_loc
-
-    # --- analytic derivatives (optional; used by hemocircuit.derivatives) -----------------
-    def state_partials(self, p, x, u, t, src=None):
-        """Analytic partial derivatives of the element's equations with respect to its own
-        states, at states ``x`` and local unknowns ``u`` (shapes as in :meth:`stamp`), or
-        None (the default: not provided; finite differences are used).  A dict of arrays
-        (leading axes may broadcast; L = K + M local unknowns, S states):
-          ``dA``    d A_loc / d x      (B, E, L, L, S)
-          ``db``    d b_loc / d x      (B, E, L, S)
-          ``df_dx`` d(dx/dt)/dx at fixed u   (B, E, S, S)
-          ``df_du`` d(dx/dt)/du at fixed x   (B, E, S, L)
-        hemocircuit.derivatives composes them through the nodal solve into the circuit's
-        state Jacobian when every component with states provides them."""
-        return None
-
-    def provides_state_partials(self) -> bool:
-        """True if the type implements :meth:`state_partials`."""
-        return type(self).state_partials is not Component.state_partials
 
     def has_dc_stamp(self) -> bool:
         """True if :meth:`dc_stamp` changes the stamp (by default: the type overrides it)."""

@@ -13,9 +13,7 @@ shooting's flow map, noisy at the integrator's tolerance) are differenced with
 Services:
   :func:`dense_jacobian`, :func:`central_jacobian`  d fun / d x of any row-wise map, every
       column from ONE batched evaluation
-  :func:`state_jacobian`   d(dx/dt)/dx of a circuit: analytic when every component with
-      states provides :meth:`Component.state_partials` (composed through the nodal solve),
-      central differences otherwise
+  :func:`state_jacobian`   d(dx/dt)/dx of a circuit by central differences
   :func:`parameter_sensitivity`   d(dx/dt)/dp and d(outputs)/dp for a list of ID.PARAM, all
       parameters and members from ONE batched evaluation (fitting, sensitivity analysis,
       the linearisation's input matrices)
@@ -97,90 +95,13 @@ def central_jacobian(fun, X, scales, rel=CENTRAL_REL, with_value=False):
 
 
 # ------------------------------------------------------------------ circuits -------------
-def _analytic_ready(circuit):
-    """True when the state Jacobian can be composed from analytic partials: the dense path,
-    every element affine in the pressures, no parameter expressions (they read other
-    elements' states), and every component with states providing state_partials."""
-    if circuit.sparse or circuit.nonlinear:
-        return False
-    for g in circuit.groups:
-        if g.exprs:
-            return False
-        if g.S and not g.comp.provides_state_partials():
-            return False
-    return True
-
-
-def _analytic_state_jacobian(circuit, t, X):
-    """d(dx/dt)/dx (B, nx, nx) composed through the nodal solve A u = b:
-
-        du/dx = A^-1 (db/dx - dA/dx u),   J = df/dx|_u + df/du du/dx,
-
-    with each group's local partials (Component.state_partials) scattered by the element's
-    unknown and state indices.  Groups without states contribute only through A and b, which
-    then do not depend on the states (no expressions: see _analytic_ready)."""
-    Bx, nx = X.shape
-    n = circuit.n
-    u, plist, stamps = circuit.evaluate(t, X, want="u")  # u (Bx, n + 1), ground slot last
-    A = circuit.nodal_matrix(t, X)  # (Bx, n, n)
-    dA = np.zeros((Bx, n + 1, n + 1, nx))
-    db = np.zeros((Bx, n + 1, nx))
-    parts = []
-    for g, p, st in zip(circuit.groups, plist, stamps):
-        if g.S == 0:
-            parts.append(None)
-            continue
-        src = None if st is None else st[2]
-        xl, ul = X[:, g.sidx], u[:, g.uidx]
-        d = g.comp.state_partials(p, xl, ul, t, src)
-        parts.append(d)
-        E, L, S = g.E, g.L, g.S
-        r = np.broadcast_to(g.uidx[:, :, None, None], (E, L, L, S))
-        c = np.broadcast_to(g.uidx[:, None, :, None], (E, L, L, S))
-        s = np.broadcast_to(g.sidx[:, None, None, :], (E, L, L, S))
-        dA_loc = np.broadcast_to(d["dA"], (Bx, E, L, L, S))
-        for b in range(Bx):
-            np.add.at(dA[b], (r, c, s), dA_loc[b])
-            np.add.at(db[b], (np.broadcast_to(g.uidx[:, :, None], (E, L, S)),
-                              np.broadcast_to(g.sidx[:, None, :], (E, L, S))),
-                      np.broadcast_to(d["db"], (Bx, E, L, S))[b])
-    rhs = db - np.einsum("bijk,bj->bik", dA, u)  # (Bx, n + 1, nx)
-    du = np.concatenate([np.linalg.solve(A, rhs[:, :n, :]), np.zeros((Bx, 1, nx))], axis=1)
-    J = np.zeros((Bx, nx, nx))
-    for g, d in zip(circuit.groups, parts):
-        if d is None:
-            continue
-        E, S = g.E, g.S
-        dfdx = np.broadcast_to(d["df_dx"], (Bx, E, S, S))
-        for i in range(E):
-            J[:, g.sidx[i][:, None], g.sidx[i][None, :]] += dfdx[:, i]
-        # df/du (Bx, E, S, L) @ du at the element's unknowns (Bx, E, L, nx)
-        J[:, g.sidx.reshape(-1), :] += np.einsum("besl,belk->besk", np.broadcast_to(d["df_du"], (Bx, E, S, g.L)),
-                                                 du[:, g.uidx, :]).reshape(Bx, E * S, nx)
-    return J
-
-
-def state_jacobian(circuit, x, t=0.0, method="auto", rel=CENTRAL_REL):
-    """d(dx/dt)/dx of ``circuit`` at x: (nx,) -> (nx, nx); (B, nx) -> (B, nx, nx).
-
-    method: 'analytic' (every component with states provides state_partials; else an
-    error), 'fd' (central differences, one batched evaluation), or 'auto' (analytic when
-    available, else fd).  The linearisation passes the steady variant."""
-    from .errors import HemocircuitError
-
+def state_jacobian(circuit, x, t=0.0, rel=CENTRAL_REL):
+    """d(dx/dt)/dx of ``circuit`` at x: (nx,) -> (nx, nx); (B, nx) -> (B, nx, nx), by central
+    differences (one batched evaluation of the elements' kernel functions).  The
+    linearisation passes the steady variant."""
     single = np.ndim(x) == 1
     X = np.atleast_2d(np.asarray(x, dtype=float))
-    if method not in ("auto", "analytic", "fd"):
-        raise HemocircuitError(f"state_jacobian: method {method!r}; choose 'auto', 'analytic' or 'fd'")
-    analytic = method == "analytic" or (method == "auto" and _analytic_ready(circuit))
-    if analytic:
-        if not _analytic_ready(circuit):
-            raise HemocircuitError("state_jacobian: no analytic Jacobian for this circuit (a component with "
-                                   "states lacks state_partials, a parameter expression, an element nonlinear "
-                                   "in the pressures, or the sparse path)")
-        J = _analytic_state_jacobian(circuit, t, X)
-    else:
-        J = central_jacobian(lambda rows: circuit.evaluate(t, rows), X, circuit.state_scales, rel)
+    J = central_jacobian(lambda rows: circuit.evaluate(t, rows), X, circuit.state_scales, rel)
     return J[0] if single else J
 
 

@@ -18,6 +18,11 @@ types use; plain ``numba.njit`` works the same), each working on ONE element (th
 ``observe(p, x, iopt, out)``
     The element's *state-only* observables (those with ``Observable.state_only``), in the order
     of ``Kernel.observables``, into ``out`` -- what parameter expressions of other elements read.
+``report(p, x, u, t, iopt, out)`` (optional)
+    Every observable of the element, in ``Component.observables()`` order, into ``out``, given
+    the solved local unknowns ``u`` (flows, stresses: what needs the pressures).  Read by the
+    outputs of every analysis (hemocircuit.elementwise); without it the type's observables are
+    its state-only ones.
 ``derivs_jac(p, x, u, t, iopt, dx, Jx, Ju) -> int`` (optional)
     ``derivs`` plus its exact partial derivatives, ``Jx[i, k]`` = d dx_i / d x_k (S, S) and
     ``Ju[i, k]`` = d dx_i / d u_k (S, L, per mmHg or mL/s); returns 1, or 0 when it does not
@@ -44,9 +49,12 @@ len(local_nodes) + len(branches), S = len(states)); a kernel reads the options t
 The built-in kernels are compiled with numba's ``_nrt=False`` (no reference counting of the
 arrays passed: they never allocate), as are the engine's functions that call them.
 
-A component without a kernel (``kernel()`` returns None) runs on the vectorised numpy path;
-circuits that contain one fall back to it as a whole.  Both paths must agree: the contract
-test compares them on every registered component type.
+These functions are the ONE definition of a type's equations: the compiled engine runs them
+compiled, and every other path (operating point, linearisation, outputs, the batched numpy
+integrator) calls the same functions through hemocircuit.elementwise, as Python for a few
+elements (no compile) and compiled for large batches.  A legacy type without a kernel
+(``kernel()`` returns None) that overrides the vectorised numpy hooks still runs, on the numpy
+path only (circuits that contain one fall back to it as a whole, saying so once).
 """
 from __future__ import annotations
 
@@ -64,3 +72,5 @@ class Kernel:
     observables: tuple = ()
     #: optional analytic partials of ``derivs`` (see the module docstring), or None
     derivs_jac: object = None
+    #: optional: every observable, given the local unknowns (see the module docstring), or None
+    report: object = None

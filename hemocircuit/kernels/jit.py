@@ -3,8 +3,11 @@
 Loading the component registry imports every component module; with ``numba.njit`` at module
 level that alone imports numba (~0.25 s), which commands that never run compiled code (``op``,
 ``--help``) do not need.  ``njit(**options)(fn)`` returns a :class:`LazyDispatcher`: the numba
-dispatcher is made on the first call, or when numba compiles a caller that reads it as a global
-(numba types a global through its ``_numba_type_``), so kernels calling kernels work unchanged.
+dispatcher is made when numba compiles a caller that reads it as a global (numba types a global
+through its ``_numba_type_``), so kernels calling kernels work unchanged, or when asked for
+(``.dispatcher``).  Called from Python before that, it runs as the Python function it is (the one
+definition of the equations, run by hemocircuit.elementwise without a compile); once compiled,
+calls run the machine code.
 """
 from __future__ import annotations
 
@@ -29,11 +32,18 @@ class LazyDispatcher:
         return self._dispatcher
 
     @property
+    def compiled(self) -> bool:
+        """True once numba has made the dispatcher (a compiled caller, or ``.dispatcher``)."""
+        return self._dispatcher is not None
+
+    @property
     def _numba_type_(self):  # what numba.typeof reports: the real dispatcher's type
         return self.dispatcher._numba_type_
 
     def __call__(self, *args):
-        return self.dispatcher(*args)
+        if self._dispatcher is None:
+            return self.py_func(*args)
+        return self._dispatcher(*args)
 
     def __reduce__(self):  # pickled by name, as a module-level function is
         return _lookup, (self.__module__, self.__qualname__)

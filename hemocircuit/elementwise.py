@@ -1,0 +1,148 @@
+"""A component's per-element functions evaluated over a batch: the numpy path's entry to the
+one definition of each element's equations (its :class:`~hemocircuit.kernels.Kernel`).
+
+The compiled engine runs a type's kernel functions inside numba; every other path (the
+operating point, linearisation, the outputs, the batched integrator, a component check) calls
+the same functions here, one element at a time over the (B, E) batch of the circuit's groups.
+Small batches run the functions as Python (no numba import, no compile: ``op`` and ``check``
+start at once); from :data:`COMPILED_CALLS` element calls on, or once numba has compiled a
+function anyway, the compiled function runs.  A call that Python refuses where numba's numpy
+error model gives inf or NaN (``math.exp`` overflowing, ``math.log(0)``) is run compiled, so
+both give the same number.
+
+Shapes as :mod:`hemocircuit.component`: ``p`` {name: (1 or B, E)}, ``x`` (B, E, S), ``u``
+(B, E, L) or None, ``t`` a float or (B, 1) times, ``src`` (B, E) waveform values or None.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+#: element calls from which a batch runs the compiled functions (numba's dispatch costs ~2 us a
+#: call, a Python call of the arteriole's equations ~40 us; the compile is loaded from the cache)
+COMPILED_CALLS = 256
+
+_PYTHON_REFUSES = (OverflowError, ZeroDivisionError, ValueError)
+
+
+def _runner(fn, calls: int):
+    """The callable to use for ``calls`` element calls of kernel function ``fn`` (see the module
+    docstring): a lazy dispatcher (hemocircuit.kernels.jit) runs as Python until compiled."""
+    lazy = getattr(fn, "dispatcher", None)
+    if lazy is None:  # a plain numba dispatcher, or a plug-in's plain Python function
+        return fn
+    if calls >= COMPILED_CALLS or fn.compiled:
+        return fn.dispatcher
+    return fn.py_func
+
+
+def _call(fn, run, args):
+    """run(*args), redone compiled where Python raises what numba's error model would not."""
+    try:
+        return run(*args)
+    except _PYTHON_REFUSES:
+        if run is fn or getattr(fn, "dispatcher", None) is None:
+            raise
+        return fn.dispatcher(*args)
+
+
+class Batch:
+    """The (B, E) element arguments of one group, laid out for the kernel functions."""
+
+    def __init__(self, comp, p, x, u=None, t=0.0, src=None):
+        names = list(comp.parameters)
+        x = np.asarray(x, dtype=float)
+        shapes = [np.shape(p[n]) for n in names] + [x.shape[:2]]
+        if u is not None:
+            shapes.append(np.shape(u)[:2])
+        if src is not None:
+            shapes.append(np.shape(src))
+        tt = np.asarray(t, dtype=float)
+        if tt.ndim:
+            shapes.append((tt.reshape(-1).shape[0], 1))
+        B, E = np.broadcast_shapes(*shapes)
+        self.B, self.E = B, E
+        P = np.empty((B, E, max(len(names), 1)))
+        for j, n in enumerate(names):
+            P[:, :, j] = p[n]
+        if src is not None:
+            # a waveform's value adds to the parameter it is given on (Component.waveform_params:
+            # one per element), as the engine does before it calls the kernel
+            P[:, :, names.index(comp.waveform_params[0])] += src
+        self.P = P
+        S = len(comp.states())
+        self.X = np.ascontiguousarray(np.broadcast_to(x, (B, E, S)))
+        self.L = len(comp.local_nodes) + len(comp.branches())
+        # no local unknowns (elements affine in the pressures): one zero row serves every call
+        self.U = (np.zeros((1, 1, self.L)) if u is None
+                  else np.ascontiguousarray(np.broadcast_to(np.asarray(u, dtype=float), (B, E, self.L))))
+        self.u_given = u is not None
+        self.T = np.broadcast_to(tt.reshape(-1), (B,)) if tt.ndim else np.full(B, float(tt))
+        self.iopt = comp.kernel_options()
+        self.S = S
+
+    def members(self):
+        U, given = self.U, self.u_given
+        for b in range(self.B):
+            t = float(self.T[b])
+            for e in range(self.E):
+                yield b, e, self.P[b, e], self.X[b, e], (U[b, e] if given else U[0, 0]), t
+
+
+def kernel_of(comp):
+    """The component's kernel, or a clear error naming the type (a type without one must keep
+    its own numpy hooks: hemocircuit.component)."""
+    k = comp.kernel()
+    if k is None:
+        from .errors import HemocircuitError
+        raise HemocircuitError(f"component type '{comp.type_name}' has no kernel (Component.kernel): write its "
+                               "equations as kernel functions (docs/components.md), or override the numpy hooks")
+    return k
+
+
+def stamp(comp, p, x, u, t, src=None):
+    """(A_loc (B, E, L, L), b_loc (B, E, L)) from the kernel's ``stamp``."""
+    k = kernel_of(comp)
+    bt = Batch(comp, p, x, u, t, src)
+    L = bt.L
+    A = np.zeros((bt.B, bt.E, L, L))
+    b = np.zeros((bt.B, bt.E, L))
+    run = _runner(k.stamp, bt.B * bt.E)
+    with np.errstate(all="ignore"):
+        for i, e, pe, xe, ue, te in bt.members():
+            _call(k.stamp, run, (pe, xe, ue, te, bt.iopt, A[i, e], b[i, e]))
+    return A, b
+
+
+def derivatives(comp, p, x, u, t, src=None):
+    """dx/dt (B, E, S) from the kernel's ``derivs`` (zeros for a legacy type without states)."""
+    if not comp.states():
+        return np.zeros(np.shape(x))
+    k = kernel_of(comp)
+    bt = Batch(comp, p, x, u, t, src)
+    dx = np.zeros((bt.B, bt.E, bt.S))
+    run = _runner(k.derivs, bt.B * bt.E)
+    with np.errstate(all="ignore"):
+        for i, e, pe, xe, ue, te in bt.members():
+            _call(k.derivs, run, (pe, xe, ue, te, bt.iopt, dx[i, e]))
+    return dx
+
+
+def observe(comp, p, x, u, t, src=None):
+    """{observable: (B, E)}: the state-only ones from the kernel's ``observe`` when ``u`` is
+    None, every observable from its ``report`` otherwise (``observe`` when it has none)."""
+    if not comp.observables():
+        return {}
+    k = kernel_of(comp)
+    full = u is not None and k.report is not None
+    names = [o.name for o in comp.observables()] if full else list(k.observables)
+    if not names:
+        return {}
+    bt = Batch(comp, p, x, u, t, src)
+    out = np.zeros((bt.B, bt.E, len(names)))
+    fn = k.report if full else k.observe
+    run = _runner(fn, bt.B * bt.E)
+    with np.errstate(all="ignore"):
+        for i, e, pe, xe, ue, te in bt.members():
+            args = (pe, xe, ue, te, bt.iopt, out[i, e]) if full else (pe, xe, bt.iopt, out[i, e])
+            _call(fn, run, args)
+    return {n: out[..., j] for j, n in enumerate(names)}
