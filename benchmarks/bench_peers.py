@@ -212,7 +212,7 @@ def radius_um(c, x):
 def raise_radius(c, x, factor):
     """x with art.lambda changed so that the radius is multiplied by ``factor``.
 
-    components/arteriole/geometry.py: r = (lambda l0 n_c / pi - t_w) / 2 is affine in lambda,
+    components/arteriole/equations.py (l2r): r = (lambda l0 n_c / pi - t_w) / 2 is affine in lambda,
     so two evaluations of the public output 'art.r' give the exact lambda (no unit assumptions).
     """
     il = c.state_names.index("art.lambda")

@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .kernels.jit import LazyDispatcher
+
 #: element calls from which a batch runs the compiled functions (numba's dispatch costs ~2 us a
 #: call, a Python call of the arteriole's equations ~40 us; the compile is loaded from the cache)
 COMPILED_CALLS = 256
@@ -27,8 +29,7 @@ _PYTHON_REFUSES = (OverflowError, ZeroDivisionError, ValueError)
 def _runner(fn, calls: int):
     """The callable to use for ``calls`` element calls of kernel function ``fn`` (see the module
     docstring): a lazy dispatcher (hemocircuit.kernels.jit) runs as Python until compiled."""
-    lazy = getattr(fn, "dispatcher", None)
-    if lazy is None:  # a plain numba dispatcher, or a plug-in's plain Python function
+    if not isinstance(fn, LazyDispatcher):  # a plain numba dispatcher, or a plain Python function
         return fn
     if calls >= COMPILED_CALLS or fn.compiled:
         return fn.dispatcher
@@ -40,7 +41,7 @@ def _call(fn, run, args):
     try:
         return run(*args)
     except _PYTHON_REFUSES:
-        if run is fn or getattr(fn, "dispatcher", None) is None:
+        if not isinstance(fn, LazyDispatcher) or run is fn.dispatcher:
             raise
         return fn.dispatcher(*args)
 

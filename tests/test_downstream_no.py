@@ -16,7 +16,6 @@ import pytest
 import hemocircuit as hc
 from hemocircuit.analyses.op import operating_point
 from hemocircuit.analyses.transient import simulate
-from hemocircuit.components.arteriole import no_transport
 from hemocircuit.components.arteriole.parameters import effective
 from hemocircuit.errors import NetlistError
 
@@ -102,7 +101,7 @@ def test_consistent_model_values(ops):
 @pytest.mark.parametrize("case", ["base", "rdb=rdw"])
 def test_steady_state_equals_closed_forms(ops, reading, case):
     """C_v0 = q2 C_in,v / (q3 + r_db + h_wv (1 - h_wv/(h_wv + r_dw))), C_T0 = h_wv C_v0/(h_wv + r_dw)
-    (thesis), with C_in,v from the arteriole's own eq. cinv (no_transport.cb_outlet); in the
+    (thesis), with C_in,v from the arteriole's eq. cinv (written out here); in the
     consistent model the decay terms carry their volumes and the exchange the length n L."""
     c, op = ops[reading, case]
     p = _art_params(c)
@@ -119,7 +118,9 @@ def test_steady_state_equals_closed_forms(ops, reading, case):
     else:
         Q = op["Q(Rsv)"] * ML / p["n"]  # one tube's flow
         G, D_v, D_T = h_wv * p["n"] * p["L"], p["r_db"] * V_v, p["r_dw"] * V_T
-    C_inv = float(no_transport.cb_outlet(Cw, Q, r, p))
+    # eq. cinv: C_b(L) = (h_w C_w/gamma_wb / k - C_in)(1 - exp(-k L/|Q|)) + C_in, k = h_w + r_db pi r^2
+    k = p["h_w"] + p["r_db"] * np.pi * r ** 2
+    C_inv = (p["h_w"] * Cw / p["gamma_wb"] / k - p["C_in"]) * (-np.expm1(-k * p["L"] / abs(Q))) + p["C_in"]
     assert op["NOv.C_feed"] == pytest.approx(C_inv, rel=1e-9)
     C_v0 = q2 * C_inv / (q3 + D_v + G * (1 - G / (G + D_T)))
     C_T0 = G * C_v0 / (G + D_T)

@@ -19,48 +19,38 @@ from __future__ import annotations
 import numpy as np
 
 from hemocircuit.component import Component, Observable, Option, Param, State, Storage
-from hemocircuit.units import M3_PER_ML, PA_PER_MMHG
+from hemocircuit.units import PA_PER_MMHG
 
-from . import model
-from .geometry import bed_volume, l2r, lumen_area, resistance
-from .myogenic import CA_FLOOR
-from .no_transport import _cb_inf
-from .parameters import PARAMETERS, PRESETS, check_params, effective
+from . import compiled, equations, model
+from .parameters import PARAMETERS, PRESETS, check_params
 from .steady_state import solve_steady
 
 _UNITS = {"mol/L": "M", "mol/L/s": "M/s"}
-# observables: name -> (unit shown, factor from the model's SI unit, doc)
+# observables: name -> (unit in the circuit, doc), in the order compiled.report writes them
 _OBS = {
-    "r": ("um", 1e6, "internal radius"),
-    "lambda": ("dimensionless", 1.0, "normalised cell length"),
-    "Ca": ("M", 1.0, "[Ca2+]"),
-    "dCa": ("M/s", 1.0, "d[Ca2+]/dt (second-order Ca)"),
-    "Cw": ("M", 1.0, "wall [NO]"),
-    "Cb_mean": ("M", 1.0, "spatially averaged blood [NO] (eq. cbbar)"),
-    "cGMP": ("M", 1.0, "[cGMP]"),
-    "M": ("dimensionless", 1.0, "free myosin fraction"),
-    "Mp": ("dimensionless", 1.0, "phosphorylated myosin fraction"),
-    "AMp": ("dimensionless", 1.0, "attached phosphorylated fraction"),
-    "AM": ("dimensionless", 1.0, "attached dephosphorylated (latch) fraction"),
-    "sigma": ("Pa", 1.0, "wall stress P r / t_w"),
-    "tau_hat": ("dimensionless", 1.0, "normalised shear stress"),
-    "Q": ("mL/s", 1.0 / M3_PER_ML, "Poiseuille flow of the bed (n vessels)"),
-    "R": ("mmHg*s/mL", M3_PER_ML / PA_PER_MMHG, "resistance of the bed"),
-    "V": ("mL", 1.0 / M3_PER_ML, "blood volume of the bed"),
-    "F_a": ("N", 1.0, "active force per cell"),
-    "F_p": ("N", 1.0, "passive force per cell"),
-    "q_out": ("mL/s", 1.0, "flow leaving at the out terminal"),
+    "r": ("um", "internal radius"),
+    "lambda": ("dimensionless", "normalised cell length"),
+    "Ca": ("M", "[Ca2+]"),
+    "dCa": ("M/s", "d[Ca2+]/dt (second-order Ca)"),
+    "Cw": ("M", "wall [NO]"),
+    "Cb_mean": ("M", "spatially averaged blood [NO] (eq. cbbar)"),
+    "cGMP": ("M", "[cGMP]"),
+    "M": ("dimensionless", "free myosin fraction"),
+    "Mp": ("dimensionless", "phosphorylated myosin fraction"),
+    "AMp": ("dimensionless", "attached phosphorylated fraction"),
+    "AM": ("dimensionless", "attached dephosphorylated (latch) fraction"),
+    "sigma": ("Pa", "wall stress P r / t_w"),
+    "tau_hat": ("dimensionless", "normalised shear stress"),
+    "Q": ("mL/s", "Poiseuille flow of the bed (n vessels)"),
+    "R": ("mmHg*s/mL", "resistance of the bed"),
+    "V": ("mL", "blood volume of the bed"),
+    "F_a": ("N", "active force per cell"),
+    "F_p": ("N", "passive force per cell"),
+    "q_out": ("mL/s", "flow leaving at the out terminal"),
     # NO carried out of the bed (eq. cinv; read by downstream tracer pools, docs/downstream_no.md)
-    "Cb_inf": ("M", 1.0, "far-downstream blood [NO], h_w C_we / (h_w + r_db A_b) (eqs. cbbar, cinv)"),
-    "k_NO": ("m**2/s", 1.0, "blood NO loss per unit vessel length, h_w + r_db A_b (exponent of eq. cinv)"),
+    "Cb_inf": ("M", "far-downstream blood [NO], h_w C_we / (h_w + r_db A_b) (eqs. cbbar, cinv)"),
+    "k_NO": ("m**2/s", "blood NO loss per unit vessel length, h_w + r_db A_b (exponent of eq. cinv)"),
 }
-_STATE_ONLY = ("r", "lambda", "Ca", "dCa", "Cw", "V", "R", "Cb_inf", "k_NO")
-
-
-def _outlet_no(Cw, r, p):
-    """State-only terms of eq. cinv: {'Cb_inf' [M], 'k_NO' [m^2/s]} (no_speed applied)."""
-    pe = effective(p)
-    return {"Cb_inf": _cb_inf(Cw, r, pe), "k_NO": pe["h_w"] + pe["r_db"] * lumen_area(r)}
 
 
 class Arteriole(Component):
@@ -114,7 +104,8 @@ class Arteriole(Component):
 
     def observables(self):
         names = [n for n in _OBS if n != "dCa" or self.opts["ca_order"] == 2]
-        return tuple(Observable(n, _OBS[n][0], _OBS[n][2], state_only=n in _STATE_ONLY) for n in names)
+        state_only = compiled.observables(self.opts["ca_order"])
+        return tuple(Observable(n, _OBS[n][0], _OBS[n][1], state_only=n in state_only) for n in names)
 
     def outputs_of_interest(self):
         return ("r", "Ca")
@@ -125,93 +116,17 @@ class Arteriole(Component):
 
     def hard_limits(self):
         """Second-order Ca stops at the floor and its rate is reset (chapter 6 footnotes)."""
-        return (("Ca", CA_FLOOR, "dCa"),) if self.opts["ca_order"] == 2 else ()
+        return (("Ca", equations.CA_FLOOR, "dCa"),) if self.opts["ca_order"] == 2 else ()
 
     def check(self, p):
         return [(0, m) for m in check_params(p)]
 
-    # --- helpers ----------------------------------------------------------------------
-    def _pressures(self, u):
-        """(P_im, dP) in Pa from local pressures [mmHg]."""
-        P_in, P_out, P_ref = u[..., 0], u[..., 1], u[..., 2]
-        P_im = 0.5 * (P_in + P_out) - (P_ref if self.opts["pim_reference"] == "ref" else 0.0)
-        return P_im * PA_PER_MMHG, (P_in - P_out) * PA_PER_MMHG
-
-    def _states(self, x):
-        return model.unpack(x, self.model_options)
-
-    # --- numerical hooks --------------------------------------------------------------
-    def stamp(self, p, x, u, t, src=None):
-        s = self._states(x)
-        r = l2r(s["lambda"], p)
-        g = 1.0 / (resistance(r, p) * (M3_PER_ML / PA_PER_MMHG))  # mL/s per mmHg
-        shape = g.shape
-        if not self.opts["volume_flow"]:
-            A = np.zeros(shape + (3, 3))
-            A[..., 0, 0] = g
-            A[..., 0, 1] = -g
-            A[..., 1, 0] = -g
-            A[..., 1, 1] = g
-            return A, np.zeros(shape + (3,))
-        # local nodes: in 0, out 1, ref 2, mid 3
-        A = np.zeros(shape + (4, 4))
-        g2 = 2.0 * g
-        for a, b in ((0, 3), (3, 1)):
-            A[..., a, a] += g2
-            A[..., b, b] += g2
-            A[..., a, b] -= g2
-            A[..., b, a] -= g2
-        da, db = model.dr_dt_affine(s, p, self.model_options)  # m/s, m/(s Pa)
-        k = 2 * np.pi * r * p["L"] * p["n"] / M3_PER_ML  # mL per m of radius
-        c0 = k * da  # mL/s
-        c1 = k * db * PA_PER_MMHG  # mL/s per mmHg of P_im
-        # volume flow q_v = c0 + c1 P_im leaves mid and enters ref
-        for j, w in ((0, 0.5), (1, 0.5)) + (((2, -1.0),) if self.opts["pim_reference"] == "ref" else ()):
-            A[..., 3, j] += c1 * w
-            A[..., 2, j] -= c1 * w
-        b = np.zeros(shape + (4,))
-        b[..., 3] = -c0
-        b[..., 2] = c0
-        return A, b
-
-    def derivatives(self, p, x, u, t, src=None):
-        P_im, dP = self._pressures(u)
-        o = self.model_options
-        d, _ = model._evaluate(self._states(x), P_im, dP, p, o)
-        out = np.stack([d[n] for n in model.state_names(o)], axis=-1)
-        if not np.isfinite(out).all():  # one check for all states (model.derivatives checks each)
-            model._check_finite(d, "derivatives")
-        return out
-
-    def observe(self, p, x, u, t, src=None):
-        s = self._states(x)
-        if u is None:
-            r = l2r(s["lambda"], p)
-            out = {"r": r * 1e6, "lambda": s["lambda"], "Ca": s["Ca"], "Cw": s["Cw"],
-                   "V": bed_volume(r, p) / M3_PER_ML, "R": resistance(r, p) * _OBS["R"][1]}
-            if self.opts["ca_order"] == 2:
-                out["dCa"] = s["dCa"]
-            out.update(_outlet_no(s["Cw"], r, p))
-            return out
-        P_im, dP = self._pressures(u)
-        o = model.observables(s, P_im, dP, p, self.model_options)
-        out = {n: o[n] * _OBS[n][1] for n in _OBS if n in o}
-        out["Q"] = o["Q"] * p["n"] * _OBS["Q"][1]
-        out.update(_outlet_no(s["Cw"], o["r"], p))
-        if self.opts["volume_flow"]:
-            out["q_out"] = 2.0 * (u[..., 3] - u[..., 1]) / (resistance(o["r"], p) * _OBS["R"][1])
-        else:
-            out["q_out"] = (u[..., 0] - u[..., 1]) / (resistance(o["r"], p) * _OBS["R"][1])
-        return out
-
-    # --- compiled path (hemocircuit.kernels; equations in compiled.py) -------------------
+    # --- the equations: kernel functions in compiled.py, from equations.py ------------------
     def kernel(self):
         from hemocircuit.kernels import Kernel
-
-        from . import compiled
         return Kernel(stamp=compiled.stamp, derivs=compiled.derivs, observe=compiled.observe,
-                      observables=tuple(o.name for o in self.observables() if o.state_only),
-                      derivs_jac=compiled.derivs_jac)
+                      observables=compiled.observables(self.opts["ca_order"]), derivs_jac=compiled.derivs_jac,
+                      report=compiled.report)
 
     def kernel_options(self):
         """[ca_order (1|2), kinetics dynamic (0|1), passive (0|1), volume_flow (0|1),
@@ -226,8 +141,9 @@ class Arteriole(Component):
         return model.pack(st, self.model_options)
 
     def initial_states(self, p, u, flows=None, x=None):
-        P_im, dP = self._pressures(u)
-        r_guess = None if x is None else l2r(self._states(x)["lambda"], p)
+        P_im, dP = compiled.pressures(np.moveaxis(u, -1, 0), self.kernel_options())
+        r_guess = None if x is None else equations.l2r(model.unpack(x, self.model_options)["lambda"],
+                                                       equations.vector(p))
         st = solve_steady(P_im, dP, p, self.model_options, r_guess=r_guess, warn=False)
         new = model.pack(st, self.model_options)
         if x is not None:

@@ -16,14 +16,9 @@ import warnings
 
 import numpy as np
 
-from . import kinetics as kin
-from .cgmp import cgmp
-from .geometry import flow, l2r, r2l
-from .mechanics import force_residual
+from . import equations as eq
 from .model import resolve_options
-from .myogenic import ca_bar, wall_stress
-from .no_transport import cb_mean, cw_steady, tau_hat
-from .parameters import effective
+
 
 
 class SteadyStateWarning(RuntimeWarning):
@@ -31,19 +26,23 @@ class SteadyStateWarning(RuntimeWarning):
 
 
 def slaved(lam, P, dP, p, passive=False) -> dict:
-    """Everything that is explicit at a given lambda (``p`` already ``effective``), and the
-    force residual g [N] of eq mechSS."""
-    r = l2r(lam, p)
-    Q = flow(r, dP, p)
-    tau = tau_hat(dP, r, p)
-    Cw = cw_steady(Q, r, tau, p)
-    cG = cgmp(Cw, p)
-    sigma = wall_stress(P, r, p)
-    Ca = np.zeros(np.shape(sigma)) if passive else ca_bar(sigma, p)
-    alpha = kin.quasi_steady(kin.rate_constants(Ca, cG, p, passive))
-    g = force_residual(lam, P, alpha[2], p)
+    """Everything that is explicit at a given lambda (``p`` the parameter vector,
+    equations.vector), and the force residual g [N] of eq mechSS."""
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        r = eq.l2r(lam, p)
+        Q = eq.flow(r, dP, p)
+        tau = eq.tau_hat(dP, r, p)
+        h_w, r_dw, s_w, k_tau = eq.no_rates(p)
+        x = eq.transport_number(Q, r, h_w, p)
+        Cw = eq.cw_steady(r, x, tau, h_w, r_dw, s_w, k_tau, p)
+        cG = eq.cgmp(Cw, p)
+        sigma = eq.wall_stress(P, r, p)
+        Ca = np.zeros(np.shape(sigma)) if passive else eq.ca_bar(sigma, p)
+        alpha = eq.quasi_steady(*eq.rates(Ca, cG, p, passive), p)
+        g = eq.force_excess(lam, r, P, alpha[2], p)
+        Cb_mean = eq.cb_mean(Cw, r, x, h_w, p)
     return dict(lambda_=lam, r=r, Q=Q, tau_hat=tau, Cw=Cw, cGMP=cG, sigma=sigma, Ca=Ca,
-                alpha=alpha, g=g)
+                alpha=alpha, g=g, Cb_mean=Cb_mean)
 
 
 def _illinois(f, a, b, fa, fb, xtol, maxiter):
@@ -80,12 +79,12 @@ def solve_steady(P, dP, params, options=None, *, r_min=1e-6, r_max=300e-6, n_gri
     'high' (largest radius) or 'low'.  Warns (SteadyStateWarning) on multiplicity or absence.
     Roots closer together than the grid step (r range / n_grid) can be missed."""
     o = resolve_options(options)
-    p = effective(params)
+    p = eq.vector(params)
     passive = o["passive"]
     P = np.asarray(P, dtype=float)
     dP = np.asarray(dP, dtype=float)
-    shape = np.broadcast_shapes(P.shape, dP.shape, *(np.shape(v) for v in p.values()))
-    lam_lo, lam_hi = r2l(r_min, p), r2l(r_max, p)
+    shape = np.broadcast_shapes(P.shape, dP.shape, p.shape[1:])
+    lam_lo, lam_hi = eq.r2l(r_min, p), eq.r2l(r_max, p)
     s = np.linspace(0.0, 1.0, n_grid).reshape((-1,) + (1,) * len(shape))
     grid = np.broadcast_to(lam_lo + (lam_hi - lam_lo) * s, (n_grid,) + shape)
     g = slaved(grid, P, dP, p, passive)["g"]
@@ -97,7 +96,7 @@ def solve_steady(P, dP, params, options=None, *, r_min=1e-6, r_max=300e-6, n_gri
     found = n_stable > 0
     if r_guess is not None:
         mid = 0.5 * (grid[:-1] + grid[1:])
-        dist = np.where(down, np.abs(mid - r2l(np.asarray(r_guess, dtype=float), p)), np.inf)
+        dist = np.where(down, np.abs(mid - eq.r2l(np.asarray(r_guess, dtype=float), p)), np.inf)
         k = np.argmin(dist, axis=0)
     elif branch == "high":
         k = (n_grid - 2) - np.argmax(down[::-1], axis=0)
@@ -127,9 +126,9 @@ def solve_steady(P, dP, params, options=None, *, r_min=1e-6, r_max=300e-6, n_gri
     out = {"Ca": np.broadcast_to(sl["Ca"], shape), "Cw": np.broadcast_to(sl["Cw"], shape),
            "lambda": lam, "r": sl["r"], "cGMP": sl["cGMP"], "sigma": sl["sigma"],
            "Q": np.broadcast_to(sl["Q"], shape), "tau_hat": sl["tau_hat"],
-           "Cb_mean": cb_mean(sl["Cw"], sl["Q"], sl["r"], p),
+           "Cb_mean": np.broadcast_to(sl["Cb_mean"], shape),
            "alpha": np.stack(al, axis=-1), "n_roots": n_roots, "n_stable": n_stable,
            "found": found, "converged": conv | ~found}
-    out.update(zip(kin.STATES, al))
+    out.update(zip(eq.BRIDGE_STATES, al))
     out["dCa"] = np.zeros(shape)
     return out

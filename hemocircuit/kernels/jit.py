@@ -13,14 +13,19 @@ from __future__ import annotations
 
 import functools
 
+import numpy as np
+
 
 class LazyDispatcher:
-    """A numba ``njit`` dispatcher created on first use (see the module docstring)."""
+    """A numba ``njit`` dispatcher created on first use (see the module docstring).  ``python``:
+    what a call from Python runs however compiled the function is (an equation of scalars that
+    also takes numpy arrays from Python: its Python function, or a numpy twin such as np.where)."""
 
-    def __init__(self, fn, options):
+    def __init__(self, fn, options, python=None):
         self.py_func = fn
         self._options = options
         self._dispatcher = None
+        self._python = python
         functools.update_wrapper(self, fn)
 
     @property
@@ -41,6 +46,8 @@ class LazyDispatcher:
         return self.dispatcher._numba_type_
 
     def __call__(self, *args):
+        if self._python is not None:
+            return self._python(*args)
         if self._dispatcher is None:
             return self.py_func(*args)
         return self._dispatcher(*args)
@@ -64,3 +71,20 @@ def _lookup(module: str, qualname: str):
 def njit(**options):
     """Decorator: like ``numba.njit(**options)``, applied on first use."""
     return lambda fn: LazyDispatcher(fn, options)
+
+
+def equation(**options):
+    """Decorator of an equation written once for both paths: compiled like :func:`njit` when a
+    kernel calls it, and run as the Python function it is when called from Python -- where its
+    arguments may be numpy arrays (it uses operations that work on scalars in numba and on
+    arrays in numpy: arithmetic, np.exp, np.maximum, ... and :func:`select` for a choice)."""
+    return lambda fn: LazyDispatcher(fn, options, python=fn)
+
+
+def _select_scalar(cond, a, b):
+    return a if cond else b
+
+
+#: ``select(cond, a, b)``: ``a if cond else b`` compiled, ``np.where(cond, a, b)`` from Python
+#: (both a and b are evaluated: keep them free of side effects and cheap)
+select = LazyDispatcher(_select_scalar, dict(cache=True, nogil=True, inline="always"), python=np.where)

@@ -3,13 +3,15 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
+from element_calls import rates
+
 MMHG = 133.322387415   # Pa per mmHg
 
 
 def _ca_step(art, p, t):
     """Linear step response of the Ca subsystem alone: Ca_bar 1e-8 -> 1e-7 M at t = 0."""
     def rhs(_, y):
-        return [y[1], art.myogenic.d2Ca_dt2(y[0], y[1], 1e-7, p)]
+        return [y[1], art.equations.d2Ca(y[0], y[1], 1e-7, art.equations.vector(p))]
     sol = solve_ivp(rhs, (0, t[-1]), [1e-8, 0.0], t_eval=t, method="LSODA",
                     rtol=1e-10, atol=[1e-18, 1e-18])
     return sol.y[0]
@@ -43,13 +45,13 @@ def _run_element(art, p, options, P0, P1, dP, t):
     x0 = art.pack(s0, options)
 
     def rhs(_, x):
-        d = art.derivatives(x, P1, dP, p, options)
-        return np.array([d[n] for n in art.state_names(options)])
+        d = rates(art, x, P1, dP, p, options)
+        return np.array([float(d[n]) for n in art.state_names(options)])
 
     sol = solve_ivp(rhs, (0, t[-1]), x0, t_eval=t, method="LSODA", rtol=1e-8,
                     atol=[art.STATE_SCALES[n] * 1e-8 for n in art.state_names(options)])
     assert sol.success
-    return art.geometry.l2r(sol.y[art.state_names(options).index("lambda")], p), \
+    return art.equations.l2r(sol.y[art.state_names(options).index("lambda")], art.equations.vector(p)), \
         art.solve_steady(P1, dP, p, options)["r"]
 
 

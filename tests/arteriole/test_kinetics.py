@@ -1,6 +1,8 @@
 """4-state kinetics (eqs 4state, 4stateCons, phos, dephos, 4stateSS) and figure figrPhospCa."""
 import numpy as np
 
+from element_calls import observed
+
 
 def _grid():
     Ca = np.logspace(-12, -3, 37)[:, None]
@@ -10,23 +12,27 @@ def _grid():
 
 def test_quasi_steady_sums_to_one_and_is_null_vector(art, kuo):
     Ca, cG = _grid()
-    K = art.kinetics.rate_constants(Ca, cG, kuo)
-    alpha = np.stack(np.broadcast_arrays(*art.kinetics.quasi_steady(K)), axis=-1)
+    eq, p = art.equations, art.equations.vector(kuo)
+    K = eq.rates(Ca, cG, p, False)
+    alpha = np.stack(np.broadcast_arrays(*eq.quasi_steady(*K, p)), axis=-1)
     assert alpha.shape == (37, 16, 4)
     assert np.all(alpha >= 0)
     np.testing.assert_allclose(alpha.sum(-1), 1.0, rtol=0, atol=1e-14)
-    resid = np.einsum("...ij,...j->...i", art.kinetics.k_matrix(K), alpha)
-    assert np.max(np.abs(resid)) < 1e-12
-    # the derivative function agrees with the matrix and vanishes there too
-    d = np.stack(np.broadcast_arrays(*art.kinetics.derivative(tuple(np.moveaxis(alpha, -1, 0)), K)), -1)
-    np.testing.assert_allclose(d, resid, atol=1e-15)
+    # the rates of eq 4state vanish there (the kinetics' right-hand side, as the element runs it)
+    d = np.stack(np.broadcast_arrays(*eq.kinetics(*K, *np.moveaxis(alpha, -1, 0), p)), -1)
+    assert np.max(np.abs(d)) < 1e-12
+    # conservation (eq 4stateCons): the rates sum to zero at any fractions
+    rng = np.random.default_rng(3)
+    a = rng.random((37, 16, 4))
+    np.testing.assert_allclose(sum(eq.kinetics(*K, *np.moveaxis(a, -1, 0), p)), 0.0, atol=1e-14)
 
 
 def test_closed_form_equals_linear_solve(art, kuo):
     Ca, cG = _grid()
-    K = art.kinetics.rate_constants(Ca, cG, kuo)
-    closed = np.stack(np.broadcast_arrays(*art.kinetics.quasi_steady(K)), axis=-1)
-    solved = art.kinetics.quasi_steady_solve(K)
+    p = art.equations.vector(kuo)
+    K = art.equations.rates(Ca, cG, p, False)
+    closed = np.stack(np.broadcast_arrays(*art.equations.quasi_steady(*K, p)), axis=-1)
+    solved = art.kinetics.quasi_steady_solve(*K, p)
     np.testing.assert_allclose(closed, solved, rtol=1e-10, atol=1e-14)
 
 
@@ -35,25 +41,28 @@ def test_closed_form_with_other_rate_values(art, kuo):
     rng = np.random.default_rng(1)
     p = dict(kuo, K3=rng.uniform(0.01, 2, 50), K4=rng.uniform(0.01, 2, 50),
              K7=rng.uniform(0.001, 1, 50))
-    K = art.kinetics.rate_constants(rng.uniform(1e-9, 1e-5, 50), rng.uniform(0, 1e-6, 50), p)
-    closed = np.stack(art.kinetics.quasi_steady(K), axis=-1)
-    np.testing.assert_allclose(closed, art.kinetics.quasi_steady_solve(K), rtol=1e-10, atol=1e-14)
+    p = art.equations.vector(p)
+    K = art.equations.rates(rng.uniform(1e-9, 1e-5, 50), rng.uniform(0, 1e-6, 50), p, False)
+    closed = np.stack(art.equations.quasi_steady(*K, p), axis=-1)
+    np.testing.assert_allclose(closed, art.kinetics.quasi_steady_solve(*K, p), rtol=1e-10, atol=1e-14)
 
 
 def test_rates_at_nonpositive_ca_are_finite(art, kuo):
-    K = art.kinetics.rate_constants(np.array([-1e-6, 0.0, art.CA_FLOOR]), 1e-9, kuo)
+    K = art.equations.rates(np.array([-1e-6, 0.0, art.CA_FLOOR]), 1e-9, art.equations.vector(kuo), False)
     assert all(np.all(np.isfinite(k)) for k in K)
     np.testing.assert_allclose(K[0][:2], K[0][2])  # clipped at the floor
 
 
 def test_passive_alpha_and_zero_active_force(art, kuo):
-    K = art.kinetics.rate_constants(np.array([1e-7, 1e-5]), np.array([1e-9, 1e-7]), kuo, passive=True)
-    alpha = np.stack(np.broadcast_arrays(*art.kinetics.quasi_steady(K)), -1)
+    eq, p = art.equations, art.equations.vector(kuo)
+    K = eq.rates(np.array([1e-7, 1e-5]), np.array([1e-9, 1e-7]), p, True)
+    alpha = np.stack(np.broadcast_arrays(*eq.quasi_steady(*K, p)), -1)
     np.testing.assert_array_equal(alpha, [[1, 0, 0, 0], [1, 0, 0, 0]])
-    assert np.all(art.mechanics.active_force_isometric(np.array([0.9, 1.4]), alpha[:, 2], kuo) == 0)
-    # through the model: passive states give alpha = [1,0,0,0] and F_a = 0 whatever Ca is
+    lam = np.array([0.9, 1.4])
+    assert np.all(eq.active_force(0.0, alpha[:, 2], alpha[:, 3], eq.overlap(lam, p), p) == 0)
+    # through the element: passive states give alpha = [1,0,0,0] and F_a = 0 whatever Ca is
     s = {"Ca": np.array([1e-7, 1e-6]), "Cw": 1e-8, "lambda": 1.2}
-    obs = art.observables(s, 8000.0, 0.0, kuo, {"passive": True})
+    obs = observed(art, s, 8000.0, 0.0, kuo, {"passive": True})
     np.testing.assert_array_equal(np.broadcast_to(obs["M"], (2,)), 1.0)
     np.testing.assert_array_equal(obs["F_a"], 0.0)
 

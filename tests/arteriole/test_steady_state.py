@@ -4,6 +4,8 @@ import warnings
 import numpy as np
 import pytest
 
+from element_calls import rates
+
 MMHG = 133.322387415   # Pa per mmHg
 CMH2O = 98.0665        # Pa per cmH2O
 
@@ -19,7 +21,7 @@ def test_steady_state_is_fixed_point(art, options, preset):
     dP = np.array([0.0, 4.0 * CMH2O, 20.0 * CMH2O])
     s = art.solve_steady(P, dP, p, options)
     assert s["found"].all() and s["converged"].all()
-    d = art.derivatives(s, P, dP, p, options)
+    d = rates(art, s, P, dP, p, options)
     scales = art.state_scales(options)
     assert set(d) == set(art.state_names(options))
     for name, rate in d.items():
@@ -67,8 +69,8 @@ def test_no_speed_barely_changes_steady_state(art, kuo, dP):
     np.testing.assert_allclose(fast["r"], slow["r"], rtol=1e-3)
     # away from the steady state, the wall-NO rate scales with no_speed
     st = dict(Ca=slow["Ca"], Cw=2 * slow["Cw"], **{"lambda": slow["lambda"]})
-    d1 = art.derivatives(st, P, dP, kuo)["Cw"]
-    d200 = art.derivatives(st, P, dP, dict(kuo, no_speed=200.0))["Cw"]
+    d1 = rates(art, st, P, dP, kuo)["Cw"]
+    d200 = rates(art, st, P, dP, dict(kuo, no_speed=200.0))["Cw"]
     np.testing.assert_allclose(d200 / d1, 200.0, rtol=2e-2)
 
 
@@ -99,9 +101,9 @@ def test_multiple_equilibria_are_flagged_and_stable_one_returned(art, kuo):
     assert hi["n_roots"] == 3 and hi["n_stable"] == 2
     assert hi["r"] > lo["r"] + 5e-6
     assert near["r"] == lo["r"]
-    pe = art.effective(p)
+    pe = art.equations.vector(p)
     for s in (hi, lo):
-        assert np.max(np.abs(art.derivatives(s, P, 0.0, p)["lambda"])) < 1e-9
+        assert np.max(np.abs(rates(art, s, P, 0.0, p)["lambda"])) < 1e-9
         h = 1e-6
         g = [art.steady_state.slaved(s["lambda"] + e, P, 0.0, pe)["g"] for e in (-h, h)]
         assert (g[1] - g[0]) / (2 * h) < 0                  # stable: d(dlambda/dt)/dlambda < 0
