@@ -1,9 +1,17 @@
-"""Batched small dense linear solves for the nodal equations (the hot path).
+"""Small dense linear algebra, compiled: the one LU of the project.
 
-``solve_batched(A, b)`` solves A[i] u[i] = b[i] for a stack of small matrices.  For many rows
-it is a compiled Gaussian elimination with partial pivoting (numba, imported on first use),
-several times faster than ``np.linalg.solve`` for the 8x8-ish systems of a circuit evaluated
-for hundreds of batch rows; otherwise numpy.
+``lu_factor`` / ``lu_factor_at`` / ``lu_apply`` are Gaussian elimination with partial pivoting
+on the leading m x m block of a matrix, in place.  The compiled engine (hemocircuit.kernels:
+the nodal solve, its static condensation, the element-local Jacobian, the Rosenbrock and BDF
+iteration matrices) calls them, and so does :func:`solve_batched` below: one definition.  They
+are compiled (``kernels.jit.njit``: numba imported when a compiled caller needs them) without
+reference counting (they never allocate) and with numpy's error model (a division by zero gives
+inf/nan); called from Python before that, they run as the Python functions they are.
+
+``solve_batched(A, b)`` solves A[i] u[i] = b[i] for a stack of small matrices (the nodal
+equations of the batched numpy path).  For many rows it runs compiled (numba, imported on first
+use), several times faster than ``np.linalg.solve`` for the 8x8-ish systems of a circuit
+evaluated for hundreds of batch rows; otherwise numpy.
 """
 from __future__ import annotations
 
@@ -11,46 +19,90 @@ import numpy as np
 
 from .kernels.jit import njit
 
+#: how the LU functions are compiled: no allocation (no reference counting), numpy's error
+#: model (as the engine's functions)
+_COMPILED = dict(cache=True, nogil=True, error_model="numpy", _nrt=False)
+
+
+@njit(**_COMPILED)
+def lu_factor_at(W, piv, m):
+    """In-place LU with partial pivoting of the leading m x m block of W (multipliers below the
+    diagonal, rows swapped as they go, pivot rows in ``piv``).  Returns -1 on success or the
+    column where no nonzero pivot was left."""
+    for c in range(m):
+        p = c
+        best = abs(W[c, c])
+        for r in range(c + 1, m):
+            v = abs(W[r, c])
+            if v > best:
+                best, p = v, r
+        piv[c] = p
+        if best == 0.0:
+            return c
+        if p != c:
+            for j in range(m):
+                tmp = W[c, j]
+                W[c, j] = W[p, j]
+                W[p, j] = tmp
+        inv = 1.0 / W[c, c]
+        for r in range(c + 1, m):
+            W[r, c] *= inv
+            f = W[r, c]
+            if f != 0.0:
+                for j in range(c + 1, m):
+                    W[r, j] -= f * W[c, j]
+    return -1
+
+
+@njit(**_COMPILED)
+def lu_factor(W, piv, m):
+    """:func:`lu_factor_at`, True when W is regular.  (The nodal system uses it with m = n,
+    leaving out the ground slot; the integrators' iteration matrices with m = nx.)"""
+    return lu_factor_at(W, piv, m) < 0
+
+
+@njit(**_COMPILED)
+def lu_apply(W, piv, v, m):
+    """Solve with the factors of :func:`lu_factor` (size m), in place on v[:m]."""
+    for c in range(m):
+        p = piv[c]
+        if p != c:
+            tmp = v[c]
+            v[c] = v[p]
+            v[p] = tmp
+    for i in range(m):
+        s = v[i]
+        for j in range(i):
+            s -= W[i, j] * v[j]
+        v[i] = s
+    for i in range(m - 1, -1, -1):
+        s = v[i]
+        for j in range(i + 1, m):
+            s -= W[i, j] * v[j]
+        v[i] = s / W[i, i]
+
 
 @njit(cache=True, nogil=True)
 def _solve_nb(A, b):
+    """u[k] with A[k] u[k] = b[k] for every k (:func:`lu_factor`, :func:`lu_apply`); NaN rows
+    where A[k] is singular."""
     m, n, _ = A.shape
     out = np.empty((m, n))
     a = np.empty((n, n))
     x = np.empty(n)
+    piv = np.empty(n, dtype=np.int64)
     for k in range(m):
         for i in range(n):
             x[i] = b[k, i]
             for j in range(n):
                 a[i, j] = A[k, i, j]
-        for c in range(n):
-            p = c
-            best = abs(a[c, c])
-            for r in range(c + 1, n):
-                v = abs(a[r, c])
-                if v > best:
-                    best, p = v, r
-            if best == 0.0:
-                for i in range(n):
-                    out[k, i] = np.nan
-                break
-            if p != c:
-                for j in range(n):
-                    a[c, j], a[p, j] = a[p, j], a[c, j]
-                x[c], x[p] = x[p], x[c]
-            inv = 1.0 / a[c, c]
-            for r in range(c + 1, n):
-                f = a[r, c] * inv
-                if f != 0.0:
-                    for j in range(c, n):
-                        a[r, j] -= f * a[c, j]
-                    x[r] -= f * x[c]
+        if lu_factor(a, piv, n):
+            lu_apply(a, piv, x, n)
+            for i in range(n):
+                out[k, i] = x[i]
         else:
-            for i in range(n - 1, -1, -1):
-                s = x[i]
-                for j in range(i + 1, n):
-                    s -= a[i, j] * out[k, j]
-                out[k, i] = s / a[i, i]
+            for i in range(n):
+                out[k, i] = np.nan
     return out
 
 
@@ -62,8 +114,13 @@ NUMBA_MIN_ROWS = 64
 def solve_batched(A, b):
     """u with A[i] @ u[i] = b[i]; A (m, n, n), b (m, n).  Singular rows give NaN."""
     if len(A) >= NUMBA_MIN_ROWS:
-        return _solve_nb(np.ascontiguousarray(A, dtype=float), np.ascontiguousarray(b, dtype=float))
+        return _solve_compiled(A, b)
     try:
         return np.linalg.solve(A, b[..., None])[..., 0]
     except np.linalg.LinAlgError:
-        return _solve_nb(np.ascontiguousarray(A, dtype=float), np.ascontiguousarray(b, dtype=float))
+        return _solve_compiled(A, b)
+
+
+def _solve_compiled(A, b):
+    # the numba dispatcher itself: a lazy one called from Python would run the Python function
+    return _solve_nb.dispatcher(np.ascontiguousarray(A, dtype=float), np.ascontiguousarray(b, dtype=float))
