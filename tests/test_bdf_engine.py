@@ -1,4 +1,4 @@
-"""The compiled variable-order BDF integrator (engine_template.integrate_batch_bdf, method 'bdf'):
+"""The compiled variable-order BDF integrator (engine_bdf.integrate_batch_bdf, method 'bdf'):
 closed forms, agreement with the Rosenbrock method and with scipy, hard-limit events,
 breakpoints, batches, and the vasomotion cycle against the peers' reference."""
 import os

@@ -597,7 +597,7 @@ def test_run_from_a_later_start_has_no_repeated_time():
 @pytest.mark.parametrize("method", [None, "bdf"])
 def test_a_failed_member_has_nan_rows_and_the_others_run_as_alone(method):
     """A member started from a non-finite state fails (its status says why) and every output row
-    after its start is NaN (engine_template.finish_member, the end of every member's run, failed
+    after its start is NaN (kernels.runs.finish_member, the end of every member's run, failed
     or not); the other member of the batch runs as alone (R-C charging, V = C P (1 - exp(-t/RC)))."""
     from hemocircuit.kernels.system import STATUS
 

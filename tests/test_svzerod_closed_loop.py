@@ -99,7 +99,7 @@ def test_anderson_shooting_finds_the_orbit_in_few_periods(example, orbit):
 @pytest.mark.parametrize("method", [None, "bdf"])
 def test_a_start_on_the_valves_bounds_is_held_not_crossed(method):
     """From the operating point the heart's four valve flows sit on their hard limit 0 to
-    rounding (3.4e-16 mL/s).  Such a state counts as on its bound (engine_template.
+    rounding (3.4e-16 mL/s).  Such a state counts as on its bound (kernels.runs.
     LIMIT_ON_BOUND x atol): held, not "crossed" at s ~ 0 by every step.  Before, every step was
     a limit event advancing t by ~1e-21 s, and `tran MODEL.json` hit the 10-million-step limit
     at t = 3.8e-11 s after 3 minutes.  Now 0.1 s takes a few dozen steps, and no valve flow

@@ -3,14 +3,29 @@
 One module is generated per *set of component types* a circuit uses (``layout.build_layout``
 passes the circuit's distinct kernels in a canonical order), never per netlist, element count
 or parameter value: a header that dispatches by type code to each type's Kernel functions,
-followed by ``engine_template.py``.  Numba compiles it on first use and caches the machine code
-beside the module (or under ``$NUMBA_CACHE_DIR``), so every netlist made of the same types
-reuses it.  Compiling only the types used keeps a first run short (the dispatchers inline every
-kernel they name into the engine).  The module's name is ``hemocircuit_engine_<set>_<source>``:
-<set> hashes the kernels' names, <source> the kernel sources (kernels.freshness.key: the template,
-this package, the components package, units.py, the batch integrator), the kernels' own files (a
-plug-in's included) and the numba
-version, so an edit to any of them makes a new module instead of reusing stale machine code.
+followed by the engine's template files in the order of :data:`TEMPLATES`, one job each:
+
+* ``engine_nodal.py``       scratch buffers, element loading, static condensation, the nodal
+                            solve, the right-hand side, the outputs' nodal solve;
+* ``engine_jacobian.py``    the state Jacobian (element-local or whole right-hand sides);
+* ``engine_rosenbrock.py``  the Rosenbrock(-W) integrator;
+* ``engine_bdf.py``         the variable-order BDF integrator.
+
+They are text, not importable modules: they call the header's dispatchers (elem_stamp, ...),
+which differ per type set, and one generated module keeps numba's inlining of the kernels into
+the nodal solve.  What does not depend on the types is an importable module the header imports
+(:data:`SHARED`): the LU (hemocircuit.linalg, also the numpy path's batched solve), the dense
+output and event location (kernels.dense) and the end of a member's run (kernels.runs): one
+definition each, compiled and cached once for every engine.
+
+Numba compiles the module on first use and caches the machine code beside it (or under
+``$NUMBA_CACHE_DIR``), so every netlist made of the same types reuses it.  Compiling only the
+types used keeps a first run short (the dispatchers inline every kernel they name into the
+engine).  The module's name is ``hemocircuit_engine_<set>_<source>``: <set> hashes the kernels'
+names, <source> the kernel sources (kernels.freshness.key: the template files, this package, the
+components package, units.py, derivatives.py, linalg.py), the kernels' own files (a plug-in's
+included) and the numba version, so an edit to any of them makes a new module instead of reusing
+stale machine code.
 
 Cache folder: ``$HEMOCIRCUIT_CACHE_DIR`` or ``~/.cache/hemocircuit`` (never inside the checkout).
 Each load touches ``<module>.used`` (not the module: numba's cache checks its time stamp); when
@@ -31,7 +46,14 @@ from pathlib import Path
 from . import freshness
 from .freshness import cache_dir
 
-_TEMPLATE = Path(__file__).with_name("engine_template.py")
+_HERE = Path(__file__).parent
+#: the engine's template files, in the order they follow the header (each uses the ones before)
+TEMPLATES = ("engine_nodal.py", "engine_jacobian.py", "engine_rosenbrock.py", "engine_bdf.py")
+#: the engine's functions that do not depend on the component types, from importable modules:
+#: (module, names); bound in the generated module as their numba dispatchers
+SHARED = (("hemocircuit.linalg", ("lu_factor", "lu_factor_at", "lu_apply")),
+          ("hemocircuit.kernels.dense", ("hermite", "hermite_root", "stage_dense", "bdf_dense")),
+          ("hemocircuit.kernels.runs", ("finish_member",)))
 _loaded: dict[str, object] = {}
 #: days without a load after which another source version of an engine is deleted
 STALE_DAYS = 7
@@ -52,7 +74,18 @@ def _header(kernels) -> str:
              "import numpy as np",
              "from numba import njit as _njit",
              "from hemocircuit.kernels.waveforms import wave_value_with, MAX_SUM_DEPTH as WAVE_SUM_DEPTH",
-             "from hemocircuit.kernels.expressions import eval_expr_with, MAX_STACK as EXPR_STACK", ""]
+             "from hemocircuit.kernels.expressions import eval_expr_with, MAX_STACK as EXPR_STACK",
+             "# the one step rule of the differences: relative to max(|x|, the state's scale)",
+             "from hemocircuit.derivatives import FD_REL",
+             "from hemocircuit.kernels.runs import LIMIT_ON_BOUND", ""]
+    # the shared compiled functions: their numba dispatchers (kernels.jit makes them lazily),
+    # so that compile(), signatures and the cache checks of prebuild work on them as on the
+    # template's functions
+    for mod, names in SHARED:
+        alias = "_" + mod.rsplit(".", 1)[-1]
+        lines.append(f"import {mod} as {alias}")
+        lines += [f"{name} = getattr({alias}.{name}, 'dispatcher', {alias}.{name})" for name in names]
+    lines.append("")
     for k, ker in enumerate(kernels):
         for role in ("stamp", "derivs", "observe"):
             mod, name = _ref(getattr(ker, role))
@@ -87,6 +120,15 @@ def _header(kernels) -> str:
     return "\n".join(lines) + "\n\n\n"
 
 
+def source(kernels) -> str:
+    """The generated module's text: the header for these kernels, then the template files."""
+    parts = [_header(kernels)]
+    for name in TEMPLATES:
+        parts.append(f"# ---------------------------------------------------------------- {name}\n")
+        parts.append((_HERE / name).read_text().rstrip("\n") + "\n\n\n")
+    return "".join(parts)
+
+
 def kernel_names(kernel) -> list[str]:
     """'module:qualname' of a Kernel's functions (three, and derivs_jac when it has one)."""
     roles = ("stamp", "derivs", "observe") + (("derivs_jac",) if kernel.derivs_jac is not None else ())
@@ -100,8 +142,9 @@ def _fingerprint(kernels) -> tuple[str, str]:
     names = [name for ker in kernels for name in kernel_names(ker)]
     h = hashlib.sha256()
     h.update(numba.__version__.encode())
-    # every source compiled code is built from: the template, this package (it writes the
-    # header), waveforms, expressions, units, the tableaus and the components package
+    # every source compiled code is built from: the template files, this package (it writes the
+    # header; dense, runs, waveforms, expressions, the tableaus), units, derivatives, linalg and
+    # the components package
     h.update(freshness.key().encode())
     files = {inspect.getsourcefile(sys.modules[name.split(":")[0]]) for name in names}
     for f in sorted(files):  # the kernels' own files: a plug-in's lie outside that key
@@ -151,7 +194,7 @@ def engine_module(kernels):
         pass
     if not path.exists():
         tmp = path.with_suffix(f".{os.getpid()}.tmp")
-        tmp.write_text(_header(kernels) + _TEMPLATE.read_text())
+        tmp.write_text(source(kernels))
         os.replace(tmp, path)  # atomic: concurrent workers never see a half-written module
         _prune(folder, key[0], name)
     spec = importlib.util.spec_from_file_location(name, path)

@@ -32,14 +32,15 @@ _checked = False
 
 def sources() -> list[Path]:
     """Every source file whose code or constants the compiled kernels contain: the components
-    package (built-in component types and their physics), this kernels package, units.py
-    and derivatives.py (the difference step FD_REL,
-    which the engine and the heart's partials read)."""
+    package (built-in component types and their physics), this kernels package (among them
+    the engine's template files engine_*.py), units.py, derivatives.py (the difference step
+    FD_REL, which the engine and the heart's partials read) and linalg.py (the LU the engine
+    calls)."""
     import hemocircuit.components as comps
 
     roots = [Path(p).resolve() for p in comps.__path__] + [_HERE]
     files = sorted({f for r in roots for f in r.rglob("*.py") if "__pycache__" not in f.parts})
-    return files + [_HERE.parent / "units.py", _HERE.parent / "derivatives.py"]
+    return files + [_HERE.parent / "units.py", _HERE.parent / "derivatives.py", _HERE.parent / "linalg.py"]
 
 
 def key(files=None) -> str:

@@ -1,7 +1,8 @@
-"""Flatten an assembled circuit into the arrays the compiled engine reads (see engine_template).
+"""Flatten an assembled circuit into the arrays the compiled engine reads (see engine_nodal.py).
 
 Everything that is structure (elements, their type codes, node and state numbering, options,
-waveform records, expression programs) goes into the layout tuple; parameter *values* go into
+waveform records, expression programs) goes into the layout (:class:`EngineLayout`, a named
+tuple: the fields are described in engine_nodal.py's header); parameter *values* go into
 a separate matrix P (members x slots), so a batch or a new parameter value reuses the layout
 and the compiled code.
 """
@@ -9,6 +10,7 @@ from __future__ import annotations
 
 import functools
 import os
+from collections import namedtuple
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -20,9 +22,15 @@ from . import waveforms as kwave
 MAX_DENSE_UNKNOWNS = 200
 
 
+#: the structure arrays the compiled engine reads (engine_nodal.py's header describes each)
+EngineLayout = namedtuple("EngineLayout", ("n", "nx", "et", "L", "S", "ep", "ex", "eu", "ui", "eo", "io", "eb", "ws",
+                                           "w0", "wd", "xs", "xc", "xk", "xcode", "xconst", "oe", "nonlin", "cm",
+                                           "st"))
+
+
 @dataclass
 class Layout:
-    lay: tuple
+    lay: EngineLayout
     kernels: list          # Kernel objects; index = type code
     slots: dict            # (element id, parameter) -> column of P
     n_params: int
@@ -106,7 +114,7 @@ def build_layout(circuit) -> Layout | None:
             own = {name for j, name, _ in g.waves if j == i} | {name for j, name, _ in g.exprs if j == i}
             const = g.comp.matrix_constant(name for j, name, _ in g.exprs if j == i)
             cm.append(int(const))
-            # 1 static, 2 stamped at every Newton iterate, 0 once per nodal solve (engine_template)
+            # 1 static, 2 stamped at every Newton iterate, 0 once per nodal solve (engine_nodal)
             st.append(2 if not g.comp.linear_in_pressure
                       else (1 if (const and g.S == 0 and not own and not g.comp.time_dependent) else 0))
             L.append(g.L)
@@ -161,9 +169,10 @@ def build_layout(circuit) -> Layout | None:
     i64 = lambda a: np.asarray(a, dtype=np.int64)  # noqa: E731
     f64 = lambda a: np.asarray(a, dtype=np.float64)  # noqa: E731
     nonlin = int(any(not g.comp.linear_in_pressure for g in circuit.groups))
-    lay = (int(circuit.n), int(circuit.nx), i64(et), i64(L), i64(S), i64(ep), i64(ex), i64(eu), i64(ui),
-           i64(eo), i64(io), i64(eb), i64(ws), i64(w0), f64(wd), i64(xs), i64(xc), i64(xk), i64(code),
-           f64(const), i64(sorted(oe)), nonlin, i64(cm), i64(st))
+    lay = EngineLayout(n=int(circuit.n), nx=int(circuit.nx), et=i64(et), L=i64(L), S=i64(S), ep=i64(ep), ex=i64(ex),
+                       eu=i64(eu), ui=i64(ui), eo=i64(eo), io=i64(io), eb=i64(eb), ws=i64(ws), w0=i64(w0), wd=f64(wd),
+                       xs=i64(xs), xc=i64(xc), xk=i64(xk), xcode=i64(code), xconst=f64(const), oe=i64(sorted(oe)),
+                       nonlin=nonlin, cm=i64(cm), st=i64(st))
     autonomous = not ws and not any(g.comp.time_dependent for g in circuit.groups)
     return Layout(lay, kernels, slots, ep[-1], autonomous)
 

@@ -13,9 +13,10 @@ the two processes split the first compile, each compiling what the other does no
 * the helper: ``elem_derivs_jac`` and ``elem_derivs`` (the kernels only the Jacobian and the
   right-hand side call), then ``local_jacobian_into``, which by then loads the nodal solve's
   element kernels from this process's cache, then ``make_jac_work`` and the Rosenbrock
-  integrator's small callees (``hermite_root``, ``hermite``, ``stage_dense``,
-  ``finish_member``); all by signature (:func:`helper_signatures`), the scratch tuples typed
-  from the Python twins of the makers;
+  integrator's small callees (``hermite_root``, ``hermite``, ``stage_dense`` of kernels.dense,
+  ``finish_member`` of kernels.runs: shared by every engine, so often in the cache already);
+  all by signature (:func:`helper_signatures`), the scratch buffers (named tuples) typed from
+  the Python twins of the makers;
 * this process (:func:`before_integrator`): ``prepare_static`` (the element kernels of the
   nodal solve), ``rhs_into`` (loading ``elem_derivs`` from the helper's cache) and
   ``make_work``; then it waits for the helper's part before compiling the integrator itself.
@@ -94,7 +95,7 @@ def before_integrator(system):
     try:
         import numba
 
-        work = mod.make_work.py_func(system.lay)  # the scratch tuple's types, as make_work's compiled twin
+        work = mod.make_work.py_func(system.lay)  # the scratch buffers' types, as make_work's compiled twin
         x, P = np.empty(int(system.scales.size)), np.empty(int(system.layout.n_params))
         P.setflags(write=False)  # a row of the integrators' read-only parameter matrix
         t, vx, lay = numba.float64, numba.typeof(x), numba.typeof(system.lay)
@@ -133,9 +134,10 @@ def helper_signatures(mod, lay, nx, n_params):
     P.setflags(write=False)  # integrate_batch's P is a read-only view (np.broadcast_to) in a single run
     vx, J = numba.typeof(x), numba.typeof(np.empty((1, 1)))
     work, jw = mod.make_work.py_func(lay), mod.make_jac_work.py_func(lay)
-    ty = [numba.typeof(work[i]) for i in (9, 10, 7, 11, 12)]  # pl, xl, ul, il, dl as the callers pass them
-    elem = (numba.int64, ty[0], ty[1], ty[2], numba.float64, ty[3], ty[4])
-    return [(mod.elem_derivs_jac, elem + (numba.typeof(jw[14]), numba.typeof(jw[15]))),
+    # one element's buffers as the callers pass them: (k, pl, xl, ul, t, il, dl)
+    elem = (numba.int64, numba.typeof(work.pl), numba.typeof(work.xl), numba.typeof(work.ul), numba.float64,
+            numba.typeof(work.il), numba.typeof(work.dl))
+    return [(mod.elem_derivs_jac, elem + (numba.typeof(jw.Jx), numba.typeof(jw.Ju))),
             (mod.elem_derivs, elem),
             (mod.local_jacobian_into, (numba.float64, vx, numba.typeof(P), numba.typeof(lay), numba.typeof(work),
                                        numba.typeof(jw), vx, J, vx, numba.boolean)),

@@ -1,5 +1,5 @@
 """The compiled evaluator of an assembled circuit: right-hand side, nodal solve and the stiff
-integrator, all in numba (see engine_template).  Python is entered once per call, not per
+integrator, all in numba (the engine: kernels.codegen and its template files engine_*.py).  Python is entered once per call, not per
 step: a 1000 s run is one call."""
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import numpy as np
 
 from .codegen import engine_module
 from .layout import ENGINE_TYPES_VAR, build_layout, param_matrix
-from . import prebuild, tableaus
+from . import prebuild, runs, tableaus
 
 STATUS = {0: "done", -1: "step size too small", -2: "step limit reached",
           -3: "non-finite state or singular nodal system"}
@@ -71,14 +71,14 @@ class CompiledSystem:
 
     def nodal_outputs(self, t, X, P):
         """(u (m, n+1), element flows (m, E)) for rows X (m, nx) at times t (m,) with P (B,
-        slots), rows member-major (engine_template.nodal_outputs); None when a row's nodal
+        slots), rows member-major (engine_nodal.nodal_outputs); None when a row's nodal
         system fails or a value is not finite (the numpy path then says why)."""
         X = np.array(X, dtype=float, order="C")
         m = X.shape[0]
         T = np.array(np.broadcast_to(np.asarray(t, dtype=float).reshape(-1), (m,)), order="C")
         P = np.array(P, dtype=float, order="C", ndmin=2)
         P.setflags(write=False)  # read-only rows, as the integrator's: its rhs_into compilation serves
-        U, F = np.empty((m, self.lay[0] + 1)), np.empty((m, self.lay[2].shape[0]))
+        U, F = np.empty((m, self.lay.n + 1)), np.empty((m, self.lay.et.shape[0]))
         if self.mod.nodal_outputs(T, X, P, self.lay, U, F) >= 0 or not (np.all(np.isfinite(U))
                                                                         and np.all(np.isfinite(F))):
             return None
@@ -103,7 +103,7 @@ class CompiledSystem:
         """States on the grid t_out (T,) from x0 at t_out[0] for one parameter row P (slots,).
         Steps end on ``breaks`` (where a source may jump) and on ``kinks`` (where only a
         source's slope jumps: its value, and so f, is continuous, so f is not re-evaluated).
-        ``method``: 'bdf' (engine_template.integrate_batch_bdf, variable-order BDF; it restarts at
+        ``method``: 'bdf' (engine_bdf.integrate_batch_bdf, variable-order BDF; it restarts at
         kinks as at breaks) or a Rosenbrock tableau of hemocircuit.kernels.tableaus (None:
         tableaus.DEFAULT); ``tab_options`` go to the tableau's ``packed`` (the BDF method takes
         ``local_jacobian`` only).
@@ -114,9 +114,10 @@ class CompiledSystem:
         X, st = self.integrate_batch(np.asarray(t_out, dtype=float)[None], np.asarray(x0, dtype=float)[None],
                                      np.asarray(P, dtype=float)[None], rtol=rtol, atol=atol, breaks=breaks, h0=h0,
                                      hmax=hmax, max_steps=max_steps, method=method, kinks=kinks, **tab_options)
-        status, t, steps, rej, nfev, nev = (st[0, k] for k in range(6))
-        return X[0], {"status": int(status), "message": STATUS[int(status)], "t": float(t), "steps": int(steps),
-                      "rejected": int(rej), "nfev": int(nfev), "limit_events": int(nev)}
+        row = dict(zip(runs.STATS, st[0]))  # the stats columns by name (kernels.runs.finish_member)
+        out = {name: int(v) for name, v in row.items()}
+        out.update(message=STATUS[out["status"]], t=float(row["t"]))
+        return X[0], out
 
     def integrate_batch(self, t_out, X0, P, rtol=1e-6, atol=None, breaks=(), h0=1e-3, hmax=np.inf,
                         max_steps=10_000_000, method=None, kinks=(), **tab_options):

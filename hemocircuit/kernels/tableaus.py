@@ -1,6 +1,6 @@
-"""Rosenbrock(-W) tableaus for the compiled integrator, packed into one float64 array.
+"""Rosenbrock(-W) tableaus for the compiled integrator, packed into one named tuple.
 
-The engine (engine_template.integrate_batch) uses the classical form (Hairer & Wanner II, IV.7):
+The engine (engine_rosenbrock.integrate_batch) uses the classical form (Hairer & Wanner II, IV.7):
 W = I - gamma h J and, for stages s = 1..ns,
 
     W k_s = h f(t + c_s h, x + sum_j A_sj k_j) + h J sum_j G_sj k_j + h^2 d_s f_t,
@@ -26,21 +26,27 @@ Rodas5PTableau h21..h48, order 4), x(t + theta h) =
 D_m = sum_s H_ms k_s; the others use the cubic Hermite interpolant of (x, f) at both ends
 (order 3), which limits a large step's accuracy between its ends.
 
-Packed array (read by the engine): [ns, gamma, q, jac_reuse, event_restart, soft_kinks, autonomous,
-local_jacobian,
-A (ns*ns, row major), G (ns*ns), b (ns), e (ns), c (ns), d (ns), reuse (ns), nd, H (nd*ns),
-controller],
-where q is the order of the error estimate (step-size exponent 1/q), reuse[s] = 1 when stage s
+Packed (what the engine reads, :class:`RosenbrockMethod`, by field name): the number of stages
+ns, gamma, q the order of the error estimate (step-size exponent 1/q), the options
+(jac_reuse, event_restart, soft_kinks, autonomous, local_jacobian, controller: :func:`packed`)
+and the coefficients A, G (ns, ns), b, e, c, d, reuse (ns,) -- reuse[s] = 1 when stage s
 evaluates f at the same point as stage s-1 (ROS4-type methods; the engine then skips the
-evaluation), nd the number of dense-output rows (0: Hermite; at most 3).
+evaluation) -- and H (nd, ns), nd the number of dense-output rows (0: Hermite; at most 3).
+Every field has the same type for every method and option (ints, floats, float64 arrays), so
+one compiled integrator serves them all.
 """
 from __future__ import annotations
 
 import functools
+from collections import namedtuple
 
 import numpy as np
 
-HEADER = 8
+#: A method as the compiled integrator reads it (module docstring): ints, floats and read-only
+#: C-contiguous float64 arrays
+RosenbrockMethod = namedtuple("RosenbrockMethod", (
+    "stages", "gamma", "q", "jac_reuse", "event_restart", "soft_kinks", "autonomous", "local_jacobian",
+    "controller", "A", "G", "b", "e", "c", "d", "reuse", "H"))
 
 
 def _no_dense(ns):
@@ -165,7 +171,7 @@ METHODS = {"ros34pw2": _ros34pw2, "ros34pw3": _ros34pw3, "rodas4": _rodas4, "rod
 #: accepted steps per Jacobian: W-methods stay consistent with an old one; RODAS-type need a
 #: fresh one more often (measured on the vasomotion run, docs/performance.md)
 JAC_REUSE = {"ros34pw2": 6, "ros34pw3": 6, "rodas4": 1, "rodas5p": 1}
-#: the variable-order BDF method (engine_template.integrate_batch_bdf): no tableau, the engine's
+#: the variable-order BDF method (engine_bdf.integrate_batch_bdf): no tableau, the engine's
 #: other integrator
 BDF = "bdf"
 #: the engine's default method: RODAS5P (order 5, fresh element-local Jacobian each step).
@@ -179,7 +185,7 @@ BDF = "bdf"
 #: longer steps cost accuracy on that member, docs/performance.md).  So BDF is used where it is
 #: as accurate: the forced runs of ``freq``.
 DEFAULT = "rodas5p"
-#: step-size controllers (engine_template.integrate_batch): "pi", Gustafsson's PI rule
+#: step-size controllers (engine_rosenbrock.integrate_batch): "pi", Gustafsson's PI rule
 #: h_new = 0.9 h err^(-0.7/q) err_prev^(0.4/q); "predictive", Gustafsson's predictive rule as in
 #: Hairer & Wanner's RODAS/RADAU5 (IV.8 (8.21)): the smaller of the I rule 0.9 h err^(-1/q) and
 #: 0.9 h (h / h_prev) (err_prev / err^2)^(1/q), err_prev >= 1e-2; growth within [0.2, 6]; after
@@ -211,22 +217,22 @@ def _method(name):
 
 
 def packed(name="rodas5p", jac_reuse=None, event_restart=1, soft_kinks=1, autonomous=0,
-           local_jacobian=1, controller=None) -> np.ndarray:
-    """The float64 array the engine reads (see the module docstring).  ``autonomous``: the
+           local_jacobian=1, controller=None) -> RosenbrockMethod:
+    """The method as the engine reads it (see the module docstring).  ``autonomous``: the
     circuit has no waveform and no time-dependent element, so df/dt = 0 is not evaluated.
     ``local_jacobian``: the state Jacobian element by element, composed through the nodal
-    solve (engine_template.local_jacobian_into) where it applies: 1 with the kernels' analytic
+    solve (engine_jacobian.local_jacobian_into) where it applies: 1 with the kernels' analytic
     partials where they have them (Kernel.derivs_jac), 2 by element-local differences only;
     0: one whole right-hand side differenced per state.  ``controller``: the step-size rule,
     ``"pi"``, ``"predictive"`` or ``"predictive-halving"`` (module docstring); default
-    CONTROLLER[name].  (Built once per
-    set of arguments and copied: packing costs ~0.5 ms, a third of a short run's Python time.)"""
+    CONTROLLER[name].  (Built once per set of arguments, its arrays read-only: packing costs
+    ~0.5 ms, a third of a short run's Python time.)"""
     jr = JAC_REUSE.get(name) if jac_reuse is None else int(jac_reuse)
     ctrl = CONTROLLER.get(name, "pi") if controller is None else controller
     if ctrl not in CONTROLLERS:
         raise ValueError(f"unknown step-size controller {ctrl!r}: choose one of {sorted(CONTROLLERS)}")
-    return _packed(name, jr, float(event_restart), float(soft_kinks), float(autonomous),
-                   float(local_jacobian), float(CONTROLLERS[ctrl])).copy()
+    return _packed(name, jr, int(event_restart), int(soft_kinks), int(autonomous), int(local_jacobian),
+                   CONTROLLERS[ctrl])
 
 
 @functools.lru_cache(maxsize=64)
@@ -239,6 +245,12 @@ def _packed(name, jr, event_restart, soft_kinks, autonomous, local_jacobian, con
     for s in range(1, ns):
         if np.allclose(A[s], A[s - 1], rtol=0, atol=1e-14):
             reuse[s] = 1.0
-    head = [ns, gamma, q, jr, event_restart, soft_kinks, autonomous, local_jacobian]
-    return np.concatenate([head, A.ravel(), G.ravel(), b, e, c, d, reuse, [H.shape[0]], H.ravel(),
-                           [controller]]).astype(np.float64)
+
+    def frozen(a):
+        a = np.array(a, dtype=np.float64, order="C")
+        a.setflags(write=False)
+        return a
+
+    return RosenbrockMethod(int(ns), float(gamma), float(q), int(jr), event_restart, soft_kinks, autonomous,
+                            local_jacobian, int(controller), frozen(A), frozen(G), frozen(b), frozen(e), frozen(c),
+                            frozen(d), frozen(reuse), frozen(np.reshape(H, (-1, ns))))

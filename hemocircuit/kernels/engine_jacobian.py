@@ -1,0 +1,251 @@
+# Engine template, part 2 of 4: the state Jacobian.  NOT imported on its own (kernels.codegen
+# appends it after engine_nodal.py, whose functions it calls).
+#
+# Element-local (local_jacobian_into: each element's derivatives differenced, or taken from its
+# kernel's derivs_jac, composed through the nodal solve) or whole right-hand sides differenced
+# (jacobian_into), and df/dt for non-autonomous circuits.  The step rule is FD_REL
+# (hemocircuit.derivatives): relative to max(|x|, the state's scale).
+
+#: The scratch arrays of local_jacobian_into (make_jac_work), by name.  nu = the number of
+#: local unknowns of all elements (ui), Lm / Sm the largest element's local unknowns and states.
+JacWork = namedtuple("JacWork", (
+    "Pb",          # (nP,) the base parameters (effective, at x)
+    "A",           # (n+1, n+1) the full nodal matrix, then its LU
+    "piv",         # (n+1,) int: its pivots
+    "ub",          # (n+1,) the base unknowns u
+    "rb",          # (nu,) the base local residuals (at the eu offsets)
+    "M",           # (nx, n+1) dD/du
+    "col",         # (n+1,) one column dR/dx_j, then -du/dx_j
+    "Db",          # (nx,) the base derivatives
+    "Ab",          # (nu, Lm) the elements' local matrices (at the eu offsets)
+    "bb",          # (nu,) their local right-hand sides
+    "has_expr",    # (E,) int: 1 if the element has an expression parameter (layout only)
+    "observed",    # (E,) int: 1 if expressions read the element's observables (layout only)
+    "analytic",    # (E,) int: 1 if its partials came from its kernel's derivs_jac at this call
+    "Jxs",         # (nx, Sm) those partials d dx / d x_own (at the ex offsets)
+    "Jx",          # (Sm, Sm) one element's d dx / d x (derivs_jac's Jx)
+    "Ju",          # (Sm, Lm) one element's d dx / d u (derivs_jac's Ju)
+))
+
+
+@njit(cache=True, nogil=True)
+def make_jac_work(lay):
+    """The scratch arrays of local_jacobian_into (JacWork)."""
+    (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st) = lay
+    Lm = 1
+    for e in range(et.shape[0]):
+        Lm = max(Lm, L[e])
+    nu = max(ui.shape[0], 1)
+    has_expr = np.zeros(et.shape[0], dtype=np.int64)
+    for k in range(xs.shape[0]):
+        for e in range(et.shape[0]):
+            if ep[e] <= xs[k] < ep[e + 1]:
+                has_expr[e] = 1
+    observed = np.zeros(et.shape[0], dtype=np.int64)
+    if xs.shape[0] > 0:
+        for k in range(oe.shape[0]):
+            observed[oe[k]] = 1
+    Sm = 1
+    for e in range(et.shape[0]):
+        Sm = max(Sm, S[e])
+    return JacWork(Pb=np.zeros(max(ep[-1], 1)), A=np.zeros((n + 1, n + 1)), piv=np.zeros(n + 1, dtype=np.int64),
+                   ub=np.zeros(n + 1), rb=np.zeros(nu), M=np.zeros((max(nx, 1), n + 1)), col=np.zeros(n + 1),
+                   Db=np.zeros(max(nx, 1)), Ab=np.zeros((nu, Lm)), bb=np.zeros(nu), has_expr=has_expr,
+                   observed=observed, analytic=np.zeros(et.shape[0], dtype=np.int64),
+                   Jxs=np.zeros((max(nx, 1), Sm)), Jx=np.zeros((Sm, Sm)), Ju=np.zeros((Sm, Lm)))
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def local_jacobian_into(t, x, P, lay, work, jw, scales, J, xt, analytic):
+    """State Jacobian J (nx, nx) at (t, x) from element-local differences composed through the
+    nodal solve (as svZeroDSolver composes its blocks' derivatives), without a whole
+    right-hand side per column.  With f = D(x, u), R(x, u) = A(x) u - b(x) = 0 the nodal
+    system (linear in u):  du/dx = -A^-1 dR/dx  and  J = dD/dx + dD/du du/dx.  Each element
+    gives its columns of dR/dx, dD/dx (its own states; the elements with expression parameters
+    also those of the states their expressions read) and dD/du (its local unknowns) by forward
+    differences of its own stamp and derivs, same step rule as jacobian_into (FD_REL; FD_REL
+    max(|u|, 1) for an unknown in mmHg or mL/s) -- or, with ``analytic``, dD/dx of its own
+    states and dD/du from its kernel's derivs_jac where it has one (and no expression moves
+    its parameters with the states): one call instead of one derivs per state and unknown.
+    Returns 0, or -1 when it does not apply (an element nonlinear in the pressures, a singular
+    nodal matrix): the caller then differences whole right-hand sides."""
+    (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st) = lay
+    if nonlin != 0:
+        return -1
+    Pb, A, piv, ub, rb, M, col, Db, Ab, bb = jw.Pb, jw.A, jw.piv, jw.ub, jw.rb, jw.M, jw.col, jw.Db, jw.Ab, jw.bb
+    hasx, obs, an, Jxs, Jxl, Jul = jw.has_expr, jw.observed, jw.analytic, jw.Jxs, jw.Jx, jw.Ju
+    u, Al, bl, ul, pl, xl, il, dl, A0, b0 = (work.u, work.Al, work.bl, work.ul, work.pl, work.xl, work.il, work.dl,
+                                             work.A0, work.b0)
+    E = et.shape[0]
+    Pe = effective_params(t, x, P, lay, work)
+    for i in range(Pb.shape[0]):
+        Pb[i] = Pe[i]
+    # the full nodal system at x (as solve_nodes, without condensation); local stamps kept
+    for i in range(n + 1):
+        ub[i] = b0[i]
+        for k in range(n + 1):
+            A[i, k] = A0[i, k]
+    for e in range(E):
+        if st[e] == 1:
+            continue
+        stamp_element(e, t, x, Pb, et, L, ep, ex, eu, ui, eo, io, u, Al, bl, ul, pl, xl, il)
+        for i in range(L[e]):
+            r = ui[eu[e] + i]
+            ub[r] += bl[i]
+            bb[eu[e] + i] = bl[i]
+            for k in range(L[e]):
+                Ab[eu[e] + i, k] = Al[i, k]
+                if cm[e] == 0:
+                    A[r, ui[eu[e] + k]] += Al[i, k]
+    if not lu_factor(A, piv, n):
+        return -1
+    lu_apply(A, piv, ub, n)
+    ub[n] = 0.0
+    # base residuals, derivatives and dD/du
+    for i in range(M.shape[0]):
+        for k in range(n + 1):
+            M[i, k] = 0.0
+    for e in range(E):
+        if st[e] == 1:
+            continue
+        for i in range(L[e]):
+            acc = -bb[eu[e] + i]
+            for k in range(L[e]):
+                acc += Ab[eu[e] + i, k] * ub[ui[eu[e] + k]]
+            rb[eu[e] + i] = acc
+        an[e] = 0
+        if S[e] == 0:
+            continue
+        for i in range(L[e]):
+            ul[i] = ub[ui[eu[e] + i]]
+        load_element(e, x, Pb, ep, ex, eo, io, pl, xl, il)
+        # the kernel's own partials where it has them (and no expression moves its parameters
+        # with the states): one evaluation instead of one per state and local unknown
+        if analytic and hasx[e] == 0 and elem_derivs_jac(et[e], pl, xl, ul, t, il, dl, Jxl, Jul) == 1:
+            an[e] = 1
+            for i in range(S[e]):
+                Db[ex[e] + i] = dl[i]
+                for k in range(S[e]):
+                    Jxs[ex[e] + i, k] = Jxl[i, k]
+            for k in range(L[e]):
+                g = ui[eu[e] + k]
+                if g >= n:
+                    continue
+                for i in range(S[e]):
+                    M[ex[e] + i, g] += Jul[i, k]
+            continue
+        elem_derivs(et[e], pl, xl, ul, t, il, dl)
+        for i in range(S[e]):
+            Db[ex[e] + i] = dl[i]
+        for k in range(L[e]):
+            g = ui[eu[e] + k]
+            if g >= n:
+                continue
+            hk = FD_REL * max(abs(ub[g]), 1.0)
+            ul[k] = ub[g] + hk
+            hk = ul[k] - ub[g]
+            elem_derivs(et[e], pl, xl, ul, t, il, dl)
+            for i in range(S[e]):
+                M[ex[e] + i, g] += (dl[i] - Db[ex[e] + i]) / hk
+            ul[k] = ub[g]
+    for i in range(nx):
+        xt[i] = x[i]
+    for e0 in range(E):
+        observed = obs[e0] == 1
+        for j in range(ex[e0], ex[e0 + 1]):
+            hj = FD_REL * max(abs(x[j]), scales[j])
+            xt[j] = x[j] + hj
+            hj = xt[j] - x[j]
+            Pt = Pb
+            if observed:  # expressions read e0's observables: parameters at the moved state
+                Pt = effective_params(t, xt, P, lay, work)
+            for i in range(n + 1):
+                col[i] = 0.0
+            for i in range(nx):
+                J[i, j] = 0.0
+            moved = False  # does x_j enter a stamp?  If not, du/dx_j = 0: no solve
+            for e in range(E):
+                if e != e0 and not (observed and hasx[e] == 1):
+                    continue
+                stamp_element(e, t, xt, Pt, et, L, ep, ex, eu, ui, eo, io, u, Al, bl, ul, pl, xl, il)
+                for i in range(L[e]):
+                    r = ui[eu[e] + i]
+                    if r < n:
+                        acc = -bl[i]
+                        for k in range(L[e]):
+                            acc += Al[i, k] * ub[ui[eu[e] + k]]
+                        d = (acc - rb[eu[e] + i]) / hj
+                        if d != 0.0:
+                            col[r] += d
+                            moved = True
+                if S[e] > 0 and e == e0 and an[e] == 1:  # its own state: the kernel's partials
+                    for i in range(S[e]):
+                        J[ex[e] + i, j] += Jxs[ex[e] + i, j - ex[e0]]
+                elif S[e] > 0:
+                    for i in range(L[e]):
+                        ul[i] = ub[ui[eu[e] + i]]
+                    load_element(e, xt, Pt, ep, ex, eo, io, pl, xl, il)
+                    elem_derivs(et[e], pl, xl, ul, t, il, dl)
+                    for i in range(S[e]):
+                        J[ex[e] + i, j] += (dl[i] - Db[ex[e] + i]) / hj
+            if moved:
+                lu_apply(A, piv, col, n)  # -du/dx_j
+                for i in range(nx):
+                    acc = J[i, j]
+                    for g in range(n):
+                        acc -= M[i, g] * col[g]
+                    J[i, j] = acc
+            xt[j] = x[j]
+    return 0
+
+
+# inlined (numba IR) into integrate_batch, its one caller: numba links a callee's machine code into
+# every caller and LLVM optimises it again there, so each call level costs compile time
+@njit(cache=True, nogil=True, inline="always")
+def jacobian_into(t, x, f0, P, lay, work, jw, scales, J, ft, xt, ftmp, autonomous, local):
+    """Jacobian J (nx, nx) and df/dt ft (nx,) at (t, x) with f0 = f(t, x): element-local
+    (local_jacobian_into; ``local`` 1: with the kernels' analytic partials where they have
+    them, 2: differences only) when ``local`` and it applies, otherwise forward differences of
+    whole right-hand sides; ft by a forward difference in t (ft = 0 without an evaluation
+    when the circuit is autonomous).
+    Returns the number of right-hand-side evaluations, or -1 if one failed (singular nodal
+    system)."""
+    nx = x.shape[0]
+    nev = 0
+    if local == 0 or local_jacobian_into(t, x, P, lay, work, jw, scales, J, xt, local == 1) < 0:
+        for i in range(nx):
+            xt[i] = x[i]
+        for j in range(nx):
+            hj = FD_REL * max(abs(x[j]), scales[j])
+            xt[j] = x[j] + hj
+            hj = xt[j] - x[j]
+            if not rhs_into(t, xt, P, lay, work, ftmp):
+                return -1
+            for i in range(nx):
+                J[i, j] = (ftmp[i] - f0[i]) / hj
+            xt[j] = x[j]
+        nev = nx
+    if autonomous:
+        return nev
+    ht = FD_REL * max(abs(t), 1.0)
+    if not rhs_into(t + ht, x, P, lay, work, ftmp):
+        return -1
+    for i in range(nx):
+        ft[i] = (ftmp[i] - f0[i]) / ht
+    return nev + 1
+
+
+@njit(cache=True, nogil=True)
+def jacobian(t, x, P, lay, scales, local):
+    """State Jacobian (nx, nx) at (t, x) (allocating; for tests and single calls): element-local
+    if ``local`` (1: with the kernels' analytic partials, 2: differences only; where it
+    applies), else (0) whole right-hand sides differenced."""
+    nx = x.shape[0]
+    work = make_work(lay)
+    jw = make_jac_work(lay)
+    prepare_static(t, x, P, lay, work)
+    f0 = np.empty(nx)
+    rhs_into(t, x, P, lay, work, f0)
+    J = np.zeros((nx, nx))
+    jacobian_into(t, x, f0, P, lay, work, jw, scales, J, np.zeros(nx), np.empty(nx), np.empty(nx), True, local)
+    return J
