@@ -62,7 +62,9 @@ def test_the_scratch_buffers_are_named_tuples_of_arrays():
 
     c = hemocircuit.load(str(PKG.parent / "netlists" / "payne06.yaml"))
     system = CompiledSystem.of(c)
-    assert isinstance(system.lay, EngineLayout) and system.lay.n == c.n
+    fields = system.layout.fields
+    assert isinstance(fields, EngineLayout) and fields.n == c.n
+    assert all(a is b for a, b in zip(fields, system.lay))
     work = system.mod.make_work.py_func(system.lay)
     jw = system.mod.make_jac_work.py_func(system.lay)
     for buffers in (work, jw):

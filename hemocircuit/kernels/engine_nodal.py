@@ -8,8 +8,8 @@
 # solve, right-hand side, outputs), engine_jacobian.py, engine_rosenbrock.py, engine_bdf.py.
 # Everything here is numba nopython code with no per-call Python.
 #
-# Layout ``lay`` (a kernels.layout.EngineLayout, built from an assembled circuit; the functions
-# unpack its fields by name):
+# Layout ``lay`` (the fields of kernels.layout.EngineLayout as a plain tuple, built from an
+# assembled circuit; the functions unpack them by name):
 #   n, nx            unknowns of the nodal system (pressures, branch flows), states
 #   et (E,)          type code of element e;  L (E,) local unknowns;  S (E,) states
 #   ep (E+1,)        offsets of each element's parameters in the flat parameter vector P

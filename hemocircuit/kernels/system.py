@@ -78,7 +78,8 @@ class CompiledSystem:
         T = np.array(np.broadcast_to(np.asarray(t, dtype=float).reshape(-1), (m,)), order="C")
         P = np.array(P, dtype=float, order="C", ndmin=2)
         P.setflags(write=False)  # read-only rows, as the integrator's: its rhs_into compilation serves
-        U, F = np.empty((m, self.lay.n + 1)), np.empty((m, self.lay.et.shape[0]))
+        fields = self.layout.fields
+        U, F = np.empty((m, fields.n + 1)), np.empty((m, fields.et.shape[0]))
         if self.mod.nodal_outputs(T, X, P, self.lay, U, F) >= 0 or not (np.all(np.isfinite(U))
                                                                         and np.all(np.isfinite(F))):
             return None
