@@ -11,6 +11,7 @@ import functools
 import importlib
 import inspect
 import pkgutil
+import warnings
 from collections.abc import Mapping
 from importlib import metadata
 from types import MappingProxyType
@@ -53,7 +54,22 @@ def component_types() -> dict[str, type[Component]]:
         classes = [obj] if inspect.isclass(obj) else list(_classes_in(obj))
         for cls in classes:
             add(cls, f"entry point {ep.name}")
+            _say_if_legacy(cls, ep.name)
     return found
+
+
+def _say_if_legacy(cls, entry):
+    """Warn (once: the registry is built once) about a plug-in type written against the
+    vectorised numpy hooks, without kernel functions: it still runs, on the numpy path only."""
+    try:
+        legacy = cls().kernel() is None
+    except Exception:  # noqa: BLE001 - a type that needs options to build: judged when used
+        return
+    if legacy:
+        warnings.warn(f"component type '{cls.type_name}' (entry point {entry}) has no kernel functions: circuits "
+                      "with it run on the numpy path only (no compiled engine, slower); to port it, write its "
+                      "equations as kernel functions and delete its numpy hooks (docs/components.md)",
+                      stacklevel=2)
 
 
 def get_type(name: str) -> type[Component] | None:
