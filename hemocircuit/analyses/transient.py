@@ -343,7 +343,8 @@ def _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step
                                                       f"engine was built, then {compiled.stats['method']}",
                           "switched_at": switch[1], "scipy": scipy_stats}
         return compiled
-    res = _collect(segs[-1] if segs else c, ts, xs, segs, output_from)
+    res = _collect(segs[-1] if segs else c, ts, xs, segs, output_from,
+                   grid=None if dt is None else _output_grid(t0, t_end, dt))
     res.stats = scipy_stats if handover is None else {**scipy_stats, "compiled_engine": "building in the background"}
     return res
 
@@ -431,14 +432,27 @@ def _from(t, t_from):
     return t[t >= t_from - 1e-12 * max(1.0, abs(t_from))]
 
 
-def _collect(c_last, ts, xs, segs, t_from=None):
+def _on_grid(t, grid):
+    """Bool mask of the times ``t`` that are output times of ``grid`` (to rounding)."""
+    j = np.clip(np.searchsorted(grid, t), 1, max(len(grid) - 1, 1))
+    near = np.minimum(np.abs(t - grid[j - 1]), np.abs(t - grid[np.minimum(j, len(grid) - 1)]))
+    return near <= 1e-9 * np.maximum(1.0, np.abs(t))
+
+
+def _collect(c_last, ts, xs, segs, t_from=None, grid=None):
     """Stack segments (dropping duplicated boundary points and rows before ``t_from``) and
-    compute outputs per segment."""
+    compute outputs per segment.  ``grid``: the requested output times; points the integrator
+    added (a hard limit's event time, a segment's end) are left out, so the result has the
+    grid the compiled engine gives (a measure on it, e.g. a period from interpolated
+    crossings, must not depend on which engine ran)."""
     t_all, x_all, cols = [], [], {}
     for t, x, c in zip(ts, xs, segs):
         if t_from is not None:
             keep = _from(t, t_from).size
             t, x = t[t.size - keep:], x[x.shape[0] - keep:]  # times increase within a segment
+        if grid is not None and t.size:
+            on = _on_grid(t, grid)
+            t, x = t[on], x[on]
         if t.size == 0:
             continue
         if t_all and t_all[-1].size and t[0] <= t_all[-1][-1]:
