@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from hemocircuit.component import Component, Observable, Option, Param, State, Storage
+from hemocircuit.errors import HemocircuitError
 from hemocircuit.units import PA_PER_MMHG
 
 from . import compiled, equations, model
@@ -51,6 +52,17 @@ _OBS = {
     "Cb_inf": ("M", "far-downstream blood [NO], h_w C_we / (h_w + r_db A_b) (eqs. cbbar, cinv)"),
     "k_NO": ("m**2/s", "blood NO loss per unit vessel length, h_w + r_db A_b (exponent of eq. cinv)"),
 }
+
+
+class ArterioleError(HemocircuitError, ValueError):
+    """Non-finite stamp or derivatives: invalid states, inputs or parameters."""
+
+
+def _finite(result, what):
+    arrays = result if isinstance(result, tuple) else (result,)
+    if not all(np.all(np.isfinite(a)) for a in arrays):
+        raise ArterioleError(f"arteriole {what}: non-finite (invalid states, inputs or parameters)")
+    return result
 
 
 class Arteriole(Component):
@@ -127,6 +139,14 @@ class Arteriole(Component):
         return Kernel(stamp=compiled.stamp, derivs=compiled.derivs, observe=compiled.observe,
                       observables=compiled.observables(self.opts["ca_order"]), derivs_jac=compiled.derivs_jac,
                       report=compiled.report)
+
+    # an invalid state, input or parameter is an error naming the arteriole, never a NaN that
+    # surfaces later as a singular nodal system (the numpy path; the engine checks its own)
+    def stamp(self, p, x, u, t, src=None):
+        return _finite(super().stamp(p, x, u, t, src), "stamp (conductance, volume flow)")
+
+    def derivatives(self, p, x, u, t, src=None):
+        return _finite(super().derivatives(p, x, u, t, src), "derivatives")
 
     def kernel_options(self):
         """[ca_order (1|2), kinetics dynamic (0|1), passive (0|1), volume_flow (0|1),

@@ -89,10 +89,11 @@ def test_nonpositive_ca_and_odd_lambda_give_finite_derivatives(art, kuo):
     assert np.isfinite(d["lambda"]) and d["lambda"] > 0    # no bridges: the wall gives way
 
 
-def test_nan_state_is_not_hidden(art, kuo):
-    """A NaN state gives NaN rates (the circuit reports it), never a finite number."""
-    d = rates(art, {"Ca": np.nan, "Cw": 1e-8, "lambda": 1.0}, 8000.0, 0.0, kuo)
-    assert np.isnan(d["Ca"]) and np.isnan(d["lambda"])
+def test_nan_state_raises(art, kuo):
+    """A NaN state is an error naming the arteriole (the kernel itself propagates NaN)."""
+    from hemocircuit.components.arteriole.element import ArterioleError
+    with pytest.raises(ArterioleError, match="arteriole derivatives: non-finite"):
+        rates(art, {"Ca": np.nan, "Cw": 1e-8, "lambda": 1.0}, 8000.0, 0.0, kuo)
 
 
 def test_ca_floor_helpers(art):
