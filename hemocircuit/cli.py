@@ -17,192 +17,19 @@ import os
 import shlex
 import sys
 
+from .arguments import assignments, parse_sets, quantity_to, range_spacing
+from .commands import circuit_of_args, computed, load_args, record, report_grid, save_outputs
 from .errors import HemocircuitError, Interrupted
+from .loading import events_only, load_circuit  # noqa: F401 - load_circuit: the loader, also as cli.load_circuit
 
 EXIT_ERROR = 2            # an error the user can fix (message on stderr)
 EXIT_FAILED_MEMBERS = 3   # a batch completed, but some members failed (each reported)
 
 
-def _assignments(items, flag="--set", form="ID.PARAM=VALUE", example="Pa.value=90mmHg"):
-    """['ID.NAME=VALUE', ...] -> {ID.NAME: VALUE} ('90mmHg' spaced to '90 mmHg')."""
-    out = {}
-    for it in items or []:
-        if "=" not in it:
-            raise HemocircuitError(f"{flag} {it!r}: expected {form} (e.g. {example})")
-        k, v = it.split("=", 1)
-        out[k.strip()] = _unit_spacing(v.strip())
-    return out
-
-
-def _sets(items):
-    return _assignments(items, "--set", "ID.PARAM=VALUE", "Pa.value=90mmHg")
-
-
-def _unit_spacing(v):
-    """Accept '90mmHg' as well as '90 mmHg' (an exponent, '1e8', is part of the number)."""
-    import re
-    m = re.match(r"^([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)(?![eE][-+]?\d)\s*([A-Za-z].*)$", v)
-    return f"{m.group(1)} {m.group(2)}" if m else v
-
-
-def load_circuit(netlist, sets=None, protocol=None, allow_paths=None, svzerod_units=None):
-    """The one way every command gets its circuit: netlist, then ``--set``, then ``--protocol``.
-
-    ``sets``: {ID.NAME: value} (``--set``): structural options (``art.ca_order``, values as YAML
-    literals) re-assemble the circuit first, keeping every numeric value; then numeric
-    parameters are set (strings with units).  ``protocol``: path of a protocol YAML (or None),
-    checked against the circuit; its ``initial`` settings and its events at t = 0 are applied
-    last (they win over ``--set``, as they would in ``simulate``).  ``allow_paths``: more
-    folders the netlist may read files from (``--allow-path``, see hemocircuit.access).
-    ``svzerod_units`` (``--svzerod-units``): the unit system of an svZeroDSolver JSON model.
-    Returns (circuit, protocol or None).  The protocol's timed events are left to the commands
-    that run them (tran, compare --tran), which pass it on stripped of ``initial`` (see
-    :func:`events_only`).  Errors in ``--set`` name the ``--set`` option, with close matches.
-    """
-    import os
-
-    from .build import path_problem
-    from .circuit import load
-    from .errors import NetlistError
-    from .protocol import Protocol
-
-    try:
-        c = load(str(netlist), allow_paths=allow_paths, svzerod_units=svzerod_units)
-    except NetlistError as exc:
-        given = os.path.abspath(str(netlist))
-        if exc.file and os.path.abspath(str(exc.file)) != given:  # an error in a base netlist: say which
-            exc.args = (f"{exc} (in the extends chain of {given})",)
-        raise
-    sets = dict(sets or {})
-    for k, v in sets.items():
-        problem = path_problem(c, k)
-        if problem:
-            raise HemocircuitError(f"--set {k}={v}: {problem}")
-    opts = {k: v for k, v in sets.items() if c.is_option(k)}
-    params = {k: v for k, v in sets.items() if k not in opts}
-    try:
-        if opts:
-            c = c.with_options({k: _option_literal(v) for k, v in opts.items()})
-        c = c.with_values(params)
-    except NetlistError as exc:
-        mine = [f"{k}={v}" for k, v in sets.items() if k.partition(".")[0] == exc.element] or \
-            [f"{k}={v}" for k, v in sets.items()]
-        raise HemocircuitError(f"--set {', --set '.join(mine)}: "
-                               + (f"element '{exc.element}': " if exc.element else "") + exc.bare_message) from None
-    proto = None
-    if protocol:
-        proto = Protocol.load(str(protocol), c)
-        c = proto.apply_initial(c)
-    return c, proto
-
-
-def events_only(proto):
-    """The protocol without its ``initial`` settings (already applied by :func:`load_circuit`)."""
-    import dataclasses
-    return None if proto is None else dataclasses.replace(proto, initial={})
-
-
-def circuit_of_args(args, sets, netlist=None):
-    """load_circuit() of ``netlist`` (default the command's) with the loader options of the
-    parsed arguments (--protocol, --allow-path, --svzerod-units) and ``sets``: the one way
-    every command and every --grid member gets its circuit.  Returns (circuit, protocol)."""
-    return load_circuit(netlist if netlist is not None else args.netlist, sets, getattr(args, "protocol", None),
-                        getattr(args, "allow_path", None), getattr(args, "svzerod_units", None))
-
-
-def _load(args, uses_events=False):
-    """load_circuit() from the parsed arguments (netlist, --set, --protocol, --allow-path,
-    --svzerod-units) of any command; ``--show`` names are checked against the circuit's columns."""
-    c, proto = circuit_of_args(args, _sets(getattr(args, "set", None)))
-    later = [ev for ev in proto.events if ev.at > 0] if proto is not None else []
-    if later and not uses_events:
-        print(f"note: {args.command} applies the protocol's 'initial' settings and its events at t = 0; its "
-              f"{len(later)} later event(s) are used by tran only", file=sys.stderr)
-    _check_show(c, getattr(args, "show", None))
-    return c, proto
-
-
-def _check_show(c, show):
-    """Every ``--show`` name must be a column of the circuit (with close matches if not)."""
-    from .errors import did_you_mean
-
-    if not show:
-        return
-    columns = [col.name for col in c.columns()]
-    known = set(columns)
-    for name in show:
-        if name not in known:
-            derived = " (a derived quantity: compare shows those)" if name in (c.netlist.derived or {}) else ""
-            raise HemocircuitError(f"--show {name!r}: no such column{derived}{did_you_mean(name, columns)}; "
-                                   f"columns: {columns[:40]}{' ...' if len(columns) > 40 else ''}")
-
-
-def _option_literal(v):
-    import yaml
-    return yaml.safe_load(v) if isinstance(v, str) else v
-
-
 def cmd_check(args):
-    c, proto = _load(args, uses_events=True)
+    c, proto = load_args(args, uses_events=True)
     print(c.describe())
     print("ok: the netlist is valid" + (" and so is the protocol" if proto else ""))
-
-
-def record(args, res):
-    """Add this invocation's provenance (command line, --set, --protocol) to a result."""
-    from .provenance import add_invocation
-    netlists = getattr(args, "netlists", None) or [getattr(args, "netlist", None)]
-    add_invocation(res.metadata, getattr(args, "argv", sys.argv[1:]), _sets(getattr(args, "set", None)),
-                   getattr(args, "protocol", None), netlists=[n for n in netlists if n])
-    args.computed_result = res  # main() reports its warnings and failed members (exit status)
-    return res
-
-
-def save_outputs(args, res, plot=None):
-    """Compute and print ``--measure`` (saved in ``metadata['measures']``), then write ``--out``
-    (the result, with provenance) and ``--plot`` (``plot(path)``, default ``res.plot``); both
-    files were checked before the computation (:func:`_check_outputs`)."""
-    record(args, res)  # first: its warnings are reported even if a measure fails
-    apply_measures(args, res)
-    if getattr(args, "out", None):
-        print(f"wrote {res.save(args.out)}")
-    if getattr(args, "plot", None):
-        (plot or (lambda path: res.plot(path, select=getattr(args, "show", None))))(args.plot)
-        print(f"wrote {args.plot}")
-
-
-def apply_measures(args, res):
-    """``--measure SPEC`` (repeatable): :mod:`hemocircuit.measures`, printed and stored."""
-    specs = getattr(args, "measure", None)
-    if not specs:
-        return
-    from .measures import measure_all
-    for line in measure_all(res, specs):
-        print(line)
-
-
-def computed(args, compute):
-    """The command's result: ``compute(args, sets)`` on the netlist with ``--set`` applied, or,
-    with ``--grid``, every member of the grid run in parallel and stacked into one result
-    (:mod:`hemocircuit.grid`)."""
-    sets = _sets(getattr(args, "set", None))
-    if not getattr(args, "grid", None):
-        return compute(args, sets)
-    from . import grid
-    first = getattr(args, "netlist", None) or args.netlists[0]
-    circuit, _ = circuit_of_args(args, sets, first)
-    return grid.run(compute, args, circuit, sets, workers=getattr(args, "workers", None))
-
-
-def report_grid(args, res, show=None):
-    """What every command prints for a --grid result: the table (grid columns first), the
-    failed members, then --measure, --out and --plot."""
-    if show:
-        show = [k for k in show if k in res.data]
-    print(res.summary(show=getattr(args, "show", None) or show or None, max_rows=24, where=getattr(args, "out", None)))
-    for where, why in res.metadata.get("failed", []):
-        print(f"failed: {where}: {why}", file=sys.stderr)
-    save_outputs(args, res)
 
 
 def partial_path(path):
@@ -223,14 +50,14 @@ def cmd_op(args):
                                "use 'dc --sweep ... --plot' for curves, or op --grid ... --plot")
     if args.grid:
         return report_grid(args, computed(args, compute_op))
-    op = _load(args)[0].operating_point()
+    op = load_args(args)[0].operating_point()
     print(op.summary(show=args.show))
     save_outputs(args, op)
 
 
 def _dc(args, c):
     param, rng = args.sweep.split("=", 1)
-    return c.dc_sweep(param.strip(), _range_spacing(rng))
+    return c.dc_sweep(param.strip(), range_spacing(rng))
 
 
 def compute_dc(args, sets):
@@ -242,7 +69,7 @@ def cmd_dc(args):
     if not args.sweep or "=" not in args.sweep:
         raise HemocircuitError("dc needs --sweep ID.PARAM=START:STOP:STEP UNIT (e.g. Pa.value=20:200:5mmHg)")
     param = args.sweep.split("=", 1)[0].strip()
-    c = None if args.grid else _load(args)[0]
+    c = None if args.grid else load_args(args)[0]
     res = computed(args, compute_dc) if args.grid else _dc(args, c)
     cols = res.columns
     # the netlist's outputs of interest (what the plots draw), else the first flows and pressures,
@@ -259,21 +86,15 @@ def cmd_dc(args):
     save_outputs(args, res)
 
 
-def _range_spacing(r):
-    """'20:200:5mmHg' -> '20:200:5 mmHg'; exponents ('1e8') stay part of their number."""
-    import re
-    return re.sub(r"(\d)(?![eE][-+]?\d)([A-Za-z])", r"\1 \2", r, count=1)
-
-
 def compute_tran(args, sets):
     """One run (a --grid member, :func:`computed`)."""
     import numpy as np
 
     c, proto = circuit_of_args(args, sets)
-    t_end = float(_unit_to(args.t_end, "s")) if args.t_end else None
-    dt = float(_unit_to(args.dt, "s")) if args.dt else None
-    ic = _assignments(args.ic, "--ic", "ID.STATE=VALUE", "Cv.V=20mL")
-    max_step = float(_unit_to(args.max_step, "s")) if args.max_step else np.inf
+    t_end = float(quantity_to(args.t_end, "s")) if args.t_end else None
+    dt = float(quantity_to(args.dt, "s")) if args.dt else None
+    ic = assignments(args.ic, "--ic", "ID.STATE=VALUE", "Cv.V=20mL")
+    max_step = float(quantity_to(args.max_step, "s")) if args.max_step else np.inf
     return c.simulate(t_end, dt=dt, protocol=events_only(proto), integrator=args.integrator, rtol=args.rtol,
                       atol=args.atol, max_step=max_step, ic=ic, compile=args.compile)
 
@@ -282,12 +103,11 @@ def cmd_tran(args):
     from .errors import SolverError
 
     if getattr(args, "svzerod_output", None):
-        from .analyses.transient import cmd_tran_svzerod
         return cmd_tran_svzerod(args)
     if args.grid:
         return report_grid(args, computed(args, compute_tran))
     try:
-        res = compute_tran(args, _sets(args.set))
+        res = compute_tran(args, parse_sets(args.set))
     except SolverError as exc:
         part = exc.partial
         if args.out and part is not None and part.n_rows:
@@ -309,14 +129,40 @@ def cmd_tran(args):
     save_outputs(args, res)
 
 
+def cmd_tran_svzerod(args):
+    """``tran MODEL.json --svzerod-output RESULT.json``: their simulation settings (the time
+    span and grid come from their simulation_parameters, so --t-end, --dt, --ic, --protocol
+    and --grid do not apply) and their result layout (hemocircuit.svzerod.output); --out and
+    --plot get the whole run as usual."""
+    from .inputs import read_json
+    from .svzerod.importer import import_svzerod, is_svzerod_model
+    from .svzerod.output import simulate_svzerod, write_svzerod_output
+
+    given = [f"--{k.replace('_', '-')}" for k in ("t_end", "dt", "ic", "protocol", "grid") if getattr(args, k, None)]
+    if given:
+        raise HemocircuitError(f"--svzerod-output runs their simulation settings; {', '.join(given)} cannot be "
+                               "combined with it (change number_of_cardiac_cycles etc. in the model)")
+    cfg = None
+    if str(args.netlist).lower().endswith(".json"):  # read once, under the input policy
+        cfg = read_json(args.netlist, "svZeroDSolver model file")
+    if not is_svzerod_model(cfg):
+        raise HemocircuitError(f"--svzerod-output: {args.netlist} is not an svZeroDSolver JSON model "
+                               "(simulation_parameters and blocks)")
+    model = import_svzerod(cfg, units=getattr(args, "svzerod_units", None),
+                           name=os.path.splitext(os.path.basename(str(args.netlist)))[0], source=args.netlist)
+    c, res = simulate_svzerod(model, sets=parse_sets(args.set), start=args.svzerod_start, cfg=cfg)
+    path = write_svzerod_output(args.svzerod_output, model, c, res, cfg)
+    layout = "per variable" if model.sim.get("output_variable_based") else "per block"
+    ran = res.metadata["svzerod_run"]  # their rule's count and extra cycles (the model is left as given)
+    extra = f" (+{ran['extra_cycles']} by their cycle-to-cycle criterion)" if ran["extra_cycles"] else ""
+    print(f"{ran['cycles']} cycles{extra} of {model.period:g} s, {model.points} points per cycle; solver {res.stats}")
+    print(f"wrote {path} (their result layout, {layout}, units {model.units['P']}, {model.units['Q']})")
+    args.computed_result = res
+    save_outputs(args, res)
+
+
 class _Reported(HemocircuitError):
     """An error already reported on stderr (exit status 2, nothing more printed)."""
-
-
-def _unit_to(text, unit):
-    from .units import parse_quantity
-    return parse_quantity(_unit_spacing(str(text)) if not str(text).replace(".", "").isdigit() else f"{text} {unit}",
-                          unit)
 
 
 def cmd_show(args):
@@ -343,7 +189,7 @@ def cmd_show(args):
 
 
 def cmd_graph(args):
-    c, _ = _load(args)
+    c, _ = load_args(args)
     from .plotting import draw_circuit
     out = args.out or args.plot or "circuit.png"
     draw_circuit(c, out)

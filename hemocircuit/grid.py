@@ -4,7 +4,7 @@ product, the first grid varying slowest; like SPICE ``.step``).
 Values take units (``art.tau_Ca=1,10,100s``, ``Pa.value=60:120:20mmHg``); structural options
 are allowed (``art.ca_order=1,2``).  Each member is the command's own computation on the
 circuit with the member's values applied exactly as ``--set`` would apply them
-(:func:`hemocircuit.cli.load_circuit`), run in worker processes
+(:func:`hemocircuit.loading.load_circuit`), run in worker processes
 (:func:`hemocircuit.execution.run_chunks`), and the members' results are stacked into ONE
 :class:`~hemocircuit.results.Result`: the grid columns first (numbers in the parameter's
 unit, options as text), then the member's own columns; the index is the grid parameters

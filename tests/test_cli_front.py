@@ -1,4 +1,4 @@
-"""One front for every command (netlist -> --set -> --protocol, cli.load_circuit), structural
+"""One front for every command (netlist -> --set -> --protocol, loading.load_circuit), structural
 options that keep the numbers already set (Circuit.with_options), initial conditions
 (tran --ic, simulate(ic=...)) and a repository that stays clean when commands run."""
 import csv
@@ -12,8 +12,9 @@ import hemocircuit as hc
 from hemocircuit.analyses import freq as freq_mod
 from hemocircuit.analyses import periodic as periodic_mod
 from hemocircuit.batch import build_batches
-from hemocircuit.cli import load_circuit, main
+from hemocircuit.cli import main
 from hemocircuit.errors import NetlistError
+from hemocircuit.loading import load_circuit
 
 from paths import NETLISTS, ROOT
 

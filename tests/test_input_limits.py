@@ -8,7 +8,8 @@ import pytest
 
 import hemocircuit as hc
 from hemocircuit.analyses.dc import parse_range
-from hemocircuit.cli import _range_spacing, _unit_spacing, main
+from hemocircuit.arguments import range_spacing, unit_spacing
+from hemocircuit.cli import main
 from hemocircuit.derived import evaluate_derived
 from hemocircuit.errors import HemocircuitError, NetlistError
 
@@ -196,7 +197,7 @@ def test_protocol_tables_are_relative_to_the_protocol_and_checked(write, outside
 def test_protocol_event_at_zero_applies_before_the_start(write, capsys):
     pr = write("events:\n  - {at: 0 s, set: {Pa.value: 90 mmHg}}\n  - {at: 5 s, set: {Pa.value: 70 mmHg}}\n",
                "p.yaml")
-    from hemocircuit.cli import load_circuit
+    from hemocircuit.loading import load_circuit
     c, proto = load_circuit(PAYNE06, protocol=pr)
     assert c.parameters.values["Pa.value"][0] == 90.0
     op90 = c.operating_point()
@@ -220,12 +221,12 @@ def test_event_times_must_be_finite_and_not_negative(write):
 
 # -------------------------------------------------------- CLI: --set, --show, --sweep ------
 def test_sweep_values_keep_their_exponents():
-    assert _range_spacing("10,80,1e8,150 mmHg") == "10,80,1e8,150 mmHg"
-    assert _range_spacing("20:200:5mmHg") == "20:200:5 mmHg"
-    assert _range_spacing("1e-3:3e-3:1e-3s") == "1e-3:3e-3:1e-3 s"
-    assert _unit_spacing("1e300 1/mL") == "1e300 1/mL" and _unit_spacing("90mmHg") == "90 mmHg"
-    assert _unit_spacing("1e8mmHg") == "1e8 mmHg"
-    np.testing.assert_array_equal(parse_range(_range_spacing("10,80,1e8,150 mmHg"), "mmHg"), [10, 80, 1e8, 150])
+    assert range_spacing("10,80,1e8,150 mmHg") == "10,80,1e8,150 mmHg"
+    assert range_spacing("20:200:5mmHg") == "20:200:5 mmHg"
+    assert range_spacing("1e-3:3e-3:1e-3s") == "1e-3:3e-3:1e-3 s"
+    assert unit_spacing("1e300 1/mL") == "1e300 1/mL" and unit_spacing("90mmHg") == "90 mmHg"
+    assert unit_spacing("1e8mmHg") == "1e8 mmHg"
+    np.testing.assert_array_equal(parse_range(range_spacing("10,80,1e8,150 mmHg"), "mmHg"), [10, 80, 1e8, 150])
     np.testing.assert_allclose(parse_range("1e-3:3e-3:1e-3 s", "s"), [1e-3, 2e-3, 3e-3])
     for bad in ("0:1e9:1e-9 mmHg", "1e999:1:1 mmHg", ",,", "1e.e:1:1"):
         with pytest.raises(NetlistError):

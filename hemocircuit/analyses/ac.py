@@ -236,19 +236,19 @@ def _ac(args, c):
 
 
 def compute_ac(args, sets):
-    """One --grid member (:func:`hemocircuit.cli.computed`)."""
-    from ..cli import circuit_of_args
+    """One --grid member (:func:`hemocircuit.commands.computed`)."""
+    from ..commands import circuit_of_args
     return _ac(args, circuit_of_args(args, sets)[0])
 
 
 def cmd_ac(args):
-    from ..cli import _load, computed, report_grid, save_outputs
+    from ..commands import computed, load_args, report_grid, save_outputs
 
     if args.grid:
         res = computed(args, compute_ac)
         show = [k for k in res.keys() if k.startswith(("rel_gain(", "phase("))]
         return report_grid(args, res, show)
-    res = _ac(args, _load(args)[0])
+    res = _ac(args, load_args(args)[0])
     outputs = res.outputs
     print(f"AC: {res.input} = {res.p0:.6g} {res.input_unit} -> {', '.join(outputs)}; "
           f"{len(res.freq)} frequencies {res.freq[0]:.4g}..{res.freq[-1]:.4g} Hz")

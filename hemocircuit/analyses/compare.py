@@ -151,22 +151,24 @@ def register_cli(sub, common):
 
 def compute_compare(args, sets):
     """The comparison on the netlists with ``sets`` applied (also one --grid member)."""
-    from ..cli import _range_spacing, _unit_to, circuit_of_args, events_only
+    from ..arguments import quantity_to, range_spacing
+    from ..commands import circuit_of_args
+    from ..loading import events_only
 
     circuits, proto = [], None
     for path in args.netlists:
         c, proto = circuit_of_args(args, sets, path)
         circuits.append(c)
     if args.tran:
-        t_end = float(_unit_to(args.t_end, "s")) if args.t_end else None
-        dt = float(_unit_to(args.dt, "s")) if args.dt else None
+        t_end = float(quantity_to(args.t_end, "s")) if args.t_end else None
+        dt = float(quantity_to(args.dt, "s")) if args.dt else None
         return compare_transient(circuits, events_only(proto), t_end, dt)
     param, rng = args.sweep.split("=", 1)
-    return compare_sweep(circuits, param.strip(), _range_spacing(rng))
+    return compare_sweep(circuits, param.strip(), range_spacing(rng))
 
 
 def cmd_compare(args):
-    from ..cli import apply_measures, computed, record
+    from ..commands import apply_measures, computed, record
 
     if args.tran and not args.protocol:
         raise HemocircuitError("compare --tran needs --protocol")

@@ -283,11 +283,11 @@ def register_cli(sub, common):
 
 
 def cmd_envelope(args):
-    from ..cli import _load, save_outputs
+    from ..commands import load_args, save_outputs
     from ..errors import HemocircuitError
     from ..outputs import default_outputs
 
-    c, _ = _load(args)
+    c, _ = load_args(args)
     outputs = args.output or default_outputs(c, "envelope")
     sweep = parse_grid_arg(args.sweep)
     grid = [parse_grid_arg(g) for g in (args.grid or [])]

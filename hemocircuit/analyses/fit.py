@@ -43,12 +43,12 @@ def fit(netlist, spec, out=None, sets=None, protocol=None, settings=None, worker
 
 
 def cmd_fit(args):
-    from ..cli import _sets
+    from ..arguments import parse_sets
     from ..fitting.report import text
 
     settings = {k: v for k, v in (("starts", args.starts), ("seed", args.seed), ("max_nfev", args.max_nfev))
                 if v is not None}
-    problem, result, paths = fit(args.netlist, args.spec, args.out_dir, _sets(args.set), args.protocol, settings,
+    problem, result, paths = fit(args.netlist, args.spec, args.out_dir, parse_sets(args.set), args.protocol, settings,
                                  args.workers, plot=not args.no_plot, progress=args.progress,
                                  svzerod_units=getattr(args, "svzerod_units", None),
                                  allow_paths=getattr(args, "allow_path", None))

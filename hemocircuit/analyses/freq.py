@@ -376,9 +376,9 @@ def register_cli(sub, common):
 
 
 def cmd_freq(args):
-    from ..cli import _load, save_outputs
+    from ..commands import load_args, save_outputs
 
-    c, _ = _load(args)
+    c, _ = load_args(args)
     from ..outputs import default_outputs
 
     outputs = args.output or default_outputs(c, "freq")

@@ -344,9 +344,9 @@ def _forced_by_period(args, c, output):
     svz = _svzerod_model(args.netlist, getattr(args, "svzerod_units", None))
     if svz is not None:
         model, cfg = svz
-        from ..cli import _sets
+        from ..arguments import parse_sets
         from ..svzerod.output import start_state
-        x0 = start_state(model, c, sets=_sets(getattr(args, "set", None)))
+        x0 = start_state(model, c, sets=parse_sets(getattr(args, "set", None)))
         quantities = [col for _, q, p in cycles.vessel_caps(cfg, model) for col in (q, p)]
         N, tol = model.points, cycles.their_tolerance(model.sim)
     else:
@@ -377,17 +377,17 @@ def _svzerod_model(path, units=None):
 
 
 def compute_periodic(args, sets):
-    """One --grid member (:func:`hemocircuit.cli.computed`)."""
-    from ..cli import circuit_of_args
+    """One --grid member (:func:`hemocircuit.commands.computed`)."""
+    from ..commands import circuit_of_args
     return _periodic(args, circuit_of_args(args, sets)[0])[0]
 
 
 def cmd_periodic(args):
-    from ..cli import _load, computed, report_grid, save_outputs
+    from ..commands import computed, load_args, report_grid, save_outputs
 
     if args.grid:
         return report_grid(args, computed(args, compute_periodic))
-    orb, output, interest = _periodic(args, _load(args)[0])
+    orb, output, interest = _periodic(args, load_args(args)[0])
     y = orb[output]
     print(f"{'converged' if orb.converged else 'NOT converged'} after {orb.iterations} iterations of "
           f"{orb.metadata['measures']['method'].capitalize()} shooting "

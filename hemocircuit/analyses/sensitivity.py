@@ -79,14 +79,14 @@ def register_cli(sub, common):
 def cmd_sensitivity(args):
     import sys
 
-    from ..cli import _load
+    from ..commands import load_args
 
     from .. import io
 
     for flag, path in (("--series", args.series), ("--failures", args.failures)):
         if path is not None:  # checked before the run, as --out and --plot
             io.prepare_output(path, flag)
-    c, _ = _load(args)
+    c, _ = load_args(args)
     over = {"name": args.method, "scheme": args.scheme, "range": args.range, "n": args.n,
             "trajectories": args.trajectories, "seed": args.seed}
     res = sensitivity(c, args.spec, os.path.abspath(args.netlist), scheduler=args.scheduler, workers=args.workers,

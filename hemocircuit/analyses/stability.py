@@ -437,19 +437,19 @@ def plot_result(res, path, select=None, title=None):
 
 # ------------------------------------------------------------------------ CLI -------------
 def _stability(args, c):
-    from ..cli import _range_spacing
+    from ..arguments import range_spacing
     param, rng = (s.strip() for s in args.sweep.split("=", 1))
-    return stability_sweep(c, param, _range_spacing(rng), locate=not args.no_locate)
+    return stability_sweep(c, param, range_spacing(rng), locate=not args.no_locate)
 
 
 def compute_stability(args, sets):
-    """One --grid member (:func:`hemocircuit.cli.computed`)."""
-    from ..cli import circuit_of_args
+    """One --grid member (:func:`hemocircuit.commands.computed`)."""
+    from ..commands import circuit_of_args
     return _stability(args, circuit_of_args(args, sets)[0])
 
 
 def cmd_stability(args):
-    from ..cli import _load, computed, report_grid, save_outputs
+    from ..commands import computed, load_args, report_grid, save_outputs
 
     if not args.sweep or "=" not in args.sweep:
         raise HemocircuitError("stability needs --sweep ID.PARAM=START:STOP:STEP UNIT (e.g. Pa.value=10:200:2mmHg)")
@@ -457,7 +457,7 @@ def cmd_stability(args):
     show = args.show or ["classification", "max_re(lambda)", "zeta(pair)", "frequency(pair)", "at_limit"]
     if args.grid:
         return report_grid(args, computed(args, compute_stability), show)
-    res = _stability(args, _load(args)[0])
+    res = _stability(args, load_args(args)[0])
     print(res.summary(show=show, max_rows=0, where=args.out))
     for v, why in res.failed:
         print(f"failed at {param}={v:g}: {why}", file=sys.stderr)

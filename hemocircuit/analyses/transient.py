@@ -596,39 +596,3 @@ def _compiled_range(system, c, P, tpts, x, rtol, atol, h0, max_step, stats, ts, 
             raise SolverError(f"compiled integrator failed: {st['message']}", time=st["t"],
                               state=c.state_dict(bad), partial=_collect(c, ts, xs, segs))
         return X[-1].copy(), used
-
-
-def cmd_tran_svzerod(args):
-    """``tran MODEL.json --svzerod-output RESULT.json``: their simulation settings (the time
-    span and grid come from their simulation_parameters, so --t-end, --dt, --ic, --protocol
-    and --grid do not apply) and their result layout (hemocircuit.svzerod.output); --out and
-    --plot get the whole run as usual."""
-    import os
-
-    from ..cli import _sets, save_outputs
-    from ..errors import HemocircuitError
-    from ..inputs import read_json
-    from ..svzerod.importer import import_svzerod, is_svzerod_model
-    from ..svzerod.output import simulate_svzerod, write_svzerod_output
-
-    given = [f"--{k.replace('_', '-')}" for k in ("t_end", "dt", "ic", "protocol", "grid") if getattr(args, k, None)]
-    if given:
-        raise HemocircuitError(f"--svzerod-output runs their simulation settings; {', '.join(given)} cannot be "
-                               "combined with it (change number_of_cardiac_cycles etc. in the model)")
-    cfg = None
-    if str(args.netlist).lower().endswith(".json"):  # read once, under the input policy
-        cfg = read_json(args.netlist, "svZeroDSolver model file")
-    if not is_svzerod_model(cfg):
-        raise HemocircuitError(f"--svzerod-output: {args.netlist} is not an svZeroDSolver JSON model "
-                               "(simulation_parameters and blocks)")
-    model = import_svzerod(cfg, units=getattr(args, "svzerod_units", None),
-                           name=os.path.splitext(os.path.basename(str(args.netlist)))[0], source=args.netlist)
-    c, res = simulate_svzerod(model, sets=_sets(args.set), start=args.svzerod_start, cfg=cfg)
-    path = write_svzerod_output(args.svzerod_output, model, c, res, cfg)
-    layout = "per variable" if model.sim.get("output_variable_based") else "per block"
-    ran = res.metadata["svzerod_run"]  # their rule's count and extra cycles (the model is left as given)
-    extra = f" (+{ran['extra_cycles']} by their cycle-to-cycle criterion)" if ran["extra_cycles"] else ""
-    print(f"{ran['cycles']} cycles{extra} of {model.period:g} s, {model.points} points per cycle; solver {res.stats}")
-    print(f"wrote {path} (their result layout, {layout}, units {model.units['P']}, {model.units['Q']})")
-    args.computed_result = res
-    save_outputs(args, res)

@@ -396,12 +396,12 @@ def load_problem(netlist_path, spec_path, sets=None, protocol=None, svzerod_unit
                  circuit=None, named_by=None, key=None) -> FitProblem:
     """The fit problem of a netlist and a fit spec.  ``sets`` ({ID.PARAM: value}), ``protocol``
     (its 'initial' settings) and ``svzerod_units`` (an svZeroDSolver JSON's unit system) are
-    applied to the netlist as in every command (hemocircuit.cli.load_circuit); ``circuit``: the
+    applied to the netlist as in every command (hemocircuit.loading.load_circuit); ``circuit``: the
     circuit already loaded (then those three are not used).  The files the spec names must lie
     in the spec's project, the netlist's project, the bundled netlists or ``allow_paths``
     (``--allow-path``); ``named_by``/``key``: the spec naming this fit spec (a sensitivity
     spec's ``fit_error``, which has checked the path against its own folders), for messages."""
-    from ..cli import load_circuit
+    from ..loading import load_circuit
     from ..spec_inputs import spec_access
 
     access = spec_access(spec_path, netlist_path, allow_paths)
