@@ -67,9 +67,11 @@ import math
 
 import numpy as np
 
-from hemocircuit.component import Component, Observable, Option, Param, State, pressure_branch
+from hemocircuit.component import Component, Observable, Option, Param, State
 from hemocircuit.kernels.jit import njit
 from hemocircuit.units import M3_PER_ML
+
+from .svzerod._common import branch, per_element
 
 _READINGS = ("consistent", "thesis")
 #: smallest pool volume used as a divisor [m^3] (a collapsed compliance reports V = 0)
@@ -117,19 +119,6 @@ class _Pool(Component):
     def _thesis(self):
         return self.opts["units_reading"] == "thesis"
 
-    def _loss(self, p, V):
-        """(D, G): decay and wall conductances [m^3/s] (thesis reading: the bare k_d, h)."""
-        if self._thesis():
-            return p["k_d"], p["h"]
-        return p["k_d"] * V, p["h"] * p["l"]
-
-    @staticmethod
-    def _volume(p):
-        return np.maximum(p["V"] * M3_PER_ML, _V_FLOOR)
-
-    def observe(self, p, x, u, t, src=None):
-        return {"C": x[..., 0]}
-
     def kernel_options(self):
         """[units_reading 'thesis' (0|1)]; ``scale`` only sets tolerances, the kernel ignores it."""
         return np.array([int(self._thesis())], dtype=np.int64)
@@ -169,46 +158,17 @@ class TracerPool(_Pool):
     def edges(self):
         return (("a", "b", "pressure"),)
 
-    def stamp(self, p, x, u, t, src=None):
-        return pressure_branch(np.zeros(x.shape[:2]))  # ideal meter: P_a - P_b = 0
-
     def kernel(self):
         from hemocircuit.kernels import Kernel
-        return Kernel(stamp=tracer_stamp, derivs=tracer_derivs, observe=pool_observe, observables=("C",))
-
-    def feed(self, p, q):
-        """C_feed [M] (eq. cinv) for the metered flow q [mL/s]."""
-        qs = q * M3_PER_ML
-        K = p["k_feed"] * p["L_feed"] * (1.0 if self._thesis() else p["n_feed"])  # m^3/s
-        with np.errstate(divide="ignore", invalid="ignore"):
-            x = np.where(qs > 0, K / np.where(qs > 0, qs, 1.0), np.inf)
-        return (p["C_inf"] - p["C_0"]) * (-np.expm1(-x)) + p["C_0"]
-
-    def _balance(self, p, q):
-        """(a, b): V dC/dt = a - b C [mol/s per (mol/L)], with q [mL/s]."""
-        qp = np.maximum(q, 0.0) * M3_PER_ML
-        D, G = self._loss(p, self._volume(p))
-        return qp * self.feed(p, q) + G * p["C_x"], qp + D + G
-
-    def derivatives(self, p, x, u, t, src=None):
-        a, b = self._balance(p, u[..., 2])
-        return ((a - b * x[..., 0]) / self._volume(p))[..., None]
+        return Kernel(stamp=tracer_stamp, derivs=tracer_derivs, observe=pool_observe, observables=("C",),
+                      report=tracer_report)
 
     def initial_states(self, p, u, flows=None, x=None):
-        a, b = self._balance(p, u[..., 2])
-        with np.errstate(divide="ignore", invalid="ignore"):
-            c = np.where(b > 0, a / np.where(b > 0, b, 1.0), 0.0)
-        return np.nan_to_num(c)[..., None]
+        return _steady(per_element(tracer_balance, self, p, u[..., 2]))
 
     def observables(self):
         return super().observables() + (
             Observable("C_feed", "M", "concentration of the inflow (eq. cinv, C_in,v)"),)
-
-    def observe(self, p, x, u, t, src=None):
-        out = {"C": x[..., 0]}
-        if u is not None:
-            out["C_feed"] = self.feed(p, u[..., 2])
-        return out
 
 
 class TissuePool(_Pool):
@@ -224,49 +184,44 @@ class TissuePool(_Pool):
     def edges(self):
         return ()
 
-    def stamp(self, p, x, u, t, src=None):
-        shape = x.shape[:2]
-        return np.zeros(shape + (0, 0)), np.zeros(shape + (0,))
-
     def kernel(self):
         from hemocircuit.kernels import Kernel
         return Kernel(stamp=tissue_stamp, derivs=tissue_derivs, observe=pool_observe, observables=("C",))
 
-    def _balance(self, p):
-        D, G = self._loss(p, self._volume(p))
-        return G * p["C_x"], D + G
-
-    def derivatives(self, p, x, u, t, src=None):
-        a, b = self._balance(p)
-        return ((a - b * x[..., 0]) / self._volume(p))[..., None]
-
     def initial_states(self, p, u, flows=None, x=None):
-        a, b = self._balance(p)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            c = np.where(b > 0, a / np.where(b > 0, b, 1.0), 0.0)
-        return np.broadcast_to(np.nan_to_num(c), u.shape[:2])[..., None]
+        return np.broadcast_to(_steady(per_element(tissue_balance, self, p)), u.shape[:2] + (1,))
 
 
-# --- compiled path (hemocircuit.kernels contract) -------------------------------------------
-# State [C] (M); iopt = [thesis] (units_reading: 0 consistent, 1 thesis); observables: C.
-# p (the ``parameters`` order): V, k_d, h, l, C_x (both) then C_0, C_inf, k_feed, L_feed, n_feed
-# (tracer_pool).  tracer_pool local unknowns [P_a, P_b, q] (q the metered flow a -> b);
-# tissue_pool has none.  Every expression follows the numpy code above.
+def _steady(balance):
+    """The steady concentration a/b (0 where b <= 0) of V dC/dt = a - b C from the kernel's
+    balance [a, b, V] of every element, as the states (B, E, 1)."""
+    a, b = balance[..., 0], balance[..., 1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        c = np.where(b > 0, a / np.where(b > 0, b, 1.0), 0.0)
+    return np.nan_to_num(c)[..., None]
+
+
+# --- the equations (hemocircuit.kernels contract) -------------------------------------------
+# State [C] (M); iopt = [thesis] (units_reading: 0 consistent, 1 thesis); observables: C
+# (and tracer_pool's C_feed).  p (the ``parameters`` order): V, k_d, h, l, C_x (both) then C_0,
+# C_inf, k_feed, L_feed, n_feed (tracer_pool).  tracer_pool local unknowns [P_a, P_b, q] (q the
+# metered flow a -> b); tissue_pool has none.
 _jit = njit(cache=True, nogil=True, error_model="numpy", _nrt=False)  # numba imported on first use
 _V, _K_D, _H, _L, _C_X, _C_0, _C_INF, _K_FEED, _L_FEED, _N_FEED = range(10)
 
 
 @_jit
 def _pool_volume(p):
+    """The pool volume [m^3], at least _V_FLOOR (NaN stays NaN)."""
     v = p[_V] * M3_PER_ML
-    if v < _V_FLOOR:  # np.maximum(v, floor): NaN stays NaN
+    if v < _V_FLOOR:
         v = _V_FLOOR
     return v
 
 
 @_jit
 def _pool_loss(p, vol, thesis):
-    """(D, G) as _Pool._loss."""
+    """(D, G): decay and wall conductances [m^3/s] (thesis reading: the bare k_d, h)."""
     if thesis:
         return p[_K_D], p[_H]
     return p[_K_D] * vol, p[_H] * p[_L]
@@ -274,7 +229,7 @@ def _pool_loss(p, vol, thesis):
 
 @_jit
 def tracer_feed(p, q, thesis):
-    """TracerPool.feed for one element."""
+    """C_feed [M] (eq. cinv) for the metered flow q [mL/s]."""
     qs = q * M3_PER_ML
     K = p[_K_FEED] * p[_L_FEED] * (1.0 if thesis else p[_N_FEED])
     x = K / qs if qs > 0 else math.inf
@@ -282,26 +237,41 @@ def tracer_feed(p, q, thesis):
 
 
 @_jit
-def tracer_stamp(p, x, u, t, iopt, A, b):
-    A[0, 2] = 1.0  # ideal meter: P_a - P_b = 0 (b stays zero)
-    A[1, 2] = -1.0
-    A[2, 0] = 1.0
-    A[2, 1] = -1.0
-
-
-@_jit
-def tracer_derivs(p, x, u, t, iopt, dx):
+def tracer_balance(p, q, iopt):
+    """(a, b, V): V dC/dt = a - b C [mol/s per (mol/L)] of the perfused pool at flow q [mL/s]."""
     thesis = iopt[0] != 0
-    q = u[2]
     qp = q
-    if qp < 0.0:  # np.maximum(q, 0): NaN stays NaN
+    if qp < 0.0:  # q+ = max(q, 0): NaN stays NaN
         qp = 0.0
     qp = qp * M3_PER_ML
     vol = _pool_volume(p)
     D, G = _pool_loss(p, vol, thesis)
-    a = qp * tracer_feed(p, q, thesis) + G * p[_C_X]
-    bb = qp + D + G
+    return qp * tracer_feed(p, q, thesis) + G * p[_C_X], qp + D + G, vol
+
+
+@_jit
+def tracer_stamp(p, x, u, t, iopt, A, b):
+    branch(A, b, 0, 1, 2, 0.0)  # ideal meter: P_a - P_b = 0
+
+
+@_jit
+def tracer_derivs(p, x, u, t, iopt, dx):
+    a, bb, vol = tracer_balance(p, u[2], iopt)
     dx[0] = (a - bb * x[0]) / vol
+
+
+@_jit
+def tracer_report(p, x, u, t, iopt, out):
+    out[0] = x[0]  # C
+    out[1] = tracer_feed(p, u[2], iopt[0] != 0)  # C_feed
+
+
+@_jit
+def tissue_balance(p, iopt):
+    """(a, b, V): V dC/dt = a - b C of the stagnant pool."""
+    vol = _pool_volume(p)
+    D, G = _pool_loss(p, vol, iopt[0] != 0)
+    return G * p[_C_X], D + G, vol
 
 
 @_jit
@@ -311,10 +281,7 @@ def tissue_stamp(p, x, u, t, iopt, A, b):
 
 @_jit
 def tissue_derivs(p, x, u, t, iopt, dx):
-    vol = _pool_volume(p)
-    D, G = _pool_loss(p, vol, iopt[0] != 0)
-    a = G * p[_C_X]
-    bb = D + G
+    a, bb, vol = tissue_balance(p, iopt)
     dx[0] = (a - bb * x[0]) / vol
 
 

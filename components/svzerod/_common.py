@@ -22,39 +22,85 @@ E_UNIT = "mmHg/mL"
 
 
 def batch_shape(p, *shapes):
-    """(B, E) of an evaluation: the broadcast of every parameter's shape and ``shapes`` (a
-    batch may vary one parameter only, e.g. a sweep or a fit's perturbation)."""
+    """(B, E) of an evaluation: the broadcast of every parameter's shape and ``shapes``."""
     return np.broadcast_shapes(*(np.shape(v) for v in p.values()), *shapes)
 
 
-def stenosis_linearised(R, S, q0):
-    """(slope, offset) of f(q) = (R + S|q|) q linearised at q0: f ~ slope q + offset."""
-    a = np.abs(q0)
-    return R + 2.0 * S * a, -S * a * q0
+@jit
+def branch(A, b, i, j, c, value):
+    """Stamp branch c from local node i to j: its flow (unknown c) leaves i and enters j, and
+    row c says P_i - P_j = value (a series resistance R adds A[c, c] = -R)."""
+    A[i, c] = 1.0
+    A[j, c] = -1.0
+    A[c, i] = 1.0
+    A[c, j] = -1.0
+    b[c] = value
 
 
 @jit
-def k_stenosis_linearised(R, S, q0):
+def conductance(A, i, j, g):
+    """Stamp a conductance g between local nodes i and j."""
+    A[i, i] += g
+    A[i, j] -= g
+    A[j, i] -= g
+    A[j, j] += g
+
+
+@jit
+def imposed_flow(b, i, j, q):
+    """Stamp a flow q imposed from local node i to j (an inductor's state, a wall's motion)."""
+    b[i] = -q
+    b[j] = q
+
+
+def open_branches(A_loc, b_loc, rows, keep=None):
+    """DC guess: the branches ``rows`` carry no flow, except in the elements ``keep`` (the
+    stores that anchor a conservation law keep their stamp)."""
+    sel = slice(None) if keep is None else ~np.asarray(keep, dtype=bool)
+    for r in rows:
+        A_loc[:, sel, r, :] = 0.0
+        A_loc[:, sel, r, r] = 1.0
+        b_loc[:, sel, r] = 0.0
+    return A_loc, b_loc
+
+
+def check_rmin_rmax(p):
+    """The valves' check: Rmin <= Rmax."""
+    bad = np.any(p["Rmax"] < p["Rmin"], axis=tuple(range(np.ndim(p["Rmin"]) - 1)))
+    return [(int(i), "needs Rmin <= Rmax") for i in np.nonzero(np.atleast_1d(bad))[0]]
+
+
+@jit
+def stenosis_drop(R, S, q):
+    """f(q) = (R + S|q|) q: the pressure drop of a resistance R with stenosis coefficient S."""
+    return (R + S * abs(q)) * q
+
+
+@jit
+def stenosis_linearised(R, S, q0):
+    """(slope, offset) of f(q) = (R + S|q|) q linearised at q0: f ~ slope q + offset."""
     a = abs(q0)
     return R + 2.0 * S * a, -S * a * q0
 
 
-def each_element(p, names, x, t, *more):
-    """Parameters ``names`` stacked (..., len(names)), states, times and ``more`` arrays
-    broadcast to one (B, E) shape: (shape, P, X, T, *more), for blocks whose numpy hooks call
-    their compiled per-element functions."""
-    shape = batch_shape(p, x.shape[:-1], np.shape(t), *(m.shape[:-1] for m in more))
-    P = np.stack([np.broadcast_to(np.asarray(p[k], float), shape) for k in names], axis=-1)
-    X = np.broadcast_to(x, shape + x.shape[-1:])
-    T = np.broadcast_to(np.asarray(t, float), shape)
-    return (shape, P, X, T) + tuple(np.broadcast_to(m, shape + m.shape[-1:]) for m in more)
-
-
-def kernel_derivatives(derivs, p, names, x, u, t):
-    """dx/dt (B, E, S) from a compiled per-element ``derivs(p, x, u, t, iopt, dx)``."""
-    shape, P, X, T, U = each_element(p, names, x, t, u)
-    dx = np.zeros(shape + x.shape[-1:])
-    for idx in np.ndindex(shape):
-        derivs(np.ascontiguousarray(P[idx]), np.ascontiguousarray(X[idx]), np.ascontiguousarray(U[idx]),
-               float(T[idx]), None, dx[idx])
-    return dx
+def per_element(fn, comp, p, *args):
+    """``fn(p_e, *args_e, iopt)`` for every element of a batch, for the Python-side hooks that
+    need a law the kernel functions define (an activation, an elastance): ``p`` {name: (1 or
+    B, E)} stacked in ``comp.parameters`` order, ``args`` numbers or arrays broadcast with them,
+    ``iopt`` the type's kernel options.  The kernel helper ``fn`` runs as Python (compiled
+    where Python raises what numba's error model does not, as hemocircuit.elementwise).
+    Returns (B, E) floats, or (B, E, k) for a k-tuple result."""
+    names = list(comp.parameters)
+    shape = np.broadcast_shapes(*(np.shape(p[n]) for n in names), *(np.shape(a) for a in args))
+    P = np.stack([np.broadcast_to(np.asarray(p[n], float), shape) for n in names], axis=-1)
+    A = [np.broadcast_to(np.asarray(a, float), shape) for a in args]
+    iopt = comp.kernel_options()
+    rows = []
+    with np.errstate(all="ignore"):
+        for idx in np.ndindex(shape):
+            a = (P[idx], *(v[idx] for v in A), iopt)
+            try:
+                rows.append(fn(*a))
+            except (OverflowError, ZeroDivisionError, ValueError):
+                rows.append(fn.dispatcher(*a))
+    return np.array(rows, dtype=float).reshape(shape + (np.shape(rows[0]) if rows else ()))

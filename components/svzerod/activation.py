@@ -168,9 +168,14 @@ def activation(kind, t, T, a):
         return g1 / (1.0 + g1) / (1.0 + g2) / _two_hill_max(T, a[7], a[8], a[9], a[10])
     if kind == 4:  # fourier
         return (fourier_raw(np.fmod(t, T), T) - FOURIER_MIN) / FOURIER_RANGE
-    # wrapping_cosine
-    Tsa = T * a[11]
-    tp = T / a[12]
+    return wrapping_cosine(t, T, a[11], a[12])
+
+
+@jit
+def wrapping_cosine(t, T, Tsa, tpwave):
+    """The wrapping_cosine activation (also the closed-loop heart's atrial activation AA)."""
+    Tsa = T * Tsa
+    tp = T / tpwave
     tc = np.fmod(t, T)
     if tc <= tp:
         return 0.5 * (1.0 - math.cos(2.0 * math.pi * (tc - tp + Tsa) / Tsa))
@@ -229,16 +234,3 @@ def periodic_breakpoints(phases_of, p, names, t0, t1):
 #: most kinks periodic_breakpoints lists in one call, over all phases and parameter sets
 MAX_BREAKPOINTS = 4_000_000
 
-
-def activation_np(kind, t, p):
-    """Activation for every parameter set and element: p[name] arrays (B, E) -> (B, E) (``t``
-    a float or an array broadcasting with them)."""
-    k = KINDS.index(kind)
-    shape = np.broadcast_shapes(np.shape(t), *(np.shape(p[n]) for n in ("period",) + tuple(n for n, _ in ACT_PARAMS)))
-    tt = np.broadcast_to(np.asarray(t, float), shape)
-    T = np.broadcast_to(np.asarray(p["period"], float), shape)
-    a = np.stack([np.broadcast_to(np.asarray(p[n], float), shape) for n, _ in ACT_PARAMS], axis=-1)
-    out = np.empty(T.shape)
-    for idx in np.ndindex(T.shape):
-        out[idx] = activation(k, float(tt[idx]), float(T[idx]), np.ascontiguousarray(a[idx]))
-    return out

@@ -25,7 +25,7 @@ import numpy as np
 
 from hemocircuit.component import Component, Observable, Option, Param, State, Storage
 
-from ._common import batch_shape, C_UNIT, L_UNIT, R_UNIT, S_UNIT, jit, k_stenosis_linearised, stenosis_linearised
+from ._common import C_UNIT, L_UNIT, R_UNIT, S_UNIT, branch, imposed_flow, jit, stenosis_drop, stenosis_linearised
 
 _PARAMS = {
     "R_poiseuille": Param(R_UNIT, lower=0.0, doc="Poiseuille resistance"),
@@ -36,7 +36,7 @@ _PARAMS = {
 }
 
 
-class _Vessel(Component):
+class Vessel(Component):
     """Common structure of BloodVessel and BloodVesselCRL (options, states, DC stamp)."""
 
     terminals = ("in", "out", "ref")
@@ -91,12 +91,13 @@ class _Vessel(Component):
         terminals are those of the edge that carries its flow to the reference."""
         if not self.cap:
             return ()
-        return (Storage(*self._store_edge(), volume="V", state="V"),)
+        return (Storage(*self.store_edge(), volume="V", state="V"),)
 
-    def _store_edge(self):
+    def store_edge(self):
+        """The terminals of the edge that carries the capacitor's flow to the reference."""
         return ("in", "ref")
 
-    def _restore_kept(self, keep, orig, A_loc, b_loc):
+    def restore_kept(self, keep, orig, A_loc, b_loc):
         """Stores anchoring a conservation law keep their normal stamp in the DC guess."""
         kept = np.asarray(keep, dtype=bool)
         if self.cap and kept.any():
@@ -111,7 +112,7 @@ class _Vessel(Component):
         return self.ind and not self.cap
 
 
-class BloodVessel(_Vessel):
+class BloodVessel(Vessel):
     __doc__ = __doc__
     type_name = "blood_vessel"
     svzerod_blocks = ("BloodVessel",)
@@ -128,61 +129,8 @@ class BloodVessel(_Vessel):
             return (("in", "ref", "conductive"), ("in", "out", "flow"))
         return (("in", "out", "conductive"), ("out", "ref", "pressure"))  # R, then C at out
 
-    def _store_edge(self):
+    def store_edge(self):
         return ("in", "ref") if self.ind else ("out", "ref")
-
-    def stamp(self, p, x, u, t, src=None):
-        R, S = p["R_poiseuille"], p["stenosis_coefficient"]
-        L = len(self.local_nodes) + len(self.branches())
-        A = np.zeros(batch_shape(p, x.shape[:2]) + (L, L))
-        b = np.zeros(batch_shape(p, x.shape[:2]) + (L,))
-        if self.cap:
-            Pc = x[..., 0] / p["C"]
-            slope, off = stenosis_linearised(R, S, 0.0 if u is None else u[..., 3])
-            A[..., 0, 3], A[..., 2, 3] = 1.0, -1.0          # Q_in: in -> (R) -> c -> ref
-            A[..., 3, 0], A[..., 3, 2], A[..., 3, 3] = 1.0, -1.0, -slope
-            b[..., 3] = Pc + off
-            if self.ind:
-                q = x[..., 1]
-                b[..., 1], b[..., 2] = q, -q                 # Q_out delivered at out, drawn from ref
-            else:
-                A[..., 1, 4], A[..., 2, 4] = 1.0, -1.0       # branch out -> ref: P_out - P_ref = P_c
-                A[..., 4, 1], A[..., 4, 2] = 1.0, -1.0
-                b[..., 4] = Pc
-        elif self.ind:
-            q = x[..., 0]
-            b[..., 0], b[..., 1] = -q, q
-        else:
-            slope, off = stenosis_linearised(R, S, 0.0 if u is None else u[..., 3])
-            A[..., 0, 3], A[..., 1, 3] = 1.0, -1.0
-            A[..., 3, 0], A[..., 3, 1], A[..., 3, 3] = 1.0, -1.0, -slope
-            b[..., 3] = off
-        return A, b
-
-    def derivatives(self, p, x, u, t, src=None):
-        R, S = p["R_poiseuille"], p["stenosis_coefficient"]
-        dx = np.zeros(x.shape)
-        if self.cap:
-            Pc = x[..., 0] / p["C"]
-            if self.ind:
-                q = x[..., 1]
-                dx[..., 0] = u[..., 3] - q
-                dx[..., 1] = (Pc - (u[..., 1] - u[..., 2])) / p["L"]
-            else:
-                dx[..., 0] = u[..., 3] + u[..., 4]
-        elif self.ind:
-            q = x[..., 0]
-            dx[..., 0] = (u[..., 0] - u[..., 1] - (R + S * np.abs(q)) * q) / p["L"]
-        return dx
-
-    def observe(self, p, x, u, t, src=None):
-        if u is None:
-            return {"V": x[..., 0]} if self.cap else {}
-        if self.cap:
-            q_out = x[..., 1] if self.ind else -u[..., 4]
-            return {"V": x[..., 0], "Q_in": u[..., 3], "Q_out": q_out}
-        q = x[..., 0] if self.ind else u[..., 3]
-        return {"Q_in": q, "Q_out": q}
 
     def dc_stamp(self, p, A_loc, b_loc, keep):
         """Steady state without stenosis: the capacitor open, the inductor a short."""
@@ -203,7 +151,7 @@ class BloodVessel(_Vessel):
         else:
             A_loc[..., 0, 3], A_loc[..., 1, 3] = 1.0, -1.0
             A_loc[..., 3, 0], A_loc[..., 3, 1], A_loc[..., 3, 3] = 1.0, -1.0, -R
-        return self._restore_kept(keep, orig, A_loc, b_loc)
+        return self.restore_kept(keep, orig, A_loc, b_loc)
 
     def initial_states(self, p, u, flows=None, x=None):
         out = np.zeros(u.shape[:2] + (len(self.states()),))
@@ -219,14 +167,13 @@ class BloodVessel(_Vessel):
     def kernel(self):
         from hemocircuit.kernels import Kernel
         return Kernel(stamp=vessel_stamp, derivs=vessel_derivs, observe=vessel_observe,
-                      observables=("V",) if self.cap else ())
+                      observables=("V",) if self.cap else (), report=vessel_report)
 
 
-# --- compiled path (hemocircuit.kernels contract) -------------------------------------------
+# --- the equations (hemocircuit.kernels contract) -------------------------------------------
 # p = [R_poiseuille, C, L, stenosis_coefficient]; iopt = [capacitive, inductive, stenotic];
 # layout as above.  The stenosis term is linearised at the iterate's flow only for a stenotic
-# vessel: an affine one is stamped once per nodal solve (engine_template.solve_nodes), its
-# iterate not read (the numpy path's u is None)
+# vessel: an affine one is stamped once per nodal solve, its iterate not read (zeros)
 @jit
 def vessel_stamp(p, x, u, t, iopt, A, b):
     R, S = p[0], p[3]
@@ -234,33 +181,19 @@ def vessel_stamp(p, x, u, t, iopt, A, b):
         S = 0.0
     if iopt[0] != 0:
         Pc = x[0] / p[1]
-        slope, off = k_stenosis_linearised(R, S, u[3])
-        A[0, 3] = 1.0
-        A[2, 3] = -1.0
-        A[3, 0] = 1.0
-        A[3, 2] = -1.0
+        slope, off = stenosis_linearised(R, S, u[3])
+        branch(A, b, 0, 2, 3, Pc + off)  # Q_in: in -> (R) -> c -> ref
         A[3, 3] = -slope
-        b[3] = Pc + off
         if iopt[1] != 0:
-            b[1] = x[1]
-            b[2] = -x[1]
+            imposed_flow(b, 2, 1, x[1])  # Q_out delivered at out, drawn from ref
         else:
-            A[1, 4] = 1.0
-            A[2, 4] = -1.0
-            A[4, 1] = 1.0
-            A[4, 2] = -1.0
-            b[4] = Pc
+            branch(A, b, 1, 2, 4, Pc)  # P_out - P_ref = P_c
     elif iopt[1] != 0:
-        b[0] = -x[0]
-        b[1] = x[0]
+        imposed_flow(b, 0, 1, x[0])
     else:
-        slope, off = k_stenosis_linearised(R, S, u[3])
-        A[0, 3] = 1.0
-        A[1, 3] = -1.0
-        A[3, 0] = 1.0
-        A[3, 1] = -1.0
+        slope, off = stenosis_linearised(R, S, u[3])
+        branch(A, b, 0, 1, 3, off)
         A[3, 3] = -slope
-        b[3] = off
 
 
 @jit
@@ -274,11 +207,23 @@ def vessel_derivs(p, x, u, t, iopt, dx):
         else:
             dx[0] = u[3] + u[4]
     elif iopt[1] != 0:
-        q = x[0]
-        dx[0] = (u[0] - u[1] - (R + S * abs(q)) * q) / p[2]
+        dx[0] = (u[0] - u[1] - stenosis_drop(R, S, x[0])) / p[2]
 
 
 @jit
 def vessel_observe(p, x, iopt, out):
     if iopt[0] != 0:
         out[0] = x[0]
+
+
+@jit
+def vessel_report(p, x, u, t, iopt, out):
+    """[V (capacitive),] Q_in, Q_out."""
+    if iopt[0] != 0:
+        out[0] = x[0]
+        out[1] = u[3]
+        out[2] = x[1] if iopt[1] != 0 else -u[4]
+    else:
+        q = x[0] if iopt[1] != 0 else u[3]
+        out[0] = q
+        out[1] = q

@@ -13,11 +13,9 @@ q enters at ``in`` and leaves at ``out`` (Q_in = Q_out = q); dX/dt = q - (P_in -
 """
 from __future__ import annotations
 
-import numpy as np
-
 from hemocircuit.component import Component, Observable, Param, State
 
-from ._common import batch_shape, C_UNIT, R_UNIT, jit
+from ._common import C_UNIT, R_UNIT, jit
 
 
 class BloodVesselRC(Component):
@@ -43,21 +41,6 @@ class BloodVesselRC(Component):
         return (Observable("Q_in", "mL/s", "flow into the inlet (= out of the outlet)"),
                 Observable("Q_out", "mL/s", "flow out of the outlet"))
 
-    def stamp(self, p, x, u, t, src=None):
-        shape = batch_shape(p, x.shape[:2])
-        A = np.zeros(shape + (4, 4))
-        b = np.zeros(shape + (4,))
-        A[..., 0, 3], A[..., 1, 3] = 1.0, -1.0
-        A[..., 3, 0], A[..., 3, 2] = 1.0, -1.0
-        b[..., 3] = x[..., 0] / p["Cp"]
-        return A, b
-
-    def derivatives(self, p, x, u, t, src=None):
-        return (u[..., 3] - (u[..., 0] - u[..., 1]) / p["Rpd"])[..., None] + 0.0 * x
-
-    def observe(self, p, x, u, t, src=None):
-        return {} if u is None else {"Q_in": u[..., 3], "Q_out": u[..., 3]}
-
     def dc_stamp(self, p, A_loc, b_loc, keep):
         """Steady state: dX/dt = 0, so q = (P_in - P_out)/Rpd: the branch becomes Rpd."""
         A_loc[..., 3, :] = 0.0
@@ -71,10 +54,10 @@ class BloodVesselRC(Component):
     def kernel(self):
         from hemocircuit.kernels import Kernel
         from hemocircuit.kernels.stateless import no_observables
-        return Kernel(stamp=bvrc_stamp, derivs=bvrc_derivs, observe=no_observables, observables=())
+        return Kernel(stamp=bvrc_stamp, derivs=bvrc_derivs, observe=no_observables, observables=(), report=bvrc_report)
 
 
-# --- compiled path: p = [Rpd, Cp]; state [X]; local unknowns [P_in, P_out, P_ref, q]
+# --- the equations: p = [Rpd, Cp]; state [X]; local unknowns [P_in, P_out, P_ref, q]
 @jit
 def bvrc_stamp(p, x, u, t, iopt, A, b):
     A[0, 3] = 1.0
@@ -87,3 +70,9 @@ def bvrc_stamp(p, x, u, t, iopt, A, b):
 @jit
 def bvrc_derivs(p, x, u, t, iopt, dx):
     dx[0] = u[3] - (u[0] - u[1]) / p[0]
+
+
+@jit
+def bvrc_report(p, x, u, t, iopt, out):
+    out[0] = u[3]  # Q_in
+    out[1] = u[3]  # Q_out

@@ -26,11 +26,10 @@ import numpy as np
 
 from hemocircuit.component import Component, Observable, Option, Param, State, Storage
 
-from ._common import batch_shape, E_UNIT, L_UNIT, jit
-from .activation import (KINDS, act_parameters, activation, activation_np, activation_breakpoints,
-                         check_activation)
+from ._common import E_UNIT, L_UNIT, branch, imposed_flow, jit, open_branches, per_element
+from .activation import KINDS, act_parameters, activation, activation_breakpoints, check_activation
 
-_OWN = {"Emax": Param(E_UNIT, lower=0.0, doc="maximum elastance"),
+OWN_PARAMS = {"Emax": Param(E_UNIT, lower=0.0, doc="maximum elastance"),
         "Emin": Param(E_UNIT, lower=0.0, doc="minimum elastance"),
         "Vrd": Param("mL", doc="rest volume at diastole"),
         "Vrs": Param("mL", doc="rest volume at systole"),
@@ -42,7 +41,7 @@ class ChamberElastanceInductor(Component):
     type_name = "chamber_elastance_inductor"
     svzerod_blocks = ("ChamberElastanceInductor",)
     terminals = ("in", "out", "ref")
-    parameters = {**_OWN, **act_parameters()}
+    parameters = {**OWN_PARAMS, **act_parameters()}
     options = {"activation": Option("half_cosine", choices=KINDS, doc="activation function A(t)")}
     time_dependent = True
 
@@ -70,40 +69,10 @@ class ChamberElastanceInductor(Component):
         """The activation's kinks (activation.kink_phases): steps end there."""
         return activation_breakpoints(self.opts["activation"], p, t0, t1)
 
-    def _elastance(self, p, t):
-        a = activation_np(self.opts["activation"], t, p)
-        return (p["Emax"] - p["Emin"]) * a + p["Emin"], (1.0 - a) * (p["Vrd"] - p["Vrs"]) + p["Vrs"]
-
-    def stamp(self, p, x, u, t, src=None):
-        E, Vrest = self._elastance(p, t)
-        shape = batch_shape(p, E.shape, x.shape[:2])
-        A = np.zeros(shape + (4, 4))
-        b = np.zeros(shape + (4,))
-        A[..., 0, 3], A[..., 2, 3] = 1.0, -1.0
-        A[..., 3, 0], A[..., 3, 2] = 1.0, -1.0
-        b[..., 3] = E * (x[..., 0] - Vrest)
-        b[..., 0], b[..., 1] = -x[..., 1], x[..., 1]
-        return A, b
-
-    def derivatives(self, p, x, u, t, src=None):
-        dx = np.zeros(batch_shape(p, x.shape[:2], u.shape[:2]) + (2,))
-        dx[..., 0] = u[..., 3]
-        dx[..., 1] = (u[..., 0] - u[..., 1]) / p["Impedance"]
-        return dx
-
-    def observe(self, p, x, u, t, src=None):
-        out = {"Vc": x[..., 0]}
-        if u is not None:
-            out["Q_in"], out["Q_out"] = u[..., 3] + x[..., 1], x[..., 1]
-        return out
-
     def dc_stamp(self, p, A_loc, b_loc, keep):
         """Steady state: the store open (q = 0) unless it anchors a conservation law, the
         inductor a short (a 1e6 mL/s/mmHg conductance, as the inductor component)."""
-        opened = ~np.asarray(keep, dtype=bool)
-        A_loc[:, opened, 3, :] = 0.0
-        A_loc[:, opened, 3, 3] = 1.0
-        b_loc[:, opened, 3] = 0.0
+        open_branches(A_loc, b_loc, (3,), keep)
         g = 1e6
         A_loc[..., 0, 0] += g
         A_loc[..., 0, 1] -= g
@@ -114,9 +83,10 @@ class ChamberElastanceInductor(Component):
         return A_loc, b_loc
 
     def initial_states(self, p, u, flows=None, x=None):
-        E, Vrest = self._elastance(p, 0.0)
-        out = np.zeros(batch_shape(p, E.shape, u.shape[:2]) + (2,))
-        out[..., 0] = (u[..., 0] - u[..., 2]) / E + Vrest
+        law = per_element(cei_law, self, p, 0.0)  # [E, Vrest] at t = 0
+        Vc = (u[..., 0] - u[..., 2]) / law[..., 0] + law[..., 1]
+        out = np.zeros(Vc.shape + (2,))
+        out[..., 0] = Vc
         if flows is not None:
             out[..., 1] = -flows[..., 1]
         return out
@@ -126,23 +96,30 @@ class ChamberElastanceInductor(Component):
 
     def kernel(self):
         from hemocircuit.kernels import Kernel
-        return Kernel(stamp=cei_stamp, derivs=cei_derivs, observe=cei_observe, observables=("Vc",))
+        return Kernel(stamp=cei_stamp, derivs=cei_derivs, observe=cei_observe, observables=("Vc",),
+                      report=cei_report)
 
 
-# --- compiled path: p = [Emax, Emin, Vrd, Vrs, Impedance, period, 13 activation parameters];
+# --- the equations: p = [Emax, Emin, Vrd, Vrs, Impedance, period, 13 activation parameters];
 # iopt = [activation kind]; states [Vc, Q_out]; local unknowns [P_in, P_out, P_ref, q]
 @jit
-def cei_stamp(p, x, u, t, iopt, A, b):
+def cei_law(p, t, iopt):
+    """(E, Vrest) at time t: E = (Emax - Emin) A + Emin, Vrest = (1 - A)(Vrd - Vrs) + Vrs."""
     a = activation(iopt[0], t, p[5], p[6:19])
-    E = (p[0] - p[1]) * a + p[1]
-    Vrest = (1.0 - a) * (p[2] - p[3]) + p[3]
-    A[0, 3] = 1.0
-    A[2, 3] = -1.0
-    A[3, 0] = 1.0
-    A[3, 2] = -1.0
-    b[3] = E * (x[0] - Vrest)
-    b[0] = -x[1]
-    b[1] = x[1]
+    return (p[0] - p[1]) * a + p[1], (1.0 - a) * (p[2] - p[3]) + p[3]
+
+
+@jit
+def chamber_stamp(P, x, A, b):
+    """Branch (in, ref) with P_in - P_ref = P carrying dVc/dt; Q_out = x[1] imposed in -> out."""
+    branch(A, b, 0, 2, 3, P)
+    imposed_flow(b, 0, 1, x[1])
+
+
+@jit
+def cei_stamp(p, x, u, t, iopt, A, b):
+    E, Vrest = cei_law(p, t, iopt)
+    chamber_stamp(E * (x[0] - Vrest), x, A, b)
 
 
 @jit
@@ -154,3 +131,10 @@ def cei_derivs(p, x, u, t, iopt, dx):
 @jit
 def cei_observe(p, x, iopt, out):
     out[0] = x[0]
+
+
+@jit
+def cei_report(p, x, u, t, iopt, out):
+    out[0] = x[0]  # Vc
+    out[1] = u[3] + x[1]  # Q_in
+    out[2] = x[1]  # Q_out

@@ -20,9 +20,10 @@ import numpy as np
 
 from hemocircuit.component import Param
 
-from ._common import batch_shape, E_UNIT, jit
-from .activation import act_parameters, activation, activation_np
-from .chamber_elastance_inductor import _OWN, ChamberElastanceInductor, cei_derivs, cei_observe
+from ._common import E_UNIT, jit, per_element
+from .activation import act_parameters, activation
+from .chamber_elastance_inductor import (OWN_PARAMS, ChamberElastanceInductor, cei_derivs, cei_observe, cei_report,
+                                         chamber_stamp)
 
 
 class ChamberElastanceInductorExponential(ChamberElastanceInductor):
@@ -34,37 +35,12 @@ class ChamberElastanceInductorExponential(ChamberElastanceInductor):
                   "Kxp": Param("mmHg", doc="passive pressure scale"),
                   "Kxv": Param("1/mL", doc="passive volume exponent"),
                   "Vaso": Param("mL", doc="rest volume"),
-                  "Impedance": _OWN["Impedance"], **act_parameters()}
-
-    def _pressure(self, p, Vc, t):
-        """(P_in - P_ref, dP/dVc) at volume Vc and time t."""
-        a = activation_np(self.opts["activation"], t, p)
-        e = np.exp(p["Kxv"] * (Vc - p["Vaso"]))
-        P = a * p["Emax"] * (Vc - p["Vaso"]) + (1.0 - a) * p["Kxp"] * (e - 1.0)
-        return P, a * p["Emax"] + (1.0 - a) * p["Kxp"] * p["Kxv"] * e
-
-    def stamp(self, p, x, u, t, src=None):
-        P, _ = self._pressure(p, x[..., 0], t)
-        shape = batch_shape(p, P.shape, x.shape[:2])
-        A = np.zeros(shape + (4, 4))
-        b = np.zeros(shape + (4,))
-        A[..., 0, 3], A[..., 2, 3] = 1.0, -1.0
-        A[..., 3, 0], A[..., 3, 2] = 1.0, -1.0
-        b[..., 3] = P
-        b[..., 0], b[..., 1] = -x[..., 1], x[..., 1]
-        return A, b
+                  "Impedance": OWN_PARAMS["Impedance"], **act_parameters()}
 
     def initial_states(self, p, u, flows=None, x=None):
-        """Vc with P(Vc, 0) = the local pressure: Newton from the linearisation at Vaso (the
-        law is increasing in Vc for Emax, Kxp Kxv >= 0 and A in [0, 1])."""
-        target = u[..., 0] - u[..., 2]
-        _, slope = self._pressure(p, p["Vaso"], 0.0)
-        V = p["Vaso"] + target / np.where(slope > 0, slope, 1.0)
-        for _ in range(50):
-            P, dP = self._pressure(p, V, 0.0)
-            step = (P - target) / np.where(dP > 0, dP, 1.0)
-            V = V - np.clip(step, -50.0, 50.0)
-        out = np.zeros(batch_shape(p, V.shape, u.shape[:2]) + (2,))
+        """Vc with P(Vc, 0) = the local pressure (ceie_volume)."""
+        V = per_element(ceie_volume, self, p, u[..., 0] - u[..., 2])
+        out = np.zeros(V.shape + (2,))
         out[..., 0] = V
         if flows is not None:
             out[..., 1] = -flows[..., 1]
@@ -72,19 +48,40 @@ class ChamberElastanceInductorExponential(ChamberElastanceInductor):
 
     def kernel(self):
         from hemocircuit.kernels import Kernel
-        return Kernel(stamp=ceie_stamp, derivs=cei_derivs, observe=cei_observe, observables=("Vc",))
+        return Kernel(stamp=ceie_stamp, derivs=cei_derivs, observe=cei_observe, observables=("Vc",),
+                      report=cei_report)
 
 
-# --- compiled path: p = [Emax, Kxp, Kxv, Vaso, Impedance, period, 13 activation parameters];
+# --- the equations: p = [Emax, Kxp, Kxv, Vaso, Impedance, period, 13 activation parameters];
 # iopt = [activation kind]; states [Vc, Q_out]; local unknowns [P_in, P_out, P_ref, q]
+@jit
+def atrium_pressure(A, Emax, Kxp, Kxv, Vaso, V):
+    """P = A Emax (V - Vaso) + (1 - A) Kxp (exp((V - Vaso) Kxv) - 1) at activation A (also the
+    atria of closed_loop_heart_pulmonary, their update_solution)."""
+    return A * Emax * (V - Vaso) + Kxp * (math.exp((V - Vaso) * Kxv) - 1.0) * (1.0 - A)
+
+
+@jit
+def atrium_slope(A, Emax, Kxp, Kxv, Vaso, V):
+    """dP/dV of atrium_pressure."""
+    return A * Emax + Kxp * Kxv * math.exp((V - Vaso) * Kxv) * (1.0 - A)
+
+
 @jit
 def ceie_stamp(p, x, u, t, iopt, A, b):
     a = activation(iopt[0], t, p[5], p[6:19])
-    dV = x[0] - p[3]
-    A[0, 3] = 1.0
-    A[2, 3] = -1.0
-    A[3, 0] = 1.0
-    A[3, 2] = -1.0
-    b[3] = a * p[0] * dV + (1.0 - a) * p[1] * (math.exp(p[2] * dV) - 1.0)
-    b[0] = -x[1]
-    b[1] = x[1]
+    chamber_stamp(atrium_pressure(a, p[0], p[1], p[2], p[3], x[0]), x, A, b)
+
+
+@jit
+def ceie_volume(p, target, iopt):
+    """Vc with P(Vc, t = 0) = target: Newton from the linearisation at Vaso (the law increases
+    in Vc for Emax, Kxp Kxv >= 0 and A in [0, 1]), steps clipped to 50 mL."""
+    a = activation(iopt[0], 0.0, p[5], p[6:19])
+    slope = atrium_slope(a, p[0], p[1], p[2], p[3], p[3])
+    V = p[3] + target / (slope if slope > 0.0 else 1.0)
+    for _ in range(50):
+        slope = atrium_slope(a, p[0], p[1], p[2], p[3], V)
+        step = (atrium_pressure(a, p[0], p[1], p[2], p[3], V) - target) / (slope if slope > 0.0 else 1.0)
+        V = V - min(max(step, -50.0), 50.0)
+    return V

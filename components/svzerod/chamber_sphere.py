@@ -27,15 +27,16 @@ import numpy as np
 
 from hemocircuit.component import Component, Observable, Param, State, Storage
 
-from ._common import jit, kernel_derivatives
+from ._common import branch, imposed_flow, jit
 
-_P = {"rho": ("mmHg*s**2/cm**2", True, "wall density"), "thick0": ("cm", True, "wall thickness d0"),
+PARAMS = {"rho": ("mmHg*s**2/cm**2", True, "wall density"), "thick0": ("cm", True, "wall thickness d0"),
       "radius0": ("cm", True, "reference radius r0"), "W1": ("mmHg", False, "material constant W1"),
       "W2": ("mmHg", False, "material constant W2"), "eta": ("mmHg*s", False, "wall viscosity"),
       "sigma_max": ("mmHg", False, "maximum active stress"),
       "alpha_max": ("1/s", False, "activation rate in systole"), "alpha_min": ("1/s", False, "activation rate in diastole"),
       "tsys": ("s", False, "systole start in the cycle"), "tdias": ("s", False, "diastole start in the cycle"),
       "steepness": ("s", True, "activation switch width"), "period": ("s", True, "cardiac period T")}
+_P = PARAMS  # the old name, read by hemocircuit/svzerod/importer.py until it reads PARAMS
 
 
 @jit
@@ -57,6 +58,13 @@ def sphere_activation(p, t):
 
 
 @jit
+def sphere_wall_flow(p, x):
+    """The wall's volume flow 4 pi R^2 v [mL/s] (= dV/dt)."""
+    R = x[0] + p[2]
+    return 4.0 * math.pi * R * R * x[1]
+
+
+@jit
 def sphere_derivs(p, x, u, t, iopt, dx):
     r, v, tau = x[0], x[1], x[2]
     R = r + p[2]
@@ -65,19 +73,13 @@ def sphere_derivs(p, x, u, t, iopt, dx):
     dx[0] = v
     dx[1] = R * ((u[0] - u[2]) * R - S * p[1]) / (p[2] ** 2 * p[0] * p[1])
     dx[2] = -a_abs * tau + a_plus * p[6]
-    dx[3] = 4.0 * math.pi * R * R * v
+    dx[3] = sphere_wall_flow(p, x)
 
 
 @jit
 def sphere_stamp(p, x, u, t, iopt, A, b):
-    R = x[0] + p[2]
-    qv = 4.0 * math.pi * R * R * x[1]
-    A[0, 3] = 1.0
-    A[1, 3] = -1.0
-    A[3, 0] = 1.0
-    A[3, 1] = -1.0
-    b[0] = -qv
-    b[2] = qv
+    branch(A, b, 0, 1, 3, 0.0)  # P_in = P_out, carrying Q_out
+    imposed_flow(b, 0, 2, sphere_wall_flow(p, x))
 
 
 @jit
@@ -86,12 +88,20 @@ def sphere_observe(p, x, iopt, out):
     out[1] = sphere_stress(p, x[0], x[1], x[2])
 
 
+@jit
+def sphere_report(p, x, u, t, iopt, out):
+    sphere_observe(p, x, iopt, out)
+    qv = sphere_wall_flow(p, x)
+    out[2] = u[3] + qv  # Q_in
+    out[3] = u[3] + 0.0 * qv  # Q_out
+
+
 class ChamberSphere(Component):
     __doc__ = __doc__
     type_name = "chamber_sphere"
     svzerod_blocks = ("ChamberSphere",)
     terminals = ("in", "out", "ref")
-    parameters = {k: Param(u, lower=0.0 if pos else None, lower_open=pos, doc=d) for k, (u, pos, d) in _P.items()}
+    parameters = {k: Param(u, lower=0.0 if pos else None, lower_open=pos, doc=d) for k, (u, pos, d) in PARAMS.items()}
     time_dependent = True
 
     def branches(self):
@@ -113,29 +123,7 @@ class ChamberSphere(Component):
                 Observable("Q_in", "mL/s", "flow into the chamber"),
                 Observable("Q_out", "mL/s", "flow out of the chamber"))
 
-    def stamp(self, p, x, u, t, src=None):
-        R = x[..., 0] + p["radius0"]
-        qv = 4.0 * np.pi * R * R * x[..., 1]
-        A = np.zeros(qv.shape + (4, 4))
-        b = np.zeros(qv.shape + (4,))
-        A[..., 0, 3], A[..., 1, 3], A[..., 3, 0], A[..., 3, 1] = 1.0, -1.0, 1.0, -1.0
-        b[..., 0], b[..., 2] = -qv, qv
-        return A, b
-
-    def derivatives(self, p, x, u, t, src=None):
-        return kernel_derivatives(sphere_derivs, p, tuple(_P), x, u, t)
-
-    def observe(self, p, x, u, t, src=None):
-        R = x[..., 0] + p["radius0"]
-        out = {"V": x[..., 3], "S": x[..., 2] + 2.0 * (
-            x[..., 1] * p["eta"] * (2.0 * p["radius0"] ** 12 + R ** 12)
-            + 2.0 * R ** 5 * (R ** 6 - p["radius0"] ** 6) * (p["W1"] * p["radius0"] ** 2 + p["W2"] * R ** 2))
-            / (p["radius0"] ** 2 * R ** 11)}
-        if u is not None:
-            qv = 4.0 * np.pi * R * R * x[..., 1]
-            out["Q_in"], out["Q_out"] = u[..., 3] + qv, u[..., 3] + 0.0 * qv
-        return out
-
     def kernel(self):
         from hemocircuit.kernels import Kernel
-        return Kernel(stamp=sphere_stamp, derivs=sphere_derivs, observe=sphere_observe, observables=("V", "S"))
+        return Kernel(stamp=sphere_stamp, derivs=sphere_derivs, observe=sphere_observe, observables=("V", "S"),
+                      report=sphere_report)

@@ -29,8 +29,9 @@ import numpy as np
 
 from hemocircuit.component import Component, Observable, Param, State, Storage
 
-from ._common import batch_shape, C_UNIT, E_UNIT, R_UNIT, jit
+from ._common import batch_shape, branch, C_UNIT, conductance, E_UNIT, jit, open_branches, per_element, R_UNIT
 from .activation import fourier_raw
+from .closed_loop_heart_pulmonary import ventricle_pressure
 
 
 class ClosedLoopCoronary(Component):
@@ -78,95 +79,40 @@ class ClosedLoopCoronary(Component):
                 Observable("Q_in", "mL/s", "flow into the inlet"),
                 Observable("Q_out", "mL/s", "flow out of the outlet"))
 
-    def _pim(self, p, t):
-        shape = batch_shape(p, np.shape(t))
-        T = np.broadcast_to(np.asarray(p["period"], float), shape)
-        tt = np.broadcast_to(np.asarray(t, float), shape)
-        F = np.empty(shape)
-        for idx in np.ndindex(shape):
-            F[idx] = fourier_raw(np.fmod(float(tt[idx]), float(T[idx])), float(T[idx]))
-        return p["im"] * p["E_s"] * F * (p["V_vent"] - p["V_u"])
-
-    def stamp(self, p, x, u, t, src=None):
-        shape = batch_shape(p, x.shape[:2])
-        A = np.zeros(shape + (8, 8))
-        b = np.zeros(shape + (8,))
-        ga, gv = 1.0 / p["Ram"], 1.0 / p["Rv"]
-        A[..., 0, 5], A[..., 3, 5] = 1.0, -1.0
-        A[..., 5, 0], A[..., 5, 3], A[..., 5, 5] = 1.0, -1.0, -p["Ra"]
-        A[..., 3, 6], A[..., 2, 6], A[..., 6, 3], A[..., 6, 2] = 1.0, -1.0, 1.0, -1.0
-        A[..., 4, 7], A[..., 2, 7], A[..., 7, 4], A[..., 7, 2] = 1.0, -1.0, 1.0, -1.0
-        A[..., 3, 3], A[..., 3, 4], A[..., 4, 3] = ga, -ga, -ga
-        A[..., 4, 4] = ga + gv
-        A[..., 4, 1], A[..., 1, 4], A[..., 1, 1] = -gv, -gv, gv
-        b[..., 6] = x[..., 0] / p["Ca"]
-        b[..., 7] = x[..., 1] / p["Cim"] + self._pim(p, t)
-        return A, b
-
-    def derivatives(self, p, x, u, t, src=None):
-        dx = np.zeros(batch_shape(p, x.shape[:2], u.shape[:2]) + (2,))
-        dx[..., 0] = u[..., 6]
-        dx[..., 1] = u[..., 7]
-        return dx
-
-    def observe(self, p, x, u, t, src=None):
-        out = {"V_a": x[..., 0], "V_im": x[..., 1]}
-        if u is not None:
-            out.update(P_im=self._pim(p, t) + 0.0 * u[..., 0], Q_in=u[..., 5], Q_out=(u[..., 4] - u[..., 1]) / p["Rv"])
-        return out
-
     def dc_stamp(self, p, A_loc, b_loc, keep):
         """Steady state: both capacitors open (no flow) unless the element anchors a
         conservation law, where Ca keeps its stamp (it pins the group's pressure)."""
-        opened = ~np.asarray(keep, dtype=bool)
-        A_loc[:, opened, 6, :] = 0.0
-        A_loc[:, opened, 6, 6] = 1.0
-        b_loc[:, opened, 6] = 0.0
-        A_loc[..., 7, :] = 0.0
-        A_loc[..., 7, 7] = 1.0
-        b_loc[..., 7] = 0.0
-        return A_loc, b_loc
+        open_branches(A_loc, b_loc, (6,), keep)
+        return open_branches(A_loc, b_loc, (7,))
 
     def initial_states(self, p, u, flows=None, x=None):
         out = np.zeros(batch_shape(p, u.shape[:2]) + (2,))
         out[..., 0] = p["Ca"] * (u[..., 3] - u[..., 2])
-        out[..., 1] = p["Cim"] * (u[..., 4] - u[..., 2] - self._pim(p, 0.0))
+        out[..., 1] = p["Cim"] * (u[..., 4] - u[..., 2] - per_element(clcor_pim, self, p, 0.0))
         return out
 
     def kernel(self):
         from hemocircuit.kernels import Kernel
-        return Kernel(stamp=clcor_stamp, derivs=clcor_derivs, observe=clcor_observe, observables=("V_a", "V_im"))
+        return Kernel(stamp=clcor_stamp, derivs=clcor_derivs, observe=clcor_observe, observables=("V_a", "V_im"),
+                      report=clcor_report)
 
 
-# --- compiled path: p = [Ra, Ram, Rv, Ca, Cim, im, E_s, V_u, V_vent, period]; states [V_a, V_im];
+# --- the equations: p = [Ra, Ram, Rv, Ca, Cim, im, E_s, V_u, V_vent, period]; states [V_a, V_im];
 # local unknowns [P_in, P_out, P_ref, P_a, P_m, q_ra, q_ca, q_cim]
 @jit
+def clcor_pim(p, t, iopt):
+    """P_im = im P_vent: the heart's ventricular pressure at time t from its volume V_vent."""
+    return p[5] * ventricle_pressure(fourier_raw(np.fmod(t, p[9]), p[9]), p[6], p[8], p[7])
+
+
+@jit
 def clcor_stamp(p, x, u, t, iopt, A, b):
-    ga = 1.0 / p[1]
-    gv = 1.0 / p[2]
-    A[0, 5] = 1.0
-    A[3, 5] = -1.0
-    A[5, 0] = 1.0
-    A[5, 3] = -1.0
+    branch(A, b, 0, 3, 5, 0.0)  # P_in - P_a - Ra q_ra = 0
     A[5, 5] = -p[0]
-    A[3, 6] = 1.0
-    A[2, 6] = -1.0
-    A[6, 3] = 1.0
-    A[6, 2] = -1.0
-    A[4, 7] = 1.0
-    A[2, 7] = -1.0
-    A[7, 4] = 1.0
-    A[7, 2] = -1.0
-    A[3, 3] = ga
-    A[3, 4] = -ga
-    A[4, 3] = -ga
-    A[4, 4] = ga + gv
-    A[4, 1] = -gv
-    A[1, 4] = -gv
-    A[1, 1] = gv
-    pim = p[5] * p[6] * fourier_raw(np.fmod(t, p[9]), p[9]) * (p[8] - p[7])
-    b[6] = x[0] / p[3]
-    b[7] = x[1] / p[4] + pim
+    branch(A, b, 3, 2, 6, x[0] / p[3])
+    branch(A, b, 4, 2, 7, x[1] / p[4] + clcor_pim(p, t, iopt))
+    conductance(A, 3, 4, 1.0 / p[1])
+    conductance(A, 4, 1, 1.0 / p[2])
 
 
 @jit
@@ -179,3 +125,11 @@ def clcor_derivs(p, x, u, t, iopt, dx):
 def clcor_observe(p, x, iopt, out):
     out[0] = x[0]
     out[1] = x[1]
+
+
+@jit
+def clcor_report(p, x, u, t, iopt, out):
+    clcor_observe(p, x, iopt, out)  # V_a, V_im
+    out[2] = clcor_pim(p, t, iopt) + 0.0 * u[0]  # P_im
+    out[3] = u[5]  # Q_in
+    out[4] = (u[4] - u[1]) / p[2]  # Q_out

@@ -38,17 +38,16 @@ Q_in; branch (out, ref) P_out - P_ref = V_ao/Cpa carrying -Q_out.
 """
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from hemocircuit.component import Component, Observable, Param, State, Storage
 from hemocircuit.derivatives import FD_REL
 
-from ._common import batch_shape, C_UNIT, E_UNIT, L_UNIT, R_UNIT, each_element, jit, kernel_derivatives
-from .activation import activation_breakpoints, fourier_raw
+from ._common import batch_shape, branch, C_UNIT, E_UNIT, jit, L_UNIT, R_UNIT
+from .activation import activation_breakpoints, fourier_raw, wrapping_cosine
+from .chamber_elastance_inductor_exponential import atrium_pressure, atrium_slope
 
-_P = {"period": ("s", "cardiac period (their cardiac_cycle_period)"),
+PARAMS = {"period": ("s", "cardiac period (their cardiac_cycle_period)"),
       "Tsa": ("dimensionless", "atrial systole fraction of the period"),
       "tpwave": ("dimensionless", "P-wave divisor of the period"),
       "Erv_s": (E_UNIT, "right ventricular elastance scale"), "Elv_s": (E_UNIT, "left ventricular elastance scale"),
@@ -65,6 +64,7 @@ _P = {"period": ("s", "cardiac period (their cardiac_cycle_period)"),
       "Kxp_la": ("mmHg", "LA passive pressure scale"), "Kxv_la": ("1/mL", "LA passive volume exponent"),
       "Emax_ra": (E_UNIT, "RA active elastance"), "Emax_la": (E_UNIT, "LA active elastance"),
       "Vaso_ra": ("mL", "RA rest volume"), "Vaso_la": ("mL", "LA rest volume")}
+_P = PARAMS  # the old name, read by hemocircuit/svzerod/importer.py until it reads PARAMS
 _POSITIVE = {"period", "tpwave", "Tsa", "Lra_v", "Lrv_a", "Lla_v", "Llv_a", "Rpd", "Cp", "Cpa"}
 _NONNEG = {"Rra_v", "Rrv_a", "Rla_v", "Rlv_ao"}
 
@@ -73,60 +73,32 @@ _NONNEG = {"Rra_v", "Rrv_a", "Rla_v", "Rlv_ao"}
 Q_SCALE = 10.0
 _STATES = ("V_RA", "Q_RA", "V_RV", "Q_RV", "V_pul", "V_LA", "Q_LA", "V_LV", "Q_LV", "V_ao")
 (PERIOD, TSA, TPWAVE, ERV_S, ELV_S, IML, IMR, LRA_V, RRA_V, LRV_A, RRV_A, LLA_V, RLA_V, LLV_A, RLV_AO, VRV_U,
- VLV_U, RPD, CP, CPA, KXP_RA, KXV_RA, KXP_LA, KXV_LA, EMAX_RA, EMAX_LA, VASO_RA, VASO_LA) = range(len(_P))
+ VLV_U, RPD, CP, CPA, KXP_RA, KXV_RA, KXP_LA, KXV_LA, EMAX_RA, EMAX_LA, VASO_RA, VASO_LA) = range(len(PARAMS))
 
 
 @jit
 def _atrial_activation(t, p):
     """AA: their atrial activation at t (the wrapping_cosine of activation.py with Tsa, tpwave)."""
-    T = p[PERIOD]
-    Tsa = T * p[TSA]
-    tp = T / p[TPWAVE]
-    tc = np.fmod(t, T)
-    if tc <= tp:
-        return 0.5 * (1.0 - math.cos(2.0 * math.pi * (tc - tp + Tsa) / Tsa))
-    if tc >= (T - Tsa) + tp and tc < T:
-        return 0.5 * (1.0 - math.cos(2.0 * math.pi * (tc - tp - (T - Tsa)) / Tsa))
-    return 0.0
+    return wrapping_cosine(t, p[PERIOD], p[TSA], p[TPWAVE])
 
 
 @jit
-def _activations(t, p):
-    """(AA, F): their atrial activation and the raw ventricular Fourier elastance at t."""
-    return _atrial_activation(t, p), fourier_raw(np.fmod(t, p[PERIOD]), p[PERIOD])
-
-
-@jit
-def _atrium(AA, Emax, Kxp, Kxv, Vaso, V):
-    """Pressure of an atrium: active AA Emax (V - Vaso) plus passive Kxp (exp((V - Vaso) Kxv) - 1)
-    weighted 1 - AA (their update_solution)."""
-    return AA * Emax * (V - Vaso) + Kxp * (math.exp((V - Vaso) * Kxv) - 1.0) * (1.0 - AA)
+def ventricle_pressure(F, E_s, V, V_u):
+    """P = F(t) E_s (V - V_u): a ventricle's pressure at the raw Fourier elastance F (also the
+    intramyocardial pressure of closed_loop_coronary)."""
+    return F * E_s * (V - V_u)
 
 
 @jit
 def _pressures(p, x, t):
-    """(P_RA, P_RV, P_pul, P_LA, P_LV, P_ao) from the states at time t."""
-    AA, F = _activations(t, p)
-    return _pressures_at(p, x, AA, F)
-
-
-@jit
-def _pressures_at(p, x, AA, F):
-    """_pressures with the activations (AA, F) at that time given."""
-    P_ra = _atrium(AA, p[EMAX_RA], p[KXP_RA], p[KXV_RA], p[VASO_RA], x[0])
-    P_la = _atrium(AA, p[EMAX_LA], p[KXP_LA], p[KXV_LA], p[VASO_LA], x[5])
-    P_rv = F * p[ERV_S] * (x[2] - p[VRV_U])
-    P_lv = F * p[ELV_S] * (x[7] - p[VLV_U])
-    return P_ra, P_rv, x[4] / p[CP], P_la, P_lv, x[9] / p[CPA]
-
-
-@jit
-def _pressures_rows(P, X, T, out):
-    """_pressures for every row of P (n, len(_P)), X (n, 10), T (n,) into out (n, 6): one
-    compiled call for an output table (a dispatch per row made the outputs of a 401-row cycle
-    2.6 ms instead of 1.3 ms)."""
-    for i in range(T.shape[0]):
-        out[i, 0], out[i, 1], out[i, 2], out[i, 3], out[i, 4], out[i, 5] = _pressures(P[i], X[i], T[i])
+    """(P_RA, P_RV, P_pul, P_LA, P_LV, P_ao) from the states at time t, and the activations
+    (AA, F): their atrial activation and the raw ventricular Fourier elastance."""
+    AA, F = _atrial_activation(t, p), fourier_raw(np.fmod(t, p[PERIOD]), p[PERIOD])
+    P_ra = atrium_pressure(AA, p[EMAX_RA], p[KXP_RA], p[KXV_RA], p[VASO_RA], x[0])
+    P_la = atrium_pressure(AA, p[EMAX_LA], p[KXP_LA], p[KXV_LA], p[VASO_LA], x[5])
+    P_rv = ventricle_pressure(F, p[ERV_S], x[2], p[VRV_U])
+    P_lv = ventricle_pressure(F, p[ELV_S], x[7], p[VLV_U])
+    return P_ra, P_rv, x[4] / p[CP], P_la, P_lv, x[9] / p[CPA], AA, F
 
 
 @jit
@@ -139,26 +111,16 @@ def _valve(dp, q):
 @jit
 def heart_stamp(p, x, u, t, iopt, A, b):
     # the two pressures it defines; the ventricles' Fourier elastance is not needed here
-    P_ra = _atrium(_atrial_activation(t, p), p[EMAX_RA], p[KXP_RA], p[KXV_RA], p[VASO_RA], x[0])
-    P_ao = x[9] / p[CPA]
-    A[0, 3] = 1.0
-    A[2, 3] = -1.0
-    A[3, 0] = 1.0
-    A[3, 2] = -1.0
-    b[3] = P_ra
-    A[1, 4] = 1.0
-    A[2, 4] = -1.0
-    A[4, 1] = 1.0
-    A[4, 2] = -1.0
-    b[4] = P_ao
+    branch(A, b, 0, 2, 3, atrium_pressure(_atrial_activation(t, p), p[EMAX_RA], p[KXP_RA], p[KXV_RA],
+                                          p[VASO_RA], x[0]))  # P_RA
+    branch(A, b, 1, 2, 4, x[9] / p[CPA])  # P_ao
 
 
 @jit
 def _heart(p, x, u, t, dx):
     """dx/dt into dx; returns what the partials need: the valve positions (v_ra, v_rv, v_la,
     v_lv), their pressure differences and the activations (AA, F)."""
-    AA, F = _activations(t, p)
-    P_ra, P_rv, P_pul, P_la, P_lv, P_ao = _pressures_at(p, x, AA, F)
+    P_ra, P_rv, P_pul, P_la, P_lv, P_ao, AA, F = _pressures(p, x, t)
     q_ra, q_rv, q_la, q_lv = x[1], x[3], x[6], x[8]
     v_ra = _valve(P_ra - P_rv, q_ra)
     v_rv = _valve(P_rv - P_pul, q_rv)
@@ -180,12 +142,6 @@ def _heart(p, x, u, t, dx):
 @jit
 def heart_derivs(p, x, u, t, iopt, dx):
     _heart(p, x, u, t, dx)
-
-
-@jit
-def _atrium_slope(AA, Emax, Kxp, Kxv, Vaso, V):
-    """d P_atrium / d V of _atrium."""
-    return AA * Emax + Kxp * Kxv * math.exp((V - Vaso) * Kxv) * (1.0 - AA)
 
 
 @jit
@@ -217,8 +173,8 @@ def heart_derivs_jac(p, x, u, t, iopt, dx, Jx, Ju):
             Jx[i, k] = 0.0
         for k in range(5):
             Ju[i, k] = 0.0
-    a_ra = _atrium_slope(AA, p[EMAX_RA], p[KXP_RA], p[KXV_RA], p[VASO_RA], x[0])
-    a_la = _atrium_slope(AA, p[EMAX_LA], p[KXP_LA], p[KXV_LA], p[VASO_LA], x[5])
+    a_ra = atrium_slope(AA, p[EMAX_RA], p[KXP_RA], p[KXV_RA], p[VASO_RA], x[0])
+    a_la = atrium_slope(AA, p[EMAX_LA], p[KXP_LA], p[KXV_LA], p[VASO_LA], x[5])
     a_rv, a_lv = F * p[ERV_S], F * p[ELV_S]
     a_pul, a_ao = 1.0 / p[CP], 1.0 / p[CPA]
     Ju[0, 3] = 1.0  # dV_RA = Q_in - v_RA Q_RA
@@ -246,13 +202,21 @@ def heart_observe(p, x, iopt, out):
     out[3] = x[7]
 
 
+@jit
+def heart_report(p, x, u, t, iopt, out):
+    heart_observe(p, x, iopt, out)  # V_heart, V_ao, V_RV, V_LV
+    P_ra, out[4], out[5], out[6], out[7], P_ao, AA, F = _pressures(p, x, t)  # P_RV, P_pul, P_LA, P_LV
+    out[8] = u[3]  # Q_in
+    out[9] = -u[4]  # Q_out
+
+
 class ClosedLoopHeartAndPulmonary(Component):
     __doc__ = __doc__
     type_name = "closed_loop_heart_pulmonary"
     svzerod_blocks = ("ClosedLoopHeartAndPulmonary",)
     terminals = ("in", "out", "ref")
     parameters = {k: Param(u, lower=0.0 if (k in _POSITIVE or k in _NONNEG) else None,
-                           lower_open=k in _POSITIVE, doc=d) for k, (u, d) in _P.items()}
+                           lower_open=k in _POSITIVE, doc=d) for k, (u, d) in PARAMS.items()}
     time_dependent = True
 
     def branches(self):
@@ -298,39 +262,13 @@ class ClosedLoopHeartAndPulmonary(Component):
                 Observable("Q_in", "mL/s", "flow into the right atrium"),
                 Observable("Q_out", "mL/s", "flow out of the aortic capacitor"))
 
-    def stamp(self, p, x, u, t, src=None):
-        shape, P, X, T = each_element(p, tuple(_P), x, t)
-        A = np.zeros(shape + (5, 5))
-        b = np.zeros(shape + (5,))
-        for idx in np.ndindex(shape):
-            heart_stamp(np.ascontiguousarray(P[idx]), np.ascontiguousarray(X[idx]), None, float(T[idx]), None,
-                        A[idx], b[idx])
-        return A, b
-
-    def derivatives(self, p, x, u, t, src=None):
-        return kernel_derivatives(heart_derivs, p, tuple(_P), x, u, t)
-
-    def observe(self, p, x, u, t, src=None):
-        out = {"V_heart": x[..., 0] + x[..., 2] + x[..., 5] + x[..., 7], "V_ao": x[..., 9],
-               "V_RV": x[..., 2], "V_LV": x[..., 7]}
-        if u is not None:
-            shape, P, X, T = each_element(p, tuple(_P), x, t)
-            pr = np.empty((int(np.prod(shape)), 6))
-            _pressures_rows(np.ascontiguousarray(P.reshape(-1, len(_P))), np.ascontiguousarray(X.reshape(-1, 10)),
-                            np.ascontiguousarray(T.reshape(-1)), pr)
-            pr = pr.reshape(shape + (6,))
-            out.update(P_RV=pr[..., 1], P_pul=pr[..., 2], P_LA=pr[..., 3], P_LV=pr[..., 4],
-                       Q_in=u[..., 3], Q_out=-u[..., 4])
-        return out
-
     def dc_stamp(self, p, A_loc, b_loc, keep):
         """Steady state of the heart is not a DC state (it is time-varying); the DC guess keeps
         both branches as pressure definitions (from the current states)."""
         return A_loc, b_loc
 
     def initial_states(self, p, u, flows=None, x=None):
-        shape = batch_shape(p, u.shape[:-1])
-        out = np.zeros(shape + (10,))
+        out = np.zeros(batch_shape(p, u.shape[:-1]) + (10,))
         for name, k in (("Vaso_ra", 0), ("Vrv_u", 2), ("Vaso_la", 5), ("Vlv_u", 7)):
             out[..., k] = p[name]
         out[..., 9] = p["Cpa"] * (u[..., 1] - u[..., 2])
@@ -339,4 +277,5 @@ class ClosedLoopHeartAndPulmonary(Component):
     def kernel(self):
         from hemocircuit.kernels import Kernel
         return Kernel(stamp=heart_stamp, derivs=heart_derivs, observe=heart_observe,
-                      observables=("V_heart", "V_ao", "V_RV", "V_LV"), derivs_jac=heart_derivs_jac)
+                      observables=("V_heart", "V_ao", "V_RV", "V_LV"), derivs_jac=heart_derivs_jac,
+                      report=heart_report)

@@ -11,11 +11,9 @@ q_c = dV/dt; Rd a conductance from c to out.
 """
 from __future__ import annotations
 
-import numpy as np
-
 from hemocircuit.component import Component, Observable, Param, State, Storage
 
-from ._common import batch_shape, C_UNIT, R_UNIT, jit
+from ._common import branch, C_UNIT, conductance, jit, open_branches, R_UNIT
 
 
 class ClosedLoopRCR(Component):
@@ -49,62 +47,26 @@ class ClosedLoopRCR(Component):
                 Observable("Q_in", "mL/s", "flow into the inlet"),
                 Observable("Q_out", "mL/s", "flow out of the outlet"))
 
-    def stamp(self, p, x, u, t, src=None):
-        shape = batch_shape(p, x.shape[:2])
-        A = np.zeros(shape + (6, 6))
-        b = np.zeros(shape + (6,))
-        g = 1.0 / p["Rd"]
-        A[..., 0, 4], A[..., 3, 4] = 1.0, -1.0
-        A[..., 3, 5], A[..., 2, 5] = 1.0, -1.0
-        A[..., 3, 3], A[..., 3, 1], A[..., 1, 3], A[..., 1, 1] = g, -g, -g, g
-        A[..., 4, 0], A[..., 4, 3], A[..., 4, 4] = 1.0, -1.0, -p["Rp"]
-        A[..., 5, 3], A[..., 5, 2] = 1.0, -1.0
-        b[..., 5] = x[..., 0] / p["C"]
-        return A, b
-
-    def derivatives(self, p, x, u, t, src=None):
-        return u[..., 5][..., None] + 0.0 * x
-
-    def observe(self, p, x, u, t, src=None):
-        out = {"V": x[..., 0], "P_c": x[..., 0] / p["C"]}
-        if u is not None:
-            out["Q_in"], out["Q_out"] = u[..., 4], (u[..., 3] - u[..., 1]) / p["Rd"]
-        return out
-
     def dc_stamp(self, p, A_loc, b_loc, keep):
         """Steady state: C open (q_c = 0) unless it anchors a conservation law."""
-        opened = ~np.asarray(keep, dtype=bool)
-        A_loc[:, opened, 5, :] = 0.0
-        A_loc[:, opened, 5, 5] = 1.0
-        b_loc[:, opened, 5] = 0.0
-        return A_loc, b_loc
+        return open_branches(A_loc, b_loc, (5,), keep)
 
     def initial_states(self, p, u, flows=None, x=None):
         return (p["C"] * (u[..., 3] - u[..., 2]))[..., None]
 
     def kernel(self):
         from hemocircuit.kernels import Kernel
-        return Kernel(stamp=clrcr_stamp, derivs=clrcr_derivs, observe=clrcr_observe, observables=("V", "P_c"))
+        return Kernel(stamp=clrcr_stamp, derivs=clrcr_derivs, observe=clrcr_observe, observables=("V", "P_c"),
+                      report=clrcr_report)
 
 
-# --- compiled path: p = [Rp, C, Rd]; state [V]; local unknowns [P_in, P_out, P_ref, P_c, q_p, q_c]
+# --- the equations: p = [Rp, C, Rd]; state [V]; local unknowns [P_in, P_out, P_ref, P_c, q_p, q_c]
 @jit
 def clrcr_stamp(p, x, u, t, iopt, A, b):
-    g = 1.0 / p[2]
-    A[0, 4] = 1.0
-    A[3, 4] = -1.0
-    A[3, 5] = 1.0
-    A[2, 5] = -1.0
-    A[3, 3] = g
-    A[3, 1] = -g
-    A[1, 3] = -g
-    A[1, 1] = g
-    A[4, 0] = 1.0
-    A[4, 3] = -1.0
+    branch(A, b, 0, 3, 4, 0.0)  # P_in - P_c - Rp q_p = 0
     A[4, 4] = -p[0]
-    A[5, 3] = 1.0
-    A[5, 2] = -1.0
-    b[5] = x[0] / p[1]
+    branch(A, b, 3, 2, 5, x[0] / p[1])
+    conductance(A, 3, 1, 1.0 / p[2])
 
 
 @jit
@@ -116,3 +78,10 @@ def clrcr_derivs(p, x, u, t, iopt, dx):
 def clrcr_observe(p, x, iopt, out):
     out[0] = x[0]
     out[1] = x[0] / p[1]
+
+
+@jit
+def clrcr_report(p, x, u, t, iopt, out):
+    clrcr_observe(p, x, iopt, out)  # V, P_c
+    out[2] = u[4]  # Q_in
+    out[3] = (u[3] - u[1]) / p[2]  # Q_out

@@ -17,7 +17,7 @@ import numpy as np
 
 from hemocircuit.component import Component, Observable, Param, State
 
-from ._common import batch_shape, C_UNIT, R_UNIT, jit
+from ._common import branch, C_UNIT, jit, R_UNIT
 
 
 class CoronaryBC(Component):
@@ -45,27 +45,6 @@ class CoronaryBC(Component):
     def observables(self):
         return (Observable("Q_in", "mL/s", "flow into the block"),)
 
-    def stamp(self, p, x, u, t, src=None):
-        A = np.zeros(batch_shape(p, x.shape[:2]) + (3, 3))
-        b = np.zeros(batch_shape(p, x.shape[:2]) + (3,))
-        A[..., 0, 2], A[..., 1, 2] = 1.0, -1.0
-        A[..., 2, 0], A[..., 2, 1], A[..., 2, 2] = 1.0, -1.0, -p["Ra1"]
-        b[..., 2] = x[..., 0] / p["Ca"]
-        return A, b
-
-    def derivatives(self, p, x, u, t, src=None):
-        Pim = p["Pim"] + (0.0 if src is None else src)
-        Pa = x[..., 0] / p["Ca"]
-        Pc = x[..., 1] / p["Cc"] + Pim
-        q_am = (Pa - Pc) / p["Ra2"]
-        dx = np.empty(x.shape)
-        dx[..., 0] = u[..., 2] - q_am
-        dx[..., 1] = q_am - (Pc - p["P_v"]) / p["Rv1"]
-        return dx
-
-    def observe(self, p, x, u, t, src=None):
-        return {} if u is None else {"Q_in": u[..., 2]}
-
     def dc_stamp(self, p, A_loc, b_loc, keep):
         """Steady state: capacitors open, Q_in = (P - P_v)/(Ra1 + Ra2 + Rv1)."""
         A_loc[..., 2, 2] = -(p["Ra1"] + p["Ra2"] + p["Rv1"])
@@ -83,24 +62,33 @@ class CoronaryBC(Component):
     def kernel(self):
         from hemocircuit.kernels import Kernel
         from hemocircuit.kernels.stateless import no_observables
-        return Kernel(stamp=coronary_stamp, derivs=coronary_derivs, observe=no_observables, observables=())
+        return Kernel(stamp=coronary_stamp, derivs=coronary_derivs, observe=no_observables, observables=(),
+                      report=coronary_report)
 
 
-# --- compiled path: p = [Ra1, Ra2, Rv1, Ca, Cc, Pim, P_v]; states [V_a, V_im]
+# --- the equations: p = [Ra1, Ra2, Rv1, Ca, Cc, Pim, P_v] (Pim with its waveform added);
+# states [V_a, V_im]; local unknowns [P_node, P_ref, Q_in]
 @jit
 def coronary_stamp(p, x, u, t, iopt, A, b):
-    A[0, 2] = 1.0
-    A[1, 2] = -1.0
-    A[2, 0] = 1.0
-    A[2, 1] = -1.0
+    branch(A, b, 0, 1, 2, x[0] / p[3])  # P_node - P_ref - Ra1 Q_in = V_a/Ca
     A[2, 2] = -p[0]
-    b[2] = x[0] / p[3]
+
+
+@jit
+def coronary_balance(p, x, u, Ram, dx):
+    """dx/dt with the microvascular resistance Ram (Ra2, or CORONARY_VAR_RES's Ram(t))."""
+    Pa = x[0] / p[3]
+    Pc = x[1] / p[4] + p[5]
+    q_am = (Pa - Pc) / Ram
+    dx[0] = u[2] - q_am
+    dx[1] = q_am - (Pc - p[6]) / p[2]
 
 
 @jit
 def coronary_derivs(p, x, u, t, iopt, dx):
-    Pa = x[0] / p[3]
-    Pc = x[1] / p[4] + p[5]
-    q_am = (Pa - Pc) / p[1]
-    dx[0] = u[2] - q_am
-    dx[1] = q_am - (Pc - p[6]) / p[2]
+    coronary_balance(p, x, u, p[1], dx)
+
+
+@jit
+def coronary_report(p, x, u, t, iopt, out):
+    out[0] = u[2]  # Q_in

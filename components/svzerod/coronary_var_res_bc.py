@@ -23,9 +23,9 @@ import numpy as np
 
 from hemocircuit.component import Observable, Param
 
-from ._common import batch_shape, R_UNIT, jit
+from ._common import R_UNIT, jit
 from .activation import periodic_breakpoints
-from .coronary_bc import CoronaryBC, coronary_stamp
+from .coronary_bc import CoronaryBC, coronary_balance, coronary_stamp
 
 
 @jit
@@ -66,21 +66,6 @@ class CoronaryVarResBC(CoronaryBC):
         and T_vc + T_vr; steps end there."""
         return periodic_breakpoints(lambda T, a: [0.0, a["T_vc"], a["T_vc"] + a["T_vr"]], p, ("T_vc", "T_vr"), t0, t1)
 
-    def _ram(self, p, t):
-        shape = batch_shape(p, np.shape(t))
-        args = [np.broadcast_to(np.asarray(v, float), shape) for v in
-                (t, p["period"], p["Ra2_min"], p["Ra2_max"], p["T_vc"], p["T_vr"])]
-        out = np.empty(shape)
-        for idx in np.ndindex(shape):
-            out[idx] = var_resistance(*(float(a[idx]) for a in args))
-        return out
-
-    def derivatives(self, p, x, u, t, src=None):
-        return super().derivatives({**p, "Ra2": self._ram(p, t)}, x, u, t, src)
-
-    def observe(self, p, x, u, t, src=None):
-        return {} if u is None else {"Q_in": u[..., 2], "Ram": self._ram(p, t) + 0.0 * u[..., 2]}
-
     def dc_stamp(self, p, A_loc, b_loc, keep):
         return super().dc_stamp({**p, "Ra2": p["Ra2_min"]}, A_loc, b_loc, keep)
 
@@ -90,16 +75,23 @@ class CoronaryVarResBC(CoronaryBC):
     def kernel(self):
         from hemocircuit.kernels import Kernel
         from hemocircuit.kernels.stateless import no_observables
-        return Kernel(stamp=coronary_stamp, derivs=coronary_var_res_derivs, observe=no_observables, observables=())
+        return Kernel(stamp=coronary_stamp, derivs=coronary_var_res_derivs, observe=no_observables, observables=(),
+                      report=coronary_var_res_report)
 
 
-# --- compiled path: p = [Ra1, Ra2_min, Rv1, Ca, Cc, Pim, P_v, Ra2_max, T_vc, T_vr, period];
+# --- the equations: p = [Ra1, Ra2_min, Rv1, Ca, Cc, Pim, P_v, Ra2_max, T_vc, T_vr, period];
 # states [V_a, V_im]; the stamp is coronary_bc's
 @jit
+def _ram(p, t):
+    return var_resistance(t, p[10], p[1], p[7], p[8], p[9])
+
+
+@jit
 def coronary_var_res_derivs(p, x, u, t, iopt, dx):
-    Ram = var_resistance(t, p[10], p[1], p[7], p[8], p[9])
-    Pa = x[0] / p[3]
-    Pc = x[1] / p[4] + p[5]
-    q_am = (Pa - Pc) / Ram
-    dx[0] = u[2] - q_am
-    dx[1] = q_am - (Pc - p[6]) / p[2]
+    coronary_balance(p, x, u, _ram(p, t), dx)
+
+
+@jit
+def coronary_var_res_report(p, x, u, t, iopt, out):
+    out[0] = u[2]  # Q_in
+    out[1] = _ram(p, t) + 0.0 * u[2]

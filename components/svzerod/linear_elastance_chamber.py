@@ -15,9 +15,8 @@ import numpy as np
 
 from hemocircuit.component import Component, Observable, Option, Param, State, Storage
 
-from ._common import batch_shape, E_UNIT, jit
-from .activation import (KINDS, act_parameters, activation, activation_np, activation_breakpoints,
-                         check_activation)
+from ._common import branch, E_UNIT, jit, open_branches, per_element
+from .activation import KINDS, act_parameters, activation, activation_breakpoints, check_activation
 
 
 class LinearElastanceChamber(Component):
@@ -56,40 +55,12 @@ class LinearElastanceChamber(Component):
         """The activation's kinks (activation.kink_phases): steps end there."""
         return activation_breakpoints(self.opts["activation"], p, t0, t1)
 
-    def _elastance(self, p, t):
-        return p["Epass"] + p["Emax"] * activation_np(self.opts["activation"], t, p)
-
-    def stamp(self, p, x, u, t, src=None):
-        E = self._elastance(p, t)
-        shape = batch_shape(p, E.shape, x.shape[:2])
-        A = np.zeros(shape + (5, 5))
-        b = np.zeros(shape + (5,))
-        A[..., 0, 3], A[..., 2, 3] = 1.0, -1.0
-        A[..., 3, 0], A[..., 3, 2] = 1.0, -1.0
-        b[..., 3] = E * (x[..., 0] - p["Vrest"])
-        A[..., 0, 4], A[..., 1, 4] = 1.0, -1.0
-        A[..., 4, 0], A[..., 4, 1] = 1.0, -1.0
-        return A, b
-
-    def derivatives(self, p, x, u, t, src=None):
-        return u[..., 3][..., None] + 0.0 * x
-
-    def observe(self, p, x, u, t, src=None):
-        out = {"Vc": x[..., 0]}
-        if u is not None:
-            out["Q_in"], out["Q_out"] = u[..., 3] + u[..., 4], u[..., 4]
-        return out
-
     def dc_stamp(self, p, A_loc, b_loc, keep):
         """Steady state: the store open (q = 0) unless it anchors a conservation law."""
-        opened = ~np.asarray(keep, dtype=bool)
-        A_loc[:, opened, 3, :] = 0.0
-        A_loc[:, opened, 3, 3] = 1.0
-        b_loc[:, opened, 3] = 0.0
-        return A_loc, b_loc
+        return open_branches(A_loc, b_loc, (3,), keep)
 
     def initial_states(self, p, u, flows=None, x=None):
-        E = self._elastance(p, 0.0)
+        E = per_element(lec_elastance, self, p, 0.0)
         return ((u[..., 0] - u[..., 2]) / E + p["Vrest"])[..., None]
 
     def kernel_options(self):
@@ -97,23 +68,23 @@ class LinearElastanceChamber(Component):
 
     def kernel(self):
         from hemocircuit.kernels import Kernel
-        return Kernel(stamp=lec_stamp, derivs=lec_derivs, observe=lec_observe, observables=("Vc",))
+        return Kernel(stamp=lec_stamp, derivs=lec_derivs, observe=lec_observe, observables=("Vc",),
+                      report=lec_report)
 
 
-# --- compiled path: p = [Emax, Epass, Vrest, period, 13 activation parameters];
+# --- the equations: p = [Emax, Epass, Vrest, period, 13 activation parameters];
 # iopt = [activation kind]; state [Vc]; local unknowns [P_in, P_out, P_ref, q, q_out]
 @jit
+def lec_elastance(p, t, iopt):
+    """E(t) = Epass + Emax A(t)."""
+    return p[1] + p[0] * activation(iopt[0], t, p[3], p[4:17])
+
+
+@jit
 def lec_stamp(p, x, u, t, iopt, A, b):
-    E = p[1] + p[0] * activation(iopt[0], t, p[3], p[4:17])
-    A[0, 3] = 1.0
-    A[2, 3] = -1.0
-    A[3, 0] = 1.0
-    A[3, 2] = -1.0
-    b[3] = E * (x[0] - p[2])
-    A[0, 4] = 1.0
-    A[1, 4] = -1.0
-    A[4, 0] = 1.0
-    A[4, 1] = -1.0
+    E = lec_elastance(p, t, iopt)
+    branch(A, b, 0, 2, 3, E * (x[0] - p[2]))
+    branch(A, b, 0, 1, 4, 0.0)  # P_in = P_out, carrying Q_out
 
 
 @jit
@@ -124,3 +95,10 @@ def lec_derivs(p, x, u, t, iopt, dx):
 @jit
 def lec_observe(p, x, iopt, out):
     out[0] = x[0]
+
+
+@jit
+def lec_report(p, x, u, t, iopt, out):
+    out[0] = x[0]  # Vc
+    out[1] = u[3] + u[4]  # Q_in
+    out[2] = u[4]  # Q_out

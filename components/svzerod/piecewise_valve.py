@@ -8,11 +8,9 @@ current pressures are on (the nodal Newton iteration settles on a consistent sid
 """
 from __future__ import annotations
 
-import numpy as np
+from hemocircuit.component import Component, Observable, Param
 
-from hemocircuit.component import Component, Observable, Param, two_terminal_conductance
-
-from ._common import R_UNIT, jit
+from ._common import check_rmin_rmax, conductance, jit, R_UNIT
 
 
 class PiecewiseValve(Component):
@@ -27,36 +25,31 @@ class PiecewiseValve(Component):
     constant_matrix = False
 
     def check(self, p):
-        bad = np.any(p["Rmax"] < p["Rmin"], axis=tuple(range(np.ndim(p["Rmin"]) - 1)))
-        return [(int(i), "needs Rmin <= Rmax") for i in np.nonzero(np.atleast_1d(bad))[0]]
+        return check_rmin_rmax(p)
 
     def observables(self):
         return (Observable("Q", "mL/s", "flow from in to out"),)
 
-    def _g(self, p, dp):
-        return np.where(dp > 0.0, 1.0 / p["Rmin"], 1.0 / p["Rmax"])
-
-    def stamp(self, p, x, u, t, src=None):
-        dp = np.zeros(np.shape(p["Rmin"])) if u is None else u[..., 0] - u[..., 1]
-        return two_terminal_conductance(self._g(p, dp) + 0.0 * p["Rmax"])
-
-    def observe(self, p, x, u, t, src=None):
-        if u is None:
-            return {}
-        dp = u[..., 0] - u[..., 1]
-        return {"Q": self._g(p, dp) * dp}
-
     def kernel(self):
         from hemocircuit.kernels import Kernel
         from hemocircuit.kernels.stateless import no_derivs, no_observables
-        return Kernel(stamp=piecewise_valve_stamp, derivs=no_derivs, observe=no_observables, observables=())
+        return Kernel(stamp=piecewise_valve_stamp, derivs=no_derivs, observe=no_observables, observables=(),
+                      report=piecewise_valve_report)
 
 
-# --- compiled path: p = [Rmin, Rmax]; local unknowns [P_in, P_out]
+# --- the equations: p = [Rmin, Rmax]; local unknowns [P_in, P_out]
+@jit
+def _conductance(p, dp):
+    """1/Rmin while P_in > P_out, else 1/Rmax."""
+    return 1.0 / p[0] if dp > 0.0 else 1.0 / p[1]
+
+
 @jit
 def piecewise_valve_stamp(p, x, u, t, iopt, A, b):
-    g = 1.0 / p[0] if u[0] - u[1] > 0.0 else 1.0 / p[1]
-    A[0, 0] = g
-    A[0, 1] = -g
-    A[1, 0] = -g
-    A[1, 1] = g
+    conductance(A, 0, 1, _conductance(p, u[0] - u[1]))
+
+
+@jit
+def piecewise_valve_report(p, x, u, t, iopt, out):
+    dp = u[0] - u[1]
+    out[0] = _conductance(p, dp) * dp  # Q

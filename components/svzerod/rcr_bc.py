@@ -10,11 +10,9 @@ unknowns [P_node, P_ref, Q_in]: the branch row P_node - P_ref - Rp Q_in = V/C.
 """
 from __future__ import annotations
 
-import numpy as np
-
 from hemocircuit.component import Component, Observable, Param, State
 
-from ._common import batch_shape, C_UNIT, R_UNIT, jit
+from ._common import branch, C_UNIT, jit, R_UNIT
 
 
 class RCRBC(Component):
@@ -40,24 +38,6 @@ class RCRBC(Component):
         return (Observable("Q_in", "mL/s", "flow into the block"),
                 Observable("P_c", "mmHg", "pressure of the capacitor", state_only=True))
 
-    def stamp(self, p, x, u, t, src=None):
-        A = np.zeros(batch_shape(p, x.shape[:2]) + (3, 3))
-        b = np.zeros(batch_shape(p, x.shape[:2]) + (3,))
-        A[..., 0, 2], A[..., 1, 2] = 1.0, -1.0
-        A[..., 2, 0], A[..., 2, 1], A[..., 2, 2] = 1.0, -1.0, -p["Rp"]
-        b[..., 2] = x[..., 0] / p["C"]
-        return A, b
-
-    def derivatives(self, p, x, u, t, src=None):
-        Pd = p["Pd"] + (0.0 if src is None else src)
-        return (u[..., 2] - (x[..., 0] / p["C"] - Pd) / p["Rd"])[..., None]
-
-    def observe(self, p, x, u, t, src=None):
-        out = {"P_c": x[..., 0] / p["C"]}
-        if u is not None:
-            out["Q_in"] = u[..., 2]
-        return out
-
     def cycle_time_constants(self, p):
         """Rd C [s]: svZeroDSolver counts the cycles of a run with RCR outlets from it (Solver.cpp)."""
         return p["Rd"] * p["C"]
@@ -73,18 +53,15 @@ class RCRBC(Component):
 
     def kernel(self):
         from hemocircuit.kernels import Kernel
-        return Kernel(stamp=rcr_stamp, derivs=rcr_derivs, observe=rcr_observe, observables=("P_c",))
+        return Kernel(stamp=rcr_stamp, derivs=rcr_derivs, observe=rcr_observe, observables=("P_c",),
+                      report=rcr_report)
 
 
-# --- compiled path: p = [Rp, C, Rd, Pd]; state [V]; local unknowns [P_node, P_ref, Q_in]
+# --- the equations: p = [Rp, C, Rd, Pd] (Pd with its waveform added); state [V]; local unknowns [P_node, P_ref, Q_in]
 @jit
 def rcr_stamp(p, x, u, t, iopt, A, b):
-    A[0, 2] = 1.0
-    A[1, 2] = -1.0
-    A[2, 0] = 1.0
-    A[2, 1] = -1.0
+    branch(A, b, 0, 1, 2, x[0] / p[1])  # P_node - P_ref - Rp Q_in = V/C
     A[2, 2] = -p[0]
-    b[2] = x[0] / p[1]
 
 
 @jit
@@ -95,3 +72,9 @@ def rcr_derivs(p, x, u, t, iopt, dx):
 @jit
 def rcr_observe(p, x, iopt, out):
     out[0] = x[0] / p[1]
+
+
+@jit
+def rcr_report(p, x, u, t, iopt, out):
+    out[0] = u[2]  # Q_in
+    rcr_observe(p, x, iopt, out[1:])  # P_c

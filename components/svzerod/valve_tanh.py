@@ -22,17 +22,9 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
 from hemocircuit.component import Component, Observable, Param
 
-from ._common import R_UNIT, jit
-
-
-def _r_and_dr(Rmin, Rmax, k, dp):
-    """R(dP) and dR/d(dP)."""
-    s = 1.0 / (1.0 + np.exp(np.clip(2.0 * k * dp, -700.0, 700.0)))  # (1 + tanh(-k dp))/2
-    return Rmin + (Rmax - Rmin) * s, -2.0 * (Rmax - Rmin) * k * s * (1.0 - s)
+from ._common import branch, check_rmin_rmax, jit, R_UNIT
 
 
 class ValveTanh(Component):
@@ -48,8 +40,7 @@ class ValveTanh(Component):
     constant_matrix = False
 
     def check(self, p):
-        bad = np.any(p["Rmax"] < p["Rmin"], axis=tuple(range(np.ndim(p["Rmin"]) - 1)))
-        return [(int(i), "needs Rmin <= Rmax") for i in np.nonzero(np.atleast_1d(bad))[0]]
+        return check_rmin_rmax(p)
 
     def observables(self):
         return (Observable("Q", "mL/s", "flow from in to out"),
@@ -61,43 +52,37 @@ class ValveTanh(Component):
     def edges(self):
         return (("in", "out", "conductive"),)
 
-    def stamp(self, p, x, u, t, src=None):
-        dp = np.zeros(np.shape(p["Rmin"])) if u is None else u[..., 0] - u[..., 1]
-        q = np.zeros(np.shape(p["Rmin"])) if u is None else u[..., 2]
-        R, dR = _r_and_dr(p["Rmin"], p["Rmax"], p["steepness"], dp)
-        c = np.maximum(1.0 - q * dR, 1.0)
-        A = np.zeros(np.shape(c) + (3, 3))
-        b = np.zeros(np.shape(c) + (3,))
-        A[..., 0, 2], A[..., 1, 2] = 1.0, -1.0
-        A[..., 2, 0], A[..., 2, 1], A[..., 2, 2] = c, -c, -R
-        b[..., 2] = -q * dR * dp
-        return A, b
-
-    def observe(self, p, x, u, t, src=None):
-        if u is None:
-            return {}
-        dp = u[..., 0] - u[..., 1]
-        return {"Q": u[..., 2], "status": 0.5 * (1.0 + np.tanh(-p["steepness"] * dp))}
-
     def kernel(self):
         from hemocircuit.kernels import Kernel
         from hemocircuit.kernels.stateless import no_derivs, no_observables
-        return Kernel(stamp=valve_tanh_stamp, derivs=no_derivs, observe=no_observables, observables=())
+        return Kernel(stamp=valve_tanh_stamp, derivs=no_derivs, observe=no_observables, observables=(),
+                      report=valve_tanh_report)
 
 
-# --- compiled path: p = [Rmin, Rmax, steepness]; local unknowns [P_in, P_out, Q]
+# --- the equations: p = [Rmin, Rmax, steepness]; local unknowns [P_in, P_out, Q]
+@jit
+def valve_closure(k, dp):
+    """s = (1 + tanh(-k dP))/2 = 1/(1 + exp(2 k dP)) (exponent clipped at +-700): the weight of
+    Rmax, their valve_status."""
+    return 1.0 / (1.0 + math.exp(min(max(2.0 * k * dp, -700.0), 700.0)))
+
+
 @jit
 def valve_tanh_stamp(p, x, u, t, iopt, A, b):
     Rmin, Rmax, k = p[0], p[1], p[2]
     dp = u[0] - u[1]
     q = u[2]
-    s = 1.0 / (1.0 + math.exp(min(max(2.0 * k * dp, -700.0), 700.0)))
+    s = valve_closure(k, dp)
     R = Rmin + (Rmax - Rmin) * s
     dR = -2.0 * (Rmax - Rmin) * k * s * (1.0 - s)
     c = max(1.0 - q * dR, 1.0)
-    A[0, 2] = 1.0
-    A[1, 2] = -1.0
+    branch(A, b, 0, 1, 2, -q * dR * dp)
     A[2, 0] = c
     A[2, 1] = -c
     A[2, 2] = -R
-    b[2] = -q * dR * dp
+
+
+@jit
+def valve_tanh_report(p, x, u, t, iopt, out):
+    out[0] = u[2]  # Q
+    out[1] = valve_closure(p[2], u[0] - u[1])  # status
