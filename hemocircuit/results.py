@@ -126,15 +126,6 @@ def _pyarrow():
     return pa, pq
 
 
-def _csv_cells(a):
-    """A column's cells as CSV text: numbers and flags by one repr of the whole column (Python's
-    shortest round-trip repr of each float, as ``repr(x)``; no Python call per cell), text quoted
-    where CSV needs it."""
-    if a.dtype.kind in "iufb":
-        return repr(a.tolist())[1:-1].split(", ") if a.size else []
-    return [_csv_quote(_cell(v)) for v in a.tolist()]
-
-
 def _csv_quote(text):
     """Quoted as the csv module quotes (and "" for an empty cell, so a one-column row survives)."""
     return '"' + text.replace('"', '""') + '"' if not text or any(c in text for c in ',"\n\r') else text
@@ -265,6 +256,7 @@ class Result:
 
     def to_csv(self, path):
         """Metadata as ``# key: value`` lines, then the table (header ``name [unit]``).  Atomic."""
+        from .csv_table import rows_text
         from .io import atomic_write
         md = self._file_metadata()
         buf = _io.StringIO()
@@ -277,10 +269,7 @@ class Result:
                 buf.write(f"# {key}: {_json_line(value)}\n")
         names = list(self.data)
         buf.write(",".join(_csv_quote(self.label(n)) for n in names) + "\n")
-        cells = [_csv_cells(self.data[n]) for n in names]
-        buf.write("\n".join(map(",".join, zip(*cells))))
-        if self.n_rows:
-            buf.write("\n")
+        buf.write(rows_text([self.data[n] for n in names], _cell))
         atomic_write(path, buf.getvalue())
         return str(path)
 

@@ -146,18 +146,36 @@ def _mixed_result():
 
 
 def test_csv_writer_writes_what_the_csv_module_writes():
-    """The vectorised writer's cells read back as the csv module's per-cell writer's did."""
+    """The pyarrow-backed writer's cells read back as the csv module's per-cell writer's did:
+    the same text after csv quoting, and the same numbers (floats in their shortest round-trip
+    notation, which differs from repr only in form: 1e+22 either way, 1e-07 as 1e-7)."""
     import csv
     import io
 
-    from hemocircuit.results import _cell, _csv_cells
+    from hemocircuit.csv_table import rows_text
+    from hemocircuit.results import _cell
     res = _mixed_result()
     buf = io.StringIO()
     csv.writer(buf, lineterminator="\n").writerows(zip(*[[_cell(v) for v in res[n].tolist()] for n in res.keys()]))
-    ours = "\n".join(map(",".join, zip(*[_csv_cells(res[n]) for n in res.keys()])))
-    assert list(csv.reader(io.StringIO(ours))) == list(csv.reader(io.StringIO(buf.getvalue())))
-    assert ours.splitlines()[0] == '0.0,nan,1,True,"a,b"' and ours.splitlines()[3] == '1e+22,0.3333333333333333,' \
-        '1099511627776,True,""'
+    ours = rows_text([res[n] for n in res.keys()], _cell)
+    theirs = list(csv.reader(io.StringIO(buf.getvalue())))
+    mine = list(csv.reader(io.StringIO(ours)))
+    assert len(mine) == len(theirs) == 4
+    for a, b in zip(mine, theirs):
+        assert [float(v) for v in a[:2]] == [float(v) for v in b[:2]] or "nan" in a[1]
+        assert a[2:] == b[2:]  # integers, flags and text exactly
+    assert ours.splitlines()[0] == '0,nan,1,"True","a,b"'  # text quoted throughout: the table has "a,b"
+    assert ours.splitlines()[2] == '1e-7,inf,3,"True",""'
+    assert ours.splitlines()[3] == '1e+22,0.3333333333333333,1099511627776,"True",""'
+
+
+def test_csv_writer_keeps_whole_float_columns_floats_and_quotes_only_when_needed():
+    from hemocircuit.csv_table import rows_text
+    from hemocircuit.results import _cell, _typed
+    text = rows_text([np.array([0.0, 1.0, 2.0]), np.array([0.5, 80.0, -0.0]), np.array(["a", "b", "c"])], _cell)
+    assert text == "0.0,0.5,a\n1.0,80,b\n2.0,-0,c\n"  # no cell needs quotes, so none has them
+    col = _typed([ln.split(",")[0] for ln in text.splitlines()])
+    assert col.dtype == float and list(col) == [0.0, 1.0, 2.0]
 
 
 @pytest.mark.parametrize("ext", [".csv", ".json", ".npz", ".parquet"])
