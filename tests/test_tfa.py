@@ -1,0 +1,164 @@
+"""Transfer function analysis (hemocircuit.dca, `hemocircuit tfa`): closed forms of known linear
+systems, the CARNet window count and coherence threshold, beat-to-beat averaging, and clear
+errors for bad recordings."""
+import csv
+
+import numpy as np
+import pytest
+from scipy.signal import bilinear, butter, freqz, lfilter
+
+from hemocircuit.cli import main
+from hemocircuit.dca import read_series, spectrum, tfa, uniform_series
+from hemocircuit.dca.series import Series, beat_means
+from hemocircuit.results import Result
+
+FS = 10.0
+
+
+def _noise(seconds, seed=0, mean=90.0, sd=3.0):
+    """Band-limited (0-0.5 Hz) pressure fluctuations around ``mean`` [mmHg], sampled at 10 Hz."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0, seconds, 1 / FS)
+    return t, mean + sd * lfilter(*butter(2, 0.5, fs=FS), rng.standard_normal(t.size))
+
+
+def _highpass(tau, k):
+    """A first-order high-pass k * s tau / (1 + s tau) (autoregulation's shape), discretised at 10 Hz."""
+    b, a = bilinear([tau, 0.0], [tau, 1.0], FS)
+    return k * b, a
+
+
+def test_gain_and_phase_of_a_first_order_high_pass_match_its_closed_form():
+    t, x = _noise(600)
+    b, a = _highpass(5.0, 0.8)
+    y = 60.0 + lfilter(b, a, x - 90.0)
+    res, sp = tfa(Series(t, x, y, FS, ("ABP", "CBFV"), ("mmHg", "cm/s")))
+    _, h = freqz(b, a, worN=2 * np.pi * sp.f / FS)  # the filter's own response at the estimate's frequencies
+    for k, (lo, hi) in enumerate(((0.02, 0.07), (0.07, 0.2), (0.2, 0.5))):
+        band = (sp.f >= lo) & (sp.f < hi)
+        assert res["points_used"][k] == band.sum()  # coherent everywhere: nothing left out
+        assert res["gain"][k] == pytest.approx(np.mean(np.abs(h[band])), rel=0.02)
+        assert res["phase"][k] == pytest.approx(np.degrees(np.mean(np.angle(h[band]))), abs=1.0)
+        assert res["coherence"][k] > 0.95
+        assert res["gain_norm"][k] == pytest.approx(res["gain"][k] / np.mean(y) * 100, rel=1e-12)
+    # a high-pass: the gain grows and the phase lead falls from VLF to HF
+    assert res["gain"][0] < res["gain"][1] < res["gain"][2] and res["phase"][0] > res["phase"][1] > res["phase"][2] > 0
+    assert res.units["gain"] == "cm/s/mmHg" and res.units["gain_norm"] == "%/mmHg" and res.units["phase"] == "deg"
+
+
+def test_a_proportional_output_has_its_gain_zero_phase_and_full_coherence():
+    t, x = _noise(300, seed=1)
+    sp = spectrum(x, 2.5 * x + 7.0, FS)
+    band = (sp.f >= 0.02) & (sp.f < 0.5)
+    np.testing.assert_allclose(sp.gain[band], 2.5, rtol=1e-9)
+    np.testing.assert_allclose(sp.phase_deg[band], 0.0, atol=1e-7)
+    np.testing.assert_allclose(sp.coherence[band], 1.0, rtol=1e-9)
+
+
+def test_five_minutes_give_five_windows_and_the_carnet_threshold():
+    t, x = _noise(300, seed=2)
+    sp = spectrum(x, x, FS)
+    assert sp.windows == 5 and sp.threshold == 0.34  # (3000 - 1000) / 500 + 1 windows of 100 s, 50 %
+
+
+def test_incoherent_frequencies_are_left_out_of_gain_and_phase_but_not_of_coherence():
+    t, x = _noise(300, seed=3)
+    _, y = _noise(300, seed=4, mean=60.0)  # independent of x
+    res, sp = tfa(Series(t, x, y, FS))
+    left = ~sp.used & (sp.f > 0)
+    wrapped = (sp.f < 0.1) & (np.angle(sp.H) < 0)  # the other reason to leave a frequency out
+    assert np.all((sp.coherence[left] < 0.34) | wrapped[left])
+    assert np.all(sp.coherence[sp.used] >= 0.34)
+    assert sum(res["points_used"]) < sum(res["points"])  # the threshold bites
+    for k in range(3):
+        if res["points_used"][k] == 0:
+            assert np.isnan(res["gain"][k]) and np.isnan(res["phase"][k])
+        assert np.isfinite(res["coherence"][k]) and res["coherence"][k] < 0.6
+
+
+def test_negative_low_frequency_phase_is_left_out_unless_kept():
+    t, x = _noise(600, seed=5)
+    b, a = _highpass(5.0, 0.8)
+    y = 60.0 - lfilter(b, a, x - 90.0)  # an inverted high-pass: phase near -180 + lead, negative in VLF
+    kept = spectrum(x, y, FS, keep_negative_phase=True)
+    dropped = spectrum(x, y, FS)
+    low = (kept.f >= 0.02) & (kept.f < 0.1)
+    assert kept.used[low].all() and not dropped.used[low & (np.angle(kept.H) < 0)].any()
+
+
+def test_beat_means_recover_the_mean_pressure_of_each_beat():
+    fs, period = 200.0, 0.9
+    t = np.arange(0, 60, 1 / fs)
+    mean = 90 + 5 * np.sin(2 * np.pi * 0.05 * t)
+    phase = (t % period) / period
+    pulse = 25 * (np.exp(-((phase - 0.2) / 0.08) ** 2) - 0.08 * np.sqrt(np.pi))  # zero mean over a beat (to 1e-6)
+    abp = mean + pulse
+    mids, xm, ym = beat_means(t, abp, 0.5 * abp)
+    assert len(mids) == pytest.approx(60 / period - 2, abs=1.5)
+    assert np.diff(mids) == pytest.approx(period, rel=1e-2)
+    # the beat mean is the slow pressure at mid-beat (a 0.05 Hz sine averaged over 0.9 s: within 0.1 %)
+    np.testing.assert_allclose(xm, 90 + 5 * np.sin(2 * np.pi * 0.05 * mids), rtol=2e-3)
+    np.testing.assert_allclose(ym, 0.5 * xm, rtol=1e-12)
+    s = uniform_series(t, abp, 0.5 * abp, beats=True)
+    assert s.fs == 10.0 and np.allclose(np.diff(s.t), 0.1) and "beat-to-beat means" in s.notes[0]
+
+
+def test_irregular_times_are_interpolated_and_regular_ones_kept():
+    t = np.cumsum(np.full(400, 0.8) + 0.1 * np.sin(np.arange(400)))  # beat-to-beat times
+    s = uniform_series(t, np.sin(t / 10), np.cos(t / 10))
+    assert s.fs == 10.0 and s.notes == ["interpolated linearly at 10 Hz"]
+    np.testing.assert_allclose(s.x, np.interp(s.t, t, np.sin(t / 10)))
+    r = uniform_series(np.arange(100) * 0.25, np.zeros(100), np.zeros(100))
+    assert r.fs == 4.0 and r.notes == []
+
+
+@pytest.fixture
+def recording(tmp_path):
+    t, x = _noise(400, seed=6)
+    b, a = _highpass(8.0, 0.7)
+    y = 55.0 + lfilter(b, a, x - 90.0)
+    path = tmp_path / "rec.csv"
+    with open(path, "w", newline="") as fh:  # a user's own file: plain header, no metadata
+        w = csv.writer(fh)
+        w.writerow(["time", "ABP", "CBFV"])
+        w.writerows(zip(t, x, y))
+    return path, t, x, y
+
+
+def test_cli_writes_a_row_per_band_and_a_plot(recording, tmp_path, capsys):
+    path, t, x, y = recording
+    out, fig = tmp_path / "tfa.csv", tmp_path / "tfa.png"
+    assert main(["tfa", str(path), "--input", "ABP", "--output", "CBFV", "--out", str(out), "--plot", str(fig)]) == 0
+    text = capsys.readouterr().out
+    assert "7 windows of 100 s, coherence threshold 0.25" in text  # (4000 - 1000) / 500 + 1
+    back = Result.load(out)
+    assert list(back["band"]) == ["VLF", "LF", "HF"]
+    direct, _ = tfa(uniform_series(*read_series(path, "ABP", "CBFV")[:3]))
+    np.testing.assert_allclose(back["gain"], direct["gain"], rtol=1e-12)
+    assert back.metadata["settings"]["windows"] == 7 and fig.stat().st_size > 10_000
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--input", "ABp", "--output", "CBFV"], "--input 'ABp': "),
+    (["--input", "ABP", "--output", "CBFV", "--window", "500"], "shorter than one 500 s window"),
+    (["--input", "ABP", "--output", "CBFV", "--overlap", "1"], "--overlap 1.0: must be in [0, 1)"),
+    (["--input", "ABP", "--output", "CBFV", "--time", "clock"], "--time 'clock': "),
+])
+def test_cli_errors_name_the_option(recording, capsys, argv, message):
+    path = recording[0]
+    assert main(["tfa", str(path)] + argv) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err
+    if "ABp" in message:
+        assert "did you mean 'ABP'" in err
+
+
+def test_cli_refuses_non_finite_values_and_unordered_times(tmp_path, capsys):
+    bad = tmp_path / "bad.csv"
+    bad.write_text("time,ABP,CBFV\n0,90,60\n0.1,nan,60\n0.2,91,61\n")
+    assert main(["tfa", str(bad), "--input", "ABP", "--output", "CBFV"]) == 2
+    assert "--input 'ABP': 1 value(s) of" in capsys.readouterr().err
+    back = tmp_path / "back.csv"
+    back.write_text("time,ABP,CBFV\n0,90,60\n0.2,90,60\n0.1,91,61\n")
+    assert main(["tfa", str(back), "--input", "ABP", "--output", "CBFV"]) == 2
+    assert "must increase strictly (data row 3)" in capsys.readouterr().err
