@@ -162,3 +162,59 @@ def test_cli_refuses_non_finite_values_and_unordered_times(tmp_path, capsys):
     back.write_text("time,ABP,CBFV\n0,90,60\n0.2,90,60\n0.1,91,61\n")
     assert main(["tfa", str(back), "--input", "ABP", "--output", "CBFV"]) == 2
     assert "must increase strictly (data row 3)" in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------ ARI (Tiecks) and Mx -------
+def _cuff_release(fs=10.0, drop=20.0, t_rel=40.0):
+    t = np.arange(0, 90, 1 / fs)
+    return t, np.where(t < t_rel, 100.0, 100 - drop * np.exp(-(t - t_rel) / 8))
+
+
+def test_tiecks_model_settles_at_its_closed_form_and_ari_0_is_passive():
+    from hemocircuit.dca.ari import TIECKS, model_velocity
+    dP = np.full(3000, -0.2)  # a held step, 300 s at 10 Hz
+    for ari, (T, D, K) in TIECKS.items():
+        v = model_velocity(dP, 10.0, ari, V0=60.0)
+        # at rest x2 = dP, x1 = 2 D dP, so V = V0 (1 + (1 - K) dP)
+        assert v[-1] == pytest.approx(60.0 * (1 - 0.2 * (1 - K)), rel=1e-9)
+    np.testing.assert_allclose(model_velocity(dP, 10.0, 0), 0.8, rtol=1e-12)  # ARI 0: flow follows pressure
+
+
+@pytest.mark.parametrize("true", [0.0, 2.0, 5.0, 7.3, 9.0])
+def test_ari_recovers_the_model_that_made_the_response(true):
+    from hemocircuit.dca.ari import fit_ari, model_velocity, release_time
+    t, P = _cuff_release()
+    V = model_velocity((P - 100.0) / (100.0 - 12.0), 10.0, true, 60.0)
+    ari, grid, errors, _, _ = fit_ari(t, P, V, release_time(t, P))
+    assert ari == pytest.approx(true, abs=1e-9) and errors.min() < 1e-20
+    assert release_time(t, P) == pytest.approx(40.0, abs=0.5)
+
+
+def test_mx_is_one_when_flow_follows_pressure_and_small_when_it_does_not():
+    from hemocircuit.dca.mx import block_means, moving_correlation
+    t, P = _noise(900, seed=7)
+    starts, r = moving_correlation(t, P, 2.0 * P + 5.0)
+    assert len(r) == 1 + (90 - 30) // 6 and np.allclose(r, 1.0)  # 90 blocks of 10 s, windows of 30, step 6
+    _, other = _noise(900, seed=8, mean=60.0)
+    _, r0 = moving_correlation(t, P, other)
+    assert abs(np.mean(r0)) < 0.3
+    s, m = block_means(np.arange(0, 30, 0.1), np.arange(300.0), 10.0)
+    np.testing.assert_allclose(m, [49.5, 149.5, 249.5]) and np.testing.assert_allclose(s, [0, 10, 20])
+
+
+def test_ari_and_mx_commands(tmp_path, capsys):
+    from hemocircuit.dca.ari import model_velocity
+    t, P = _cuff_release()
+    V = model_velocity((P - 100.0) / (100.0 - 12.0), 10.0, 6.0, 55.0)
+    path = tmp_path / "cuff.csv"
+    Result({"time": t, "ABP": P, "CBFV": V}, {"time": "s", "ABP": "mmHg", "CBFV": "cm/s"}, index=["time"]).save(path)
+    assert main(["ari", str(path), "--input", "ABP", "--output", "CBFV", "--out", str(tmp_path / "ari.json"),
+                 "--plot", str(tmp_path / "ari.png")]) == 0
+    assert "ARI 6.0 (release at 39.6 s, found" in capsys.readouterr().out
+    assert Result.load(tmp_path / "ari.json").metadata["ari"] == 6.0
+    assert main(["ari", str(path), "--input", "ABP", "--output", "CBFV", "--release", "85"]) == 2
+    assert "needs 10 s before the release and 30 s after it" in capsys.readouterr().err
+    t, P = _noise(600, seed=9)
+    Result({"time": t, "ABP": P, "CBFV": 0.5 * P}, {}, index=["time"]).save(tmp_path / "mx.csv")
+    assert main(["mx", str(tmp_path / "mx.csv"), "--input", "ABP", "--output", "CBFV"]) == 0
+    assert "Mx 1.000 (6 windows of 300 s" in capsys.readouterr().out
