@@ -7,6 +7,15 @@ Netlist forms (every number with a unit; the source's own unit gives the value d
   value: {pwl: {file: table.csv}}                  CSV (two columns, header 'time [s],value [mmHg]')
   value: {sine: {offset: 80 mmHg, amplitude: 8 mmHg, frequency: 0.1 Hz, phase: 0 deg, start: 0 s}}
   value: {sum: [<waveform>, <waveform>, ...]}
+  value: {noise: {mean: 90 mmHg, sd: 5 mmHg, band: [0.02 Hz, 0.5 Hz], period: 600 s, seed: 1}}
+                                                   seeded band-limited random fluctuations (a
+                                                   Gaussian process): a sum of sines at the
+                                                   frequencies k/period inside the band, with
+                                                   random amplitudes and phases from ``seed``,
+                                                   scaled so the standard deviation over one
+                                                   period is exactly ``sd``; it repeats after
+                                                   ``period`` (default 600 s); ``start``: the
+                                                   value is ``mean`` before it
   value: {periodic: {period: 1 s, pwl: [[0 s, 5 mL/s], ..., [1 s, 5 mL/s]]}}
                                                    one cycle of a table (pwl or steps), repeated:
                                                    evaluated at t0 + (t - t0) mod period, t0 its
@@ -238,7 +247,10 @@ def _table_rows(spec, base_dir, unit, where):
 
 
 _SINE_FIELDS = ("offset", "amplitude", "frequency", "phase", "start")
-_KINDS = ("steps", "pwc", "pwl", "sine", "sum", "periodic")
+_NOISE_FIELDS = ("mean", "sd", "band", "period", "seed", "start")
+_KINDS = ("steps", "pwc", "pwl", "sine", "sum", "periodic", "noise")
+#: most sines a noise waveform may sum (band x period): each costs a sine per evaluation
+MAX_NOISE_LINES = 20_000
 
 
 def parse_waveform(spec, unit: str, base_dir=None, where=None) -> Waveform:
@@ -248,7 +260,7 @@ def parse_waveform(spec, unit: str, base_dir=None, where=None) -> Waveform:
         if not isinstance(spec, dict):
             return Constant(parse_quantity(spec, unit, "value"))
         if len(spec) != 1:
-            raise NetlistError("a waveform has exactly one kind (steps, pwl, pwc, sine, sum, periodic); got "
+            raise NetlistError("a waveform has exactly one kind (steps, pwl, pwc, sine, sum, periodic, noise); got "
                                f"{excerpt(sorted(map(str, spec)))}", **where)
         (kind, body), = spec.items()
         if kind == "periodic":
@@ -280,16 +292,58 @@ def parse_waveform(spec, unit: str, base_dir=None, where=None) -> Waveform:
             if fields["frequency"] < 0:
                 raise NetlistError(f"sine frequency = {fields['frequency']:g} Hz: must be >= 0", **where)
             return Sine(**fields)
+        if kind == "noise":
+            return _noise(body, unit, where)
         if kind == "sum":
             if not isinstance(body, list) or not body:
                 raise NetlistError("sum needs a non-empty list of waveforms", **where)
             return Sum([parse_waveform(b, unit, base_dir, where) for b in body])
         raise NetlistError(f"unknown waveform kind {excerpt(kind, 40)}{did_you_mean(kind, _KINDS)} "
-                           "(use steps, pwl, pwc, sine, sum or periodic)", **where)
+                           "(use steps, pwl, pwc, sine, sum, periodic or noise)", **where)
     except UnitError as exc:
         raise NetlistError(str(exc), **where) from None
     except (TypeError, ValueError) as exc:  # unhashable or odd YAML values in a waveform mapping
         raise NetlistError(f"malformed waveform {excerpt(spec)}: {type(exc).__name__}", **where) from None
+
+
+def _noise(body, unit, where):
+    """{noise: {mean, sd, band: [lo, hi], period, seed, start}} as a Sum of a Constant and sines."""
+    if not isinstance(body, dict) or "sd" not in body or "band" not in body:
+        raise NetlistError("noise needs a mapping {sd: <value>, band: [<low> Hz, <high> Hz]} (and optionally mean, "
+                           f"period, seed, start); got {excerpt(body)}", **where)
+    unknown = set(body) - set(_NOISE_FIELDS)
+    if unknown:
+        raise NetlistError(f"unknown noise field(s) {excerpt(sorted(map(str, unknown)))}"
+                           f"{did_you_mean(sorted(map(str, unknown))[0], _NOISE_FIELDS)}", **where)
+    mean = parse_quantity(body.get("mean", f"0 {unit}"), unit, "noise mean")
+    sd = parse_quantity(body["sd"], unit, "noise sd")
+    period = parse_quantity(body.get("period", "600 s"), "s", "noise period")
+    start = parse_quantity(body.get("start", "0 s"), "s", "noise start")
+    band = body["band"]
+    if not isinstance(band, (list, tuple)) or len(band) != 2:
+        raise NetlistError(f"noise band must be [<low> Hz, <high> Hz]; got {excerpt(band)}", **where)
+    lo, hi = (parse_quantity(b, "Hz", "noise band") for b in band)
+    seed = body.get("seed", 0)
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise NetlistError(f"noise seed must be a whole number >= 0; got {excerpt(seed)}", **where)
+    for name, v in (("mean", mean), ("sd", sd), ("period", period), ("start", start), ("band", lo), ("band", hi)):
+        if not np.isfinite(v):
+            raise NetlistError(f"noise {name} = {v}: must be finite", **where)
+    if sd < 0 or period <= 0 or not 0 <= lo < hi:
+        raise NetlistError(f"noise needs sd >= 0, period > 0 and 0 <= low < high (got sd {sd:g} {unit}, period "
+                           f"{period:g} s, band [{lo:g}, {hi:g}] Hz)", **where)
+    k = np.arange(max(1, int(np.ceil(lo * period - 1e-9))), int(np.floor(hi * period + 1e-9)) + 1)
+    if k.size == 0:
+        raise NetlistError(f"noise band [{lo:g}, {hi:g}] Hz holds no frequency k/period (period {period:g} s): "
+                           "widen the band or lengthen the period", **where)
+    if k.size > MAX_NOISE_LINES:
+        raise NetlistError(f"noise band x period gives {k.size:,} sines (more than {MAX_NOISE_LINES:,}): narrow the "
+                           "band or shorten the period", **where)
+    rng = np.random.default_rng(seed)
+    c = rng.standard_normal(k.size) + 1j * rng.standard_normal(k.size)  # a Gaussian process's Fourier lines
+    amp = np.abs(c) * sd / np.sqrt(np.sum(np.abs(c) ** 2) / 2.0)  # sd over one period: sqrt(sum a^2 / 2)
+    return Sum([Constant(mean)] + [Sine(0.0, float(a), float(f), float(ph), start)
+                                   for a, f, ph in zip(amp, k / period, np.angle(c))])
 
 
 def _periodic(body, unit, base_dir, where):

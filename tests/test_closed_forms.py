@@ -397,3 +397,41 @@ def test_table_file_relative_to_netlist_folder(write, tmp_path, monkeypatch):
     res = c.simulate(2.0, dt=0.1)
     ok = _away(res.t, [1.2])
     np.testing.assert_allclose(res["P(in)"][ok], np.where(res.t < 1.2, 10 * cm, 30 * cm)[ok], rtol=1e-12)
+
+
+def test_noise_waveform_has_its_mean_sd_band_and_seed(write):
+    """{noise: ...}: over one period its mean and standard deviation are the given ones exactly,
+    its spectrum lies inside the band, the same seed gives the same series and another seed
+    another; a source carries it through a run unchanged (P(in) = the waveform)."""
+    from hemocircuit.waveforms import parse_waveform
+    spec = {"noise": {"mean": "90 mmHg", "sd": "5 mmHg", "band": ["0.05 Hz", "0.2 Hz"], "period": "100 s", "seed": 4}}
+    w = parse_waveform(spec, "mmHg")
+    t = np.arange(0, 100, 0.1)
+    v = w.sample(t)
+    assert v.mean() == pytest.approx(90.0, abs=1e-9) and v.std() == pytest.approx(5.0, rel=1e-9)
+    power = np.abs(np.fft.rfft(v - 90.0)) ** 2
+    f = np.fft.rfftfreq(t.size, 0.1)
+    inside = (f >= 0.05 - 1e-9) & (f <= 0.2 + 1e-9)
+    assert power[~inside].sum() < 1e-18 * power.sum() and np.count_nonzero(inside) == 16  # 5/100 .. 20/100 Hz
+    np.testing.assert_allclose(parse_waveform(spec, "mmHg").sample(t), v, rtol=0, atol=0)
+    other = parse_waveform({"noise": {**spec["noise"], "seed": 5}}, "mmHg").sample(t)
+    assert np.max(np.abs(other - v)) > 1.0
+    np.testing.assert_allclose(w.sample(t + 100.0), v, atol=1e-9)  # it repeats after its period
+    c = hc.load(write(_source_net("{noise: {mean: 90 mmHg, sd: 5 mmHg, band: [0.05 Hz, 0.2 Hz], period: 100 s, "
+                                  "seed: 4}}")))
+    res = c.simulate(20.0, dt=0.1)
+    np.testing.assert_allclose(res["P(in)"], w.sample(res.t), rtol=1e-12)
+
+
+@pytest.mark.parametrize("body, message", [
+    ("{sd: 5 mmHg}", "noise needs a mapping {sd: <value>, band:"),
+    ("{sd: 5 mmHg, band: [0.2 Hz, 0.1 Hz]}", "0 <= low < high"),
+    ("{sd: 5 mmHg, band: [0.001 Hz, 0.0012 Hz], period: 100 s}", "holds no frequency k/period"),
+    ("{sd: 5 mmHg, band: [0 Hz, 50 Hz], period: 1000 s}", "gives 50,000 sines"),
+    ("{sd: 5 mmHg, band: [0.02 Hz, 0.5 Hz], sed: 1}", "(did you mean 'seed' or 'sd'?)"),
+    ("{sd: 5 mmHg, band: [0.02 Hz, 0.5 Hz], seed: -1}", "noise seed must be a whole number >= 0"),
+])
+def test_noise_waveform_errors(write, body, message):
+    with pytest.raises(hc.NetlistError) as exc:
+        hc.load(write(_source_net("{noise: " + body + "}")))
+    assert message in str(exc.value)
