@@ -256,7 +256,7 @@ class Result:
 
     def to_csv(self, path):
         """Metadata as ``# key: value`` lines, then the table (header ``name [unit]``).  Atomic."""
-        from .csv_table import rows_text
+        from .arrow_tables import rows_text
         from .io import atomic_write
         md = self._file_metadata()
         buf = _io.StringIO()
@@ -288,13 +288,13 @@ class Result:
         return str(path)
 
     def to_parquet(self, path):
-        """Apache Parquet through pyarrow (an optional dependency): one column per result column
-        under its header, the index and metadata as JSON in the file's key-value metadata."""
+        """Apache Parquet through pyarrow: one column per result column under its header, the
+        index and metadata as JSON in the file's key-value metadata."""
+        from .arrow_tables import typed_array
         from .io import atomic_file
         pa, pq = _pyarrow()
-        table = pa.table({self.label(n): (v if _is_numeric(v) or v.dtype.kind == "b" else
-                                          [None if x is None else str(x) for x in v.tolist()])
-                          for n, v in self.data.items()})
+        table = pa.Table.from_arrays([typed_array(v) for v in self.data.values()],
+                                     names=[self.label(n) for n in self.data])
         table = table.replace_schema_metadata({"hemocircuit.index": json.dumps(self.index),
                                                "hemocircuit.metadata": json.dumps(self._file_metadata())})
         with atomic_file(path, "wb") as fh:

@@ -152,7 +152,7 @@ def test_csv_writer_writes_what_the_csv_module_writes():
     import csv
     import io
 
-    from hemocircuit.csv_table import rows_text
+    from hemocircuit.arrow_tables import rows_text
     from hemocircuit.results import _cell
     res = _mixed_result()
     buf = io.StringIO()
@@ -170,7 +170,7 @@ def test_csv_writer_writes_what_the_csv_module_writes():
 
 
 def test_csv_writer_keeps_whole_float_columns_floats_and_quotes_only_when_needed():
-    from hemocircuit.csv_table import rows_text
+    from hemocircuit.arrow_tables import rows_text
     from hemocircuit.results import _cell, _typed
     text = rows_text([np.array([0.0, 1.0, 2.0]), np.array([0.5, 80.0, -0.0]), np.array(["a", "b", "c"])], _cell)
     assert text == "0.0,0.5,a\n1.0,80,b\n2.0,-0,c\n"  # no cell needs quotes, so none has them
@@ -209,3 +209,19 @@ def test_simulate_takes_a_protocol_path_and_per_state_atol(tmp_path):
     res = c.simulate(3.0, dt=0.5, protocol=str(proto), atol=np.full(c.nx, 1e-10), rtol=1e-8)
     # from 40 mL at 80 mmHg towards 50 mL after the step at 1 s, R C = 1 s
     np.testing.assert_allclose(res["V(C1)"][-1], 50 - 10 * np.exp(-2.0), rtol=1e-6)
+
+
+def test_writing_csv_and_parquet_does_not_import_pandas(tmp_path):
+    """pyarrow's pa.array/pa.table import pandas (0.5-0.8 s of a run's time) to check their
+    argument; the writers build their arrays from buffers instead."""
+    import subprocess
+    import sys
+    code = ("import sys, numpy as np\nfrom hemocircuit.results import Result\n"
+            "r = Result({'t': np.arange(4) * 0.5, 'b': np.array([True, False, True, True]), "
+            "'s': np.array(['a', None, 'c,d', ''], dtype=object)}, {'t': 's'}, index=['t'])\n"
+            f"r.save({str(tmp_path / 'r.csv')!r}); r.save({str(tmp_path / 'r.parquet')!r})\n"
+            "print('pandas' in sys.modules)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "False"
+    back = Result.load(tmp_path / "r.parquet")
+    assert list(back["b"]) == [True, False, True, True] and list(back["s"]) == ["a", None, "c,d", ""]
