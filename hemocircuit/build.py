@@ -17,6 +17,7 @@ from .netlist import Netlist
 from .registry import component_types
 from .units import UnitError, parse_quantity
 from .waveforms import Constant, parse_waveform
+from .names import split_path
 
 
 @dataclass
@@ -219,7 +220,7 @@ def path_problem(circuit, path, options=True) -> str | None:
     of ``circuit``, with the close matches ("did you mean 'art.tau_Ca'?"), or None if it is fine."""
     if not isinstance(path, str) or "." not in path:
         return f"{excerpt(path, 60)} is not an ID.PARAM path (e.g. Pa.value)"
-    eid, _, name = path.partition(".")
+    eid, name = split_path(path)
     e = circuit.elements.get(eid)
     if e is None:
         return f"no element {excerpt(eid, 40)}{did_you_mean(eid, circuit.elements)}"

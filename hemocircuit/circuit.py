@@ -34,6 +34,7 @@ from .component import Component
 from .errors import HemocircuitError, NetlistError, SolverError, TopologyError
 from .graph import check_topology, local_node_map
 from .linalg import solve_batched
+from .names import split_path
 from . import sparse as sparse_la
 from .netlist import GROUND, Netlist, load_netlist
 from .parameters import ParameterSchema, ParameterSet
@@ -601,7 +602,7 @@ class Circuit:
 
     def is_option(self, path) -> bool:
         """Whether ID.NAME names a structural option (not a parameter) of an element."""
-        eid, _, name = str(path).partition(".")
+        eid, name = split_path(str(path))
         return eid in self.elements and name in self.elements[eid].cls.options
 
     def param_unit(self, path):
@@ -659,7 +660,7 @@ class Circuit:
             return self
         nl = copy.deepcopy(self.netlist)
         for path, v in changes.items():
-            eid, _, name = path.partition(".")
+            eid, name = split_path(path)
             try:
                 nl.element(eid).values[name] = v
             except KeyError:

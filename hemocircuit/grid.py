@@ -23,6 +23,7 @@ import numpy as np
 
 from .errors import HemocircuitError
 from .results import label_value
+from .names import split_path
 
 
 def parse(circuit, grid_args):
@@ -45,7 +46,7 @@ def parse(circuit, grid_args):
 def _check_path(circuit, path):
     if circuit.is_option(path):
         return
-    eid = path.partition(".")[0]
+    eid = split_path(path)[0]
     if eid not in circuit.elements:
         import difflib
         near = difflib.get_close_matches(eid, list(circuit.elements), n=3)

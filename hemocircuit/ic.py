@@ -14,6 +14,7 @@ import numpy as np
 
 from .errors import NetlistError
 from .units import UnitError, parse_quantity
+from .names import split_path
 
 
 def state_index(circuit, name: str) -> int:
@@ -25,7 +26,7 @@ def state_index(circuit, name: str) -> int:
     close = difflib.get_close_matches(name, circuit.state_names, n=5, cutoff=0.5)
     hint = f"did you mean {', '.join(close)}?" if close else f"states: {', '.join(circuit.state_names)}"
     raise NetlistError(f"initial condition: no state '{name}'; {hint}", file=circuit.file,
-                       element=name.partition(".")[0] if name.partition(".")[0] in circuit.elements else None)
+                       element=split_path(name)[0] if split_path(name)[0] in circuit.elements else None)
 
 
 def apply_ic(circuit, x, ic: dict | None) -> np.ndarray:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import os
 
 from .errors import HemocircuitError
+from .names import split_path
 
 
 def load_circuit(netlist, sets=None, protocol=None, allow_paths=None, svzerod_units=None):
@@ -50,7 +51,7 @@ def load_circuit(netlist, sets=None, protocol=None, allow_paths=None, svzerod_un
             c = c.with_options({k: _option_literal(v) for k, v in opts.items()})
         c = c.with_values(params)
     except NetlistError as exc:
-        mine = [f"{k}={v}" for k, v in sets.items() if k.partition(".")[0] == exc.element] or \
+        mine = [f"{k}={v}" for k, v in sets.items() if split_path(k)[0] == exc.element] or \
             [f"{k}={v}" for k, v in sets.items()]
         raise HemocircuitError(f"--set {', --set '.join(mine)}: "
                                + (f"element '{exc.element}': " if exc.element else "") + exc.bare_message) from None

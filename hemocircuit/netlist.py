@@ -17,7 +17,7 @@ from .access import Access
 from .errors import NetlistError, did_you_mean, excerpt
 
 TOP_KEYS = {"name", "description", "parameters", "elements", "extends", "add", "remove", "change",
-            "constraints", "outputs", "input", "derived", "ic"}
+            "constraints", "outputs", "input", "derived", "ic", "instances", "ports"}
 ELEMENT_KEYS = {"id", "type", "nodes"}
 GROUND = "ground"
 _REF = re.compile(r"\$\{([A-Za-z_][A-Za-z0-9_]*)\}")
@@ -143,6 +143,43 @@ def _element_list(items, path, access, what="elements"):
     return out
 
 
+def _edit(elements, remove, change, path, of, access):
+    """``remove: [ID]`` and ``change: {ID: {param: value}}`` of the netlist at ``path``, applied to
+    the ``elements`` of ``of`` (the netlist it extends, or an instance's netlist)."""
+    base_dir = os.path.dirname(path)
+    ids = [e.id for e in elements]
+    if not isinstance(remove, list):
+        raise NetlistError("'remove' must be a list of element ids", file=path)
+    for rid in remove:
+        if rid not in ids:
+            raise NetlistError(f"cannot remove '{rid}': no such element in {of}{did_you_mean(rid, ids)}",
+                               file=path, element=str(rid))
+    elements = [e for e in elements if e.id not in set(remove)]
+    if not isinstance(change, dict):
+        raise NetlistError("'change' must be a mapping {ID: {param: value}}", file=path)
+    for cid, kv in change.items():
+        match = [e for e in elements if e.id == cid]
+        if not match:
+            raise NetlistError(f"cannot change '{cid}': no such element{did_you_mean(cid, ids)}", file=path,
+                               element=str(cid))
+        if not isinstance(kv, dict):
+            raise NetlistError("'change' entries must be mappings {param: value}", file=path, element=cid)
+        for k, v in kv.items():
+            if k == "id":
+                raise NetlistError("cannot change an element's id", file=path, element=cid)
+            if k == "type":
+                match[0].type = v if isinstance(v, str) else str(v)
+            elif k == "nodes":
+                if not isinstance(v, list) or not all(isinstance(n, (str, int)) and not isinstance(n, bool)
+                                                      for n in v):
+                    raise NetlistError("'nodes' must be a list of node names", file=path, element=cid)
+                match[0].nodes = [str(n) for n in v]
+            else:
+                match[0].values[str(k)] = resolve_files(v, base_dir, access, {"file": path, "element": cid})
+            match[0].file = path
+    return elements
+
+
 def _load_raw(path, chain, access, svzerod=None):
     path = os.path.abspath(path)
     if path in chain:
@@ -173,38 +210,7 @@ def _load_raw(path, chain, access, svzerod=None):
         if "elements" in data:
             raise NetlistError("a netlist that 'extends' another states its difference with add/remove/change, "
                                "not 'elements'", file=path)
-        ids = [e.id for e in elements]
-        remove = data.get("remove") or []
-        if not isinstance(remove, list):
-            raise NetlistError("'remove' must be a list of element ids", file=path)
-        for rid in remove:
-            if rid not in ids:
-                raise NetlistError(f"cannot remove '{rid}': no such element in {ppath}{did_you_mean(rid, ids)}",
-                                   file=path, element=str(rid))
-        elements = [e for e in elements if e.id not in set(remove)]
-        change = data.get("change") or {}
-        if not isinstance(change, dict):
-            raise NetlistError("'change' must be a mapping {ID: {param: value}}", file=path)
-        for cid, kv in change.items():
-            match = [e for e in elements if e.id == cid]
-            if not match:
-                raise NetlistError(f"cannot change '{cid}': no such element{did_you_mean(cid, ids)}", file=path,
-                                   element=str(cid))
-            if not isinstance(kv, dict):
-                raise NetlistError("'change' entries must be mappings {param: value}", file=path, element=cid)
-            for k, v in kv.items():
-                if k == "id":
-                    raise NetlistError("cannot change an element's id", file=path, element=cid)
-                if k == "type":
-                    match[0].type = v if isinstance(v, str) else str(v)
-                elif k == "nodes":
-                    if not isinstance(v, list) or not all(isinstance(n, (str, int)) and not isinstance(n, bool)
-                                                          for n in v):
-                        raise NetlistError("'nodes' must be a list of node names", file=path, element=cid)
-                    match[0].nodes = [str(n) for n in v]
-                else:
-                    match[0].values[str(k)] = resolve_files(v, base_dir, access, {"file": path, "element": cid})
-                match[0].file = path
+        elements = _edit(elements, data.get("remove") or [], data.get("change") or {}, path, ppath, access)
         elements += _element_list(data.get("add"), path, access, "add")
         name = data.get("name", base["name"])
         description = data.get("description", "")
@@ -223,6 +229,12 @@ def _load_raw(path, chain, access, svzerod=None):
         description = data.get("description", "")
         outputs, outputs_file = (_outputs(data["outputs"], path), path) if "outputs" in data else ({}, None)
         inp, input_file = (_input(data["input"], path), path) if "input" in data else (None, None)
+    if "instances" in data:
+        from .subcircuits import expand
+        inst = expand(data["instances"], path, lambda name, overrides, where:
+                      _load_child(name, overrides, where, path, chain, access, svzerod))
+        elements = elements + inst.elements
+        constraints = constraints + inst.constraints
     derived = data.get("derived") or {}
     if not isinstance(derived, dict) or not all(isinstance(v, dict) and "expr" in v for v in derived.values()):
         raise NetlistError("'derived' must be a mapping name -> {expr: '<expression of columns>', unit: ...}",
@@ -233,10 +245,42 @@ def _load_raw(path, chain, access, svzerod=None):
                                            and not isinstance(v, bool) for k, v in ic.items()):
         raise NetlistError("'ic' must be a mapping ID.STATE -> value with its unit (a transient's starting "
                            "perturbation, e.g. {art.dCa: 1e-9 M/s})", file=path)
-    ic = {**(base["ic"] if "extends" in data else {}), **ic}
-    return {"elements": elements, "parameters": merged_params, "constraints": constraints, "name": name,
+    ic = {**(base["ic"] if "extends" in data else {}), **(inst.ic if "instances" in data else {}), **ic}
+    ports = data.get("ports")
+    if ports is not None and (not isinstance(ports, list) or not all(isinstance(p, (str, int)) and
+                                                                     not isinstance(p, bool) for p in ports)):
+        raise NetlistError("'ports' must be a list of node names (the nodes an instance of this netlist connects)",
+                           file=path)
+    ports = [str(p) for p in ports] if ports is not None else (base.get("ports") if "extends" in data else None)
+    return {"ports": ports, "elements": elements, "parameters": merged_params, "constraints": constraints, "name": name,
             "description": description, "outputs": outputs, "base_dir": base_dir, "derived": derived,
             "outputs_file": outputs_file, "input": inp, "input_file": input_file, "ic": ic}
+
+
+def _load_child(name, overrides, where, path, chain, access, svzerod):
+    """An instance's netlist, its ${} parameters (with the instance's overrides) substituted."""
+    try:
+        child = access.resolve(name, os.path.dirname(path), f"instance '{where['element']}' of {path}: netlist",
+                               where)
+    except NetlistError as exc:
+        raise NetlistError(f"instance '{where['element']}': {exc.bare_message}", **where) from None
+    if not os.path.isfile(child):
+        raise NetlistError(f"instance '{where['element']}': netlist file not found: {child}", **where)
+    if os.path.abspath(child) in chain + [path]:
+        raise NetlistError(f"instances form a cycle: {' -> '.join(chain + [path, os.path.abspath(child)])}", **where)
+    raw = _load_raw(child, chain + [path], access, svzerod)
+    unknown = [k for k in overrides if k not in raw["parameters"]]
+    if unknown:
+        raise NetlistError(f"{child} has no parameter '{unknown[0]}'{did_you_mean(unknown[0], raw['parameters'])}",
+                           **where)
+    params = _resolve_parameters({**raw["parameters"], **overrides}, child)
+    for e in raw["elements"]:
+        if any(_refs(v) for v in e.values.values()):
+            e.values = resolve_files(_substitute(e.values, params, {"file": e.file, "element": e.id}),
+                                     os.path.dirname(e.file), access, {"file": e.file, "element": e.id})
+    return {"elements": raw["elements"], "constraints": raw["constraints"], "ic": raw["ic"], "ports": raw["ports"],
+            "file": child, "edit": lambda elements, remove, change: _edit(elements, remove, change, path, child,
+                                                                          access)}
 
 
 def _outputs(value, path):

@@ -18,6 +18,7 @@ from __future__ import annotations
 import difflib
 
 from .errors import HemocircuitError, NetlistError
+from .names import split_path
 
 #: the uses an ``outputs:`` mapping may name, and what each one sets
 USES = {
@@ -116,7 +117,7 @@ def default_input(circuit) -> str:
 def input_element(circuit, name) -> str:
     """The element id of an input given as ``ID`` (a source) or ``ID.PARAM`` of a source whose
     drive value PARAM is; an error naming the sources otherwise."""
-    eid, _, param = str(name).partition(".")
+    eid, param = split_path(str(name))
     if eid not in circuit.elements:
         srcs = driven_elements(circuit)
         raise NetlistError(f"no element {eid!r}{_close(eid, circuit.elements)} (sources: {srcs})", file=circuit.file)
@@ -130,7 +131,7 @@ def input_element(circuit, name) -> str:
 def input_path(circuit, name) -> str:
     """'ID' (a source) -> 'ID.<its drive parameter>'; 'ID.PARAM' is taken as it is (and checked)."""
     if "." in str(name):
-        eid = str(name).split(".", 1)[0]
+        eid = split_path(name)[0]
         if eid not in circuit.elements:
             raise NetlistError(f"no element {eid!r}{_close(eid, circuit.elements)}", file=circuit.file)
         circuit.param_path(name)  # raises a NetlistError naming the parameters when wrong

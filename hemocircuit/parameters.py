@@ -24,6 +24,7 @@ import numpy as np
 from .build import check_values
 from .errors import NetlistError
 from .units import UnitError, parse_quantity
+from .names import split_path
 
 
 def _frozen(a):
@@ -46,7 +47,7 @@ class ParameterSchema:
         """'ID.PARAM' -> (element data, group index, index in group, name); clear errors."""
         if not isinstance(path, str) or "." not in path:
             raise NetlistError(f"parameter path {path!r} must be ID.PARAM", file=self.file)
-        eid, name = path.split(".", 1)
+        eid, name = split_path(path)
         if eid not in self.elements:
             raise NetlistError(f"no element '{eid}' (elements: {sorted(self.elements)})", file=self.file,
                                element=eid)

@@ -24,6 +24,7 @@ from .access import Access
 from .build import path_problem
 from .errors import NetlistError, excerpt
 from .units import UnitError, parse_quantity
+from .names import split_path
 
 
 @dataclass
@@ -116,17 +117,17 @@ class Protocol:
                 problem = path_problem(circuit, path)
                 if problem:
                     raise NetlistError(f"{what}: {problem}", file=self.file,
-                                       element=path.partition(".")[0] if isinstance(path, str) else None)
+                                       element=split_path(path)[0] if isinstance(path, str) else None)
         for ev in self.events:
             for path in ev.set:
-                eid, _, name = path.partition(".")
+                eid, name = split_path(path)
                 if eid in circuit.elements and name in circuit.elements[eid].cls.options:
                     raise NetlistError(f"event at {ev.at:g} s sets the structural option '{path}'; options may only "
                                        "be set in 'initial'", file=self.file, element=eid)
         c = self.apply_initial(circuit, t0=-np.inf)
         for ev in self.events:
             for path in ev.set:
-                eid, _, name = path.partition(".")
+                eid, name = split_path(path)
                 if eid in c.elements and name in c.elements[eid].cls.options:
                     raise NetlistError(f"event at {ev.at:g} s sets the structural option '{path}'; options may only "
                                        "be set in 'initial'", file=self.file, element=eid)
@@ -168,7 +169,7 @@ def _reject_bare_numbers(circuit, mapping, what, file):
             continue
         if not isinstance(value, (str, int, float, dict)) or isinstance(value, bool):
             raise NetlistError(f"{what}: {path} = {value!r} is not a quantity with a unit (or a waveform)",
-                               file=file, element=path.partition(".")[0])
+                               file=file, element=split_path(path)[0])
         if not isinstance(value, (int, float)):
             continue
         try:
@@ -178,7 +179,7 @@ def _reject_bare_numbers(circuit, mapping, what, file):
         try:
             parse_quantity(value, unit, path)
         except UnitError as exc:
-            raise NetlistError(f"{what}: {exc}", file=file, element=path.partition(".")[0]) from None
+            raise NetlistError(f"{what}: {exc}", file=file, element=split_path(path)[0]) from None
 
 
 def _table_files(value):

@@ -147,8 +147,9 @@ def test_every_command_takes_set_and_protocol():
     from hemocircuit.cli import build_parser
     p = build_parser()
     sub = next(a for a in p._actions if a.dest == "command")
-    # conformance and import-svzerod read svZeroDSolver JSON models; reproduce runs the bundled netlists
-    not_on_a_netlist = {"conformance", "import-svzerod", "reproduce"}
+    # conformance and import-svzerod read svZeroDSolver JSON models; reproduce runs the bundled netlists;
+    # tfa, ari and mx read two series from a result file or a recording
+    not_on_a_netlist = {"conformance", "import-svzerod", "reproduce", "tfa", "ari", "mx"}
     for name, sp in sub.choices.items():
         if name in not_on_a_netlist:
             continue

@@ -21,6 +21,7 @@ import numpy as np
 import yaml
 
 from ..io import atomic_write, save_figure
+from ..names import split_path
 
 #: the files a fit writes into its folder (a folder holding only these may be written again)
 OUTPUT_FILES = ("report.json", "fitted.yaml", "netlist.yaml", "fit.csv", "fit.png")
@@ -86,7 +87,7 @@ def fragment(problem, result, out_dir, extends=None):
     change = {}
 
     def put(path, text):
-        eid, _, name = path.partition(".")
+        eid, name = split_path(path)
         change.setdefault(eid, {})[name] = text
 
     for path, v in problem.start_from.items():

@@ -1,0 +1,157 @@
+"""Subcircuits (netlist ``instances:``, hemocircuit.subcircuits): a netlist used as a block with
+its ports wired to nodes; names, parameters, nesting, and clear errors."""
+import shutil
+import textwrap
+
+import pytest
+
+import hemocircuit as hc
+from hemocircuit.cli import main
+from hemocircuit.errors import NetlistError
+
+from paths import ROOT
+
+TWO = """
+name: two_hemispheres
+elements:
+  - {id: Pa, type: pressure_source, nodes: [carotid, ground], value: 80 mmHg}
+  - {id: Pv, type: pressure_source, nodes: [jugular, ground], value: 6 mmHg}
+instances:
+  - {id: left, netlist: payne06.yaml, ports: {in: carotid, out: jugular}, remove: [Pa, Pv]}
+  - {id: right, netlist: payne06.yaml, ports: {in: carotid, out: jugular}, remove: [Pa, Pv],
+     change: {Rla: {R: 0.8 mmHg*s/mL}}}
+"""
+
+
+@pytest.fixture
+def folder(tmp_path):
+    for src in (ROOT / "netlists").glob("*.yaml"):  # the chains icp -> arterial_compliance -> payne06 ...
+        shutil.copy(src, tmp_path / src.name)
+
+    def write(text, name):
+        (tmp_path / name).write_text(textwrap.dedent(text))
+        return str(tmp_path / name)
+    write.path = tmp_path
+    return write
+
+
+def test_two_instances_are_two_beds_in_parallel(folder):
+    alone = hc.load(str(folder.path / "payne06.yaml")).operating_point()
+    both = hc.load(folder(TWO, "two.yaml"))
+    assert "left.art" in both.elements and "right.Rla" in both.elements
+    op = both.operating_point()
+    q_alone = alone["Q(Rla)"]
+    assert op["Q(left.Rla)"] == pytest.approx(q_alone, rel=1e-9)  # the same bed at the same pressures
+    assert op["P(left.alpha)"] == pytest.approx(alone["P(alpha)"], rel=1e-9)
+    # the right bed has a doubled upstream resistance: its arteriole dilates, so its flow falls far
+    # less than the 1/(1 + 0.4/R_total) a passive bed would lose
+    q_right = op["Q(right.Rla)"]
+    assert 0.99 * q_alone < q_right < q_alone
+    assert op["right.art.r"] > op["left.art.r"]
+    # conservation: the source delivers both beds' flow
+    assert -op["Q(Pa)"] == pytest.approx(q_alone + q_right, rel=1e-9)
+
+
+def test_instance_parameters_take_set_and_grid(folder, capsys):
+    path = folder(TWO, "two.yaml")
+    c = hc.load(path).with_values({"left.Rla.R": "0.8 mmHg*s/mL"})
+    op = c.operating_point()
+    assert op["Q(left.Rla)"] == pytest.approx(op["Q(right.Rla)"], rel=1e-9)
+    assert main(["op", path, "--grid", "left.art.tau_Ca=1,10s", "--quiet"]) == 0
+    assert "left.art.tau_Ca" in capsys.readouterr().out
+
+
+def test_instances_nest_and_keep_their_own_parameters(folder):
+    folder("""
+        name: pair
+        ports: [feed, drain]
+        elements:
+          - {id: Rin, type: resistor, nodes: [feed, mid], R: "${R_in}"}
+        parameters: {R_in: 1 mmHg*s/mL}
+        instances:
+          - {id: bed, netlist: payne06_passive.yaml, ports: {in: mid, out: drain}, remove: [Pa, Pv]}
+        """, "pair.yaml")
+    top = folder("""
+        name: top
+        elements:
+          - {id: Pa, type: pressure_source, nodes: [a, ground], value: 100 mmHg}
+          - {id: Pv, type: pressure_source, nodes: [v, ground], value: 0 mmHg}
+        instances:
+          - {id: one, netlist: pair.yaml, ports: {feed: a, drain: v}, parameters: {R_in: 2 mmHg*s/mL}}
+        """, "top.yaml")
+    c = hc.load(top)
+    assert "one.bed.Rla" in c.elements and "one.Rin" in c.elements
+    assert c.parameters.values["one.Rin.R"][0] == pytest.approx(2.0)
+    op = c.operating_point()
+    # passive bed: series resistances 2 + 0.4 + 20 + 1.32 + 0.56 (Cv and Pic carry no steady flow)
+    assert op["Q(one.Rin)"] == pytest.approx(100.0 / (2 + 0.4 + 20 + 1.32 + 0.56), rel=1e-9)
+
+
+@pytest.mark.parametrize("instance, message", [
+    ("{id: b, netlist: payne06.yaml, ports: {inn: x}}", "has no node 'inn' (did you mean 'in'"),
+    ("{id: b, netlist: nowhere.yaml, ports: {in: x}}", "nowhere.yaml"),
+    ("{id: b, netlist: payne06.yaml, port: {in: x}}", "unknown key(s) ['port'] (did you mean 'ports'"),
+    ("{id: b, netlist: payne06.yaml, ports: {ground: x}}", "ground is shared by every circuit"),
+    ("{id: b, netlist: payne06.yaml, parameters: {Pic2: 1 mmHg}}", "has no parameter 'Pic2'"),
+    ("{id: b.c, netlist: payne06.yaml}", "needs an 'id' (letters, digits, _"),
+    ("{id: b, netlist: icp.yaml, ports: {in: x}, remove: [Pa]}",
+     "is calibrated at Pa.value, but the instance has no element 'Pa'; give the instance its own 'constraints:'"),
+])
+def test_instance_errors_name_the_instance_and_the_fix(folder, instance, message):
+    path = folder(f"""
+        name: bad
+        elements:
+          - {{id: Px, type: pressure_source, nodes: [x, ground], value: 80 mmHg}}
+        instances:
+          - {instance}
+        """, "bad.yaml")
+    with pytest.raises(NetlistError) as exc:
+        hc.load(path)
+    assert message in str(exc.value)
+    assert "bad.yaml" in str(exc.value)
+
+
+def test_a_calibrated_child_runs_with_its_own_constraints(folder):
+    path = folder("""
+        name: icp_bed
+        elements:
+          - {id: P0, type: pressure_source, nodes: [x, ground], value: 80 mmHg}
+          - {id: P1, type: pressure_source, nodes: [y, ground], value: 6 mmHg}
+        instances:
+          - {id: b, netlist: icp.yaml, ports: {in: x, out: y}, remove: [Pa, Pv],
+             constraints: [{node: ic, pressure: 10 mmHg, when: {P0.value: 80 mmHg}}]}
+        """, "icp_bed.yaml")
+    op = hc.load(path).operating_point()
+    alone = hc.load(str(folder.path / "icp.yaml")).operating_point()
+    assert op["P(b.ic)"] == pytest.approx(10.0, rel=1e-9)
+    assert op["Q(b.Rla)"] == pytest.approx(alone["Q(Rla)"], rel=1e-9)
+
+
+def test_declared_ports_must_all_be_connected_and_cycles_are_named(folder):
+    folder("""
+        name: part
+        ports: [feed, drain]
+        elements:
+          - {id: R, type: resistor, nodes: [feed, drain], R: 1 mmHg*s/mL}
+        """, "part.yaml")
+    path = folder("""
+        name: user
+        elements:
+          - {id: Px, type: pressure_source, nodes: [x, ground], value: 80 mmHg}
+        instances:
+          - {id: p, netlist: part.yaml, ports: {feed: x}}
+        """, "user.yaml")
+    with pytest.raises(NetlistError, match=r"port\(s\) \['drain'\] of .*part.yaml are not connected"):
+        hc.load(path)
+    folder("""
+        name: a
+        elements: [{id: Px, type: pressure_source, nodes: [x, ground], value: 80 mmHg}]
+        instances: [{id: b, netlist: b.yaml, ports: {}}]
+        """, "a.yaml")
+    folder("""
+        name: b
+        elements: [{id: Py, type: pressure_source, nodes: [y, ground], value: 80 mmHg}]
+        instances: [{id: a, netlist: a.yaml, ports: {}}]
+        """, "b.yaml")
+    with pytest.raises(NetlistError, match=r"instances form a cycle: .*a.yaml -> .*b.yaml -> .*a.yaml"):
+        hc.load(str(folder.path / "a.yaml"))
