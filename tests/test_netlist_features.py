@@ -450,6 +450,29 @@ def test_store_only_node_calibration_constraint(write):
     assert c.operating_point()["P(ic)"] == pytest.approx(_pic(60, 58.6875), rel=1e-9)
 
 
+def test_two_calibrated_store_only_nodes_at_the_same_or_different_conditions(write):
+    """Two calibrations (two subcircuit instances of a calibrated netlist have them): solved
+    together at one 'when', in turns at two.  Group ic as in _pic; group ic2 is Cb [a, ic2] and
+    Cw [ic2, ground], conserving K = V(Cw) - V(Cb) = 20 + 1.4 P(ic2) - 0.4 P(a)."""
+    two = ICP + ("  - {id: Cb, type: compliance, nodes: [a, ic2], C: 0.4 mL/mmHg, V0: 10 mL}\n"
+                 "  - {id: Cw, type: compliance, nodes: [ic2, ground], C: 1.0 mL/mmHg, V0: 30 mL}\n")
+
+    def p_a(Pa):
+        return Pa - (Pa - 5) / 8
+
+    same = hc.load(write(two + "constraints:\n  - {node: ic, pressure: 10 mmHg}\n  - {node: ic2, pressure: 12 mmHg}\n",
+                         "same.yaml")).operating_point()
+    assert same["P(ic)"] == pytest.approx(10.0, rel=1e-10) and same["P(ic2)"] == pytest.approx(12.0, rel=1e-10)
+    c = hc.load(write(two + "constraints:\n  - {node: ic, pressure: 10 mmHg, when: {Pa.value: 80 mmHg}}\n"
+                            "  - {node: ic2, pressure: 12 mmHg, when: {Pa.value: 60 mmHg}}\n", "apart.yaml"))
+    q80 = 75 / 8
+    W1 = 40 + 0.2 * (80 - q80 - 10) + 1.5 * (5 + q80 - 10)
+    op = c.operating_point()  # at Pa = 100 mmHg
+    assert op["P(ic)"] == pytest.approx(_pic(100, W1), rel=1e-9)
+    assert op["P(ic2)"] == pytest.approx(12 + 0.4 * (p_a(100) - p_a(60)) / 1.4, rel=1e-9)
+    assert op["V(Cw)"] - op["V(Cb)"] == pytest.approx(20 + 1.4 * 12 - 0.4 * p_a(60), rel=1e-10)
+
+
 # ------------------------------------------------------------------------- CLI ------------
 def test_cli_op_json(tmp_path, capsys):
     out = tmp_path / "op.json"

@@ -307,31 +307,58 @@ def conserved_totals(circuit, t=0.0):
 
 
 def _calibrate(circuit, t):
+    """The totals of the calibrated laws.  Calibrations with the same 'when' are solved
+    together (each law's total such that its node sits at its pressure); calibrations at
+    different 'when's take turns, each solve using the others' latest totals (the first round
+    treats a law not yet calibrated as a calibration at this 'when' too), until the totals
+    stop moving."""
+    import json
+
     totals = list(circuit.law_totals)
-    for k, spec in enumerate(circuit.law_specs):
-        if spec["kind"] != "calibration" or totals[k] is not None:
-            continue
-        cal = circuit.with_values(spec["when"])
-        node_j = cal.nodes.index(spec["node"])
-
-        def target(X, cal=cal, node_j=node_j, spec=spec):
-            u, _, _ = cal.evaluate(t, X, want="u")
-            return (u[:, node_j] - spec["pressure"]) / 1.0
-
-        def solve(cal=cal, k=k, target=target, spec=spec, known=list(totals)):
-            X0 = dc_guess(cal, t)
-            X, ok, res = _solve_with_fallbacks(cal, X0, [target if j == k else known[j] for j in range(len(known))], t)
-            if not ok:
-                raise SolverError(f"calibration of the conserved volume at node '{spec['node']}' "
-                                  f"({spec['pressure']} mmHg when {spec['when']}) did not converge",
-                                  where="computing the operating point")
-            return cal.law_volumes(X)[k]
-
-        # the total depends only on the calibration circuit (its values with 'when' applied):
-        # sweeping a parameter that 'when' fixes reuses it
-        known = tuple(None if v is None else np.asarray(v).tobytes() for v in totals)
-        totals[k] = cal.structure.cached(("calibration", k, float(t), cal.parameters.fingerprint(), known), solve)
+    specs = circuit.law_specs
+    pending = [k for k, spec in enumerate(specs) if spec["kind"] == "calibration" and totals[k] is None]
+    groups: dict = {}
+    for k in pending:
+        groups.setdefault(json.dumps(specs[k]["when"], sort_keys=True, default=str), []).append(k)
+    rounds = 1 if len(groups) <= 1 else 20
+    for _ in range(rounds):
+        before = [None if v is None else np.array(v, dtype=float) for v in totals]
+        for ks in groups.values():
+            new = _calibrate_group(circuit, t, ks, pending, totals)
+            for k in ks:
+                totals[k] = new[k]
+        if rounds == 1 or all(b is not None and np.allclose(b, totals[k], rtol=1e-12, atol=0)
+                              for k, b in enumerate(before) if k in pending):
+            break
     return totals
+
+
+def _calibrate_group(circuit, t, ks, pending, totals):
+    """Law volumes with every law of ``ks`` (one 'when') at its node pressure; the other
+    pending laws at their current totals, or at their own pressure while they have none."""
+    spec0 = circuit.law_specs[ks[0]]
+    cal = circuit.with_values(spec0["when"])
+    aims = [k for k in pending if k in ks or totals[k] is None]
+
+    def target(X, k):
+        spec = circuit.law_specs[k]
+        u, _, _ = cal.evaluate(t, X, want="u")
+        return (u[:, cal.nodes.index(spec["node"])] - spec["pressure"]) / 1.0
+
+    def solve():
+        X0 = dc_guess(cal, t)
+        laws = [(lambda X, k=j: target(X, k)) if j in aims else totals[j] for j in range(len(totals))]
+        X, ok, res = _solve_with_fallbacks(cal, X0, laws, t)
+        if not ok:
+            where = ", ".join(f"'{circuit.law_specs[k]['node']}' ({circuit.law_specs[k]['pressure']} mmHg)" for k in ks)
+            raise SolverError(f"calibration of the conserved volume at node(s) {where} when {spec0['when']} did not "
+                              "converge", where="computing the operating point")
+        return cal.law_volumes(X)
+
+    # the totals depend only on the calibration circuit (its values with 'when' applied) and the
+    # other laws' totals: sweeping a parameter that 'when' fixes reuses them
+    known = tuple(None if v is None else np.asarray(v).tobytes() for v in totals)
+    return cal.structure.cached(("calibration", tuple(ks), float(t), cal.parameters.fingerprint(), known), solve)
 
 
 def _solve_with_fallbacks(circuit, X0, totals, t):
