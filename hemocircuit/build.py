@@ -141,6 +141,15 @@ def check_values(data: ElementData, values: dict | None = None):
             continue
         par = data.cls.parameters[name]
         arr = np.atleast_1d(np.asarray(val, dtype=float))
+        wf = data.waveforms.get(name)
+        if wf is not None and par.lower is not None or wf is not None and par.upper is not None:
+            # the value in use is the slot plus the waveform: check the waveform's whole range
+            lo, hi = wf.value_range()
+            for edge, what in ((arr + lo, "lowest"), (arr + hi, "highest")):
+                if par.violates(edge).any():
+                    raise NetlistError(f"parameter '{name}': its waveform's {what} value {float(edge[0]):g} "
+                                       f"{par.unit} is not physical: need {par.bounds_text()}", **data.where)
+            continue
         if par.violates(arr).any():
             raise NetlistError(f"parameter '{name}' = {float(arr[par.violates(arr)][0]):g} {par.unit} is not "
                                f"physical: need {par.bounds_text()}", **data.where)

@@ -84,7 +84,9 @@ class Group:
         self.L = self.K + self.M
         self.observables = comp.observables()
         self.exprs = [(i, name, ex) for i, e in enumerate(elements) for name, ex in e.expressions.items()]
-        self.constant = comp.matrix_constant(name for _, name, _ in self.exprs)
+        # a parameter given as an expression or a waveform changes in time: A_loc may too
+        self.constant = comp.matrix_constant([name for _, name, _ in self.exprs] +
+                                             [name for e in elements for name in e.waveforms])
         self.index = index  # position in the structure's groups
         self.base = self  # the structural group (a bound group points at it; lazy scatters live there)
 

@@ -259,11 +259,7 @@ def _load_raw(path, chain, access, svzerod=None):
 
 def _load_child(name, overrides, where, path, chain, access, svzerod):
     """An instance's netlist, its ${} parameters (with the instance's overrides) substituted."""
-    try:
-        child = access.resolve(name, os.path.dirname(path), f"instance '{where['element']}' of {path}: netlist",
-                               where)
-    except NetlistError as exc:
-        raise NetlistError(f"instance '{where['element']}': {exc.bare_message}", **where) from None
+    child = access.resolve(name, os.path.dirname(path), f"instance '{where['element']}': netlist", where)
     if not os.path.isfile(child):
         raise NetlistError(f"instance '{where['element']}': netlist file not found: {child}", **where)
     if os.path.abspath(child) in chain + [path]:

@@ -57,6 +57,11 @@ class Waveform:
         (the output of a run evaluates every source at all its rows at once)."""
         return np.array([self(x) for x in np.asarray(t, dtype=float).reshape(-1).tolist()], dtype=float)
 
+    def value_range(self) -> tuple[float, float]:
+        """(lowest, highest) value it can take (at most: a sum adds its parts' ranges), for the
+        bounds check of a parameter that takes a waveform."""
+        raise NotImplementedError
+
 
 @dataclass
 class Constant(Waveform):
@@ -67,6 +72,9 @@ class Constant(Waveform):
 
     def sample(self, t):
         return np.full(np.asarray(t).reshape(-1).shape, float(self.value))
+
+    def value_range(self):
+        return float(self.value), float(self.value)
 
 
 @dataclass
@@ -80,6 +88,9 @@ class Table(Waveform):
             return float(np.interp(t, self.times, self.values))
         i = np.searchsorted(self.times, t, side="right") - 1
         return float(self.values[max(i, 0)])
+
+    def value_range(self):
+        return float(np.min(self.values)), float(np.max(self.values))
 
     def sample(self, t):
         t = np.asarray(t, dtype=float).reshape(-1)
@@ -128,6 +139,9 @@ class Sine(Waveform):
     def breakpoints(self, t0=-np.inf, t1=np.inf):
         return [self.start]
 
+    def value_range(self):
+        return self.offset - abs(self.amplitude), self.offset + abs(self.amplitude)
+
 
 @dataclass
 class Sum(Waveform):
@@ -148,6 +162,27 @@ class Sum(Waveform):
     def jumps(self, t0=-np.inf, t1=np.inf):
         return sorted({b for p in self.parts for b in p.jumps(t0, t1)})
 
+    def value_range(self):
+        ranges = [p.value_range() for p in self.parts]
+        return sum(r[0] for r in ranges), sum(r[1] for r in ranges)
+
+
+@dataclass
+class Noise(Sum):
+    """A ``noise`` waveform: a Sum of its mean and sines, all periodic in ``period``."""
+    period: float = 600.0
+
+    def value_range(self):
+        """The lowest and highest values over one period, sampled at 20 points per cycle of
+        its fastest sine, widened by 2 % of their spread (the sampled extremes miss the true
+        ones by less than 1 - cos(pi/20) = 1.2 % of the amplitude)."""
+        fastest = max((p.frequency for p in self.parts if isinstance(p, Sine)), default=0.0)
+        n = int(min(2_000_000, max(100, 20 * fastest * self.period)))
+        start = max((p.start for p in self.parts if isinstance(p, Sine)), default=0.0)
+        v = self.sample(start + np.arange(n) * (self.period / n))
+        margin = 0.02 * float(v.max() - v.min())
+        return float(v.min()) - margin, float(v.max()) + margin
+
 
 @dataclass
 class Periodic(Waveform):
@@ -160,6 +195,9 @@ class Periodic(Waveform):
     def phase(self, t):
         t0 = float(self.table.times[0])
         return t0 + (t - t0) % self.period
+
+    def value_range(self):
+        return self.table.value_range()
 
     def __call__(self, t):
         return self.table(self.phase(t))
@@ -342,8 +380,8 @@ def _noise(body, unit, where):
     rng = np.random.default_rng(seed)
     c = rng.standard_normal(k.size) + 1j * rng.standard_normal(k.size)  # a Gaussian process's Fourier lines
     amp = np.abs(c) * sd / np.sqrt(np.sum(np.abs(c) ** 2) / 2.0)  # sd over one period: sqrt(sum a^2 / 2)
-    return Sum([Constant(mean)] + [Sine(0.0, float(a), float(f), float(ph), start)
-                                   for a, f, ph in zip(amp, k / period, np.angle(c))])
+    return Noise([Constant(mean)] + [Sine(0.0, float(a), float(f), float(ph), start)
+                                     for a, f, ph in zip(amp, k / period, np.angle(c))], period)
 
 
 def _periodic(body, unit, base_dir, where):

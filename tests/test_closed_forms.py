@@ -435,3 +435,36 @@ def test_noise_waveform_errors(write, body, message):
     with pytest.raises(hc.NetlistError) as exc:
         hc.load(write(_source_net("{noise: " + body + "}")))
     assert message in str(exc.value)
+
+
+def test_waveform_value_ranges_bound_what_they_take():
+    from hemocircuit.waveforms import parse_waveform
+    assert parse_waveform({"sine": {"offset": "5 mmHg", "amplitude": "-2 mmHg"}}, "mmHg").value_range() == (3.0, 7.0)
+    assert parse_waveform({"pwl": [["0 s", "4 mmHg"], ["1 s", "-1 mmHg"]]}, "mmHg").value_range() == (-1.0, 4.0)
+    both = parse_waveform({"sum": [{"sine": {"amplitude": "1 mmHg", "frequency": "1 Hz"}}, {"steps": [["0 s", "2 mmHg"]]}]},
+                          "mmHg")
+    assert both.value_range() == (1.0, 3.0)
+    noise = parse_waveform({"noise": {"mean": "1 mmHg", "sd": "0.1 mmHg", "band": ["0.02 Hz", "0.2 Hz"],
+                                      "period": "100 s", "seed": 2}}, "mmHg")
+    lo, hi = noise.value_range()
+    fine = noise.sample(np.arange(0, 100, 0.01))
+    assert lo <= fine.min() and hi >= fine.max()  # a bound of what it takes
+    assert fine.min() - lo < 0.05 * (hi - lo) and hi - fine.max() < 0.05 * (hi - lo)  # and a close one
+    assert 1 - 5 * 0.1 < lo < 1 - 0.1 and 1 + 0.1 < hi < 1 + 5 * 0.1
+
+
+def test_a_time_varying_distal_resistance_acts_in_the_kernel(write):
+    """ClosedLoopRCR's Rd takes a waveform: Q_out = (P_c - P_out) / Rd(t) at every output time,
+    and a waveform that would reach Rd <= 0 is refused with its lowest value."""
+    net = """
+        elements:
+          - {id: Pa, type: pressure_source, nodes: [in, ground], value: 100 mmHg}
+          - {id: bed, type: closed_loop_rcr, nodes: [in, out, ground], Rp: 0.1 mmHg*s/mL, C: 0.5 mL/mmHg,
+             Rd: {sine: {offset: 1 mmHg*s/mL, amplitude: 0.3 mmHg*s/mL, frequency: 0.2 Hz}}}
+          - {id: Pv, type: pressure_source, nodes: [out, ground], value: 5 mmHg}
+        """
+    res = hc.load(write(net)).simulate(10.0, dt=0.05)
+    rd = 1 + 0.3 * np.sin(2 * np.pi * 0.2 * res.t)
+    np.testing.assert_allclose(res["bed.Q_out"], (res["bed.P_c"] - 5.0) / rd, rtol=1e-10)
+    with pytest.raises(hc.NetlistError, match=r"Rd': its waveform's lowest value -0.2 mmHg\*s/mL is not physical"):
+        hc.load(write(net.replace("amplitude: 0.3", "amplitude: 1.2"), "bad.yaml"))

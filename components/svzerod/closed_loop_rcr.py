@@ -25,6 +25,9 @@ class ClosedLoopRCR(Component):
     parameters = {"Rp": Param(R_UNIT, lower=0.0, doc="proximal resistance"),
                   "C": Param(C_UNIT, lower=0.0, lower_open=True, doc="capacitance"),
                   "Rd": Param(R_UNIT, lower=0.0, lower_open=True, doc="distal resistance")}
+    #: the distal resistance may vary in time (a waveform: spontaneous fluctuations of the
+    #: peripheral resistance, a thigh-cuff release; docs/body.md)
+    waveform_params = ("Rd",)
 
     def internal_nodes(self):
         return ("c",)

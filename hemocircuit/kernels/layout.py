@@ -120,7 +120,7 @@ def build_layout(circuit) -> Layout | None:
             elem_index[eid] = len(et)
             et.append(codes[(k.stamp, k.derivs, k.observe)])
             own = {name for j, name, _ in g.waves if j == i} | {name for j, name, _ in g.exprs if j == i}
-            const = g.comp.matrix_constant(name for j, name, _ in g.exprs if j == i)
+            const = g.comp.matrix_constant(own)  # expressions and waveforms change in time
             cm.append(int(const))
             # 1 static, 2 stamped at every Newton iterate, 0 once per nodal solve (engine_nodal)
             st.append(2 if not g.comp.linear_in_pressure
