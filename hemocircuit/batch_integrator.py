@@ -54,8 +54,7 @@ def integrate(circuit, x0, t_out, rtol=1e-5, atol=None, h0=1e-3, max_steps=50000
     if engine not in ("auto", "numpy"):
         raise ValueError(f"engine {engine!r}: choose 'auto' or 'numpy'")
     if engine == "auto":
-        from .kernels.system import CompiledSystem
-        system = CompiledSystem.of(circuit)
+        system = circuit.system.compiled()  # the System chooses the engine
         if system is not None:
             return _integrate_compiled(system, circuit, x0, t_out, rtol, atol, h0, max_steps, h_max, method,
                                        controller)

@@ -1,9 +1,10 @@
 """Sparse linear algebra for large circuits: LU factorisations of the nodal matrix and
 coloured finite-difference Jacobians.
 
-Used by :class:`hemocircuit.circuit.Circuit` when the nodal system has more unknowns than
-``Circuit.sparse_threshold`` (see ``SPARSE_MIN_UNKNOWNS``) and by the operating point.  Nothing
-here allocates an n x n (or nx x nx) dense array:
+Used by :class:`hemocircuit.system.System` when the nodal system has more unknowns than
+``Circuit.sparse_threshold`` (see ``hemocircuit.system.SPARSE_MIN_UNKNOWNS``) and by the
+operating point; imported only then (it loads scipy.sparse).  Nothing here allocates an
+n x n (or nx x nx) dense array:
 
 * the nodal matrix lives on a fixed CSC pattern (the union of every element's local stamp
   block); its values are a (rows, nnz) array, factorised with ``scipy.sparse.linalg.splu``;
@@ -24,12 +25,8 @@ from scipy.sparse.linalg import splu
 
 from .derivatives import fd_steps
 
-#: default threshold: circuits with more nodal unknowns than this take the sparse path
-SPARSE_MIN_UNKNOWNS = 64
 #: rows x columns of the largest array a pattern-detection block may create (~16 MB of floats)
 BLOCK_ELEMENTS = 2_000_000
-#: numbers in the arrays of one chunk of Circuit.outputs (~64 MB of floats, in all)
-OUTPUT_ELEMENTS = 8_000_000
 #: relative perturbation used to detect the Jacobian's pattern (larger than the one of the
 #: derivative itself, so that a dependence stands well above rounding noise)
 PATTERN_STEP = 1e-4
@@ -41,7 +38,7 @@ class Factors:
     """splu factorisations of one matrix per batch member (or one shared by all members).
 
     Copies share it (the factors are read-only and tied to parameter values that a copy
-    shares until its ``_prepare`` makes new ones); pickling drops the factors (SuperLU objects
+    shares until its System prepares new ones); pickling drops the factors (SuperLU objects
     do not pickle) and the owner refactorises lazily.
     """
 

@@ -50,7 +50,7 @@ def test_compiled_outputs_match_numpy_path(path):
     (CompiledSystem.nodal_outputs) gives the numpy evaluation's columns, in its order, to
     rounding: over a simulated run, and for a batch of members with their rows member-major
     (as freq evaluates a block)."""
-    from hemocircuit.circuit import COMPILED_OUTPUT_ROWS
+    from hemocircuit.system import COMPILED_OUTPUT_ROWS
 
     if not os.path.exists(path):
         pytest.skip(f"{path} is not here")

@@ -58,13 +58,12 @@ def test_ladder_operating_point_closed_form(write):
 def test_sparse_path_holds_no_dense_system(write):
     c = ladder(write, 200)
     assert c.sparse
-    assert c.A_const.shape[1] < 20 * c.n  # values on the pattern, not (n+1)^2
-    assert c._Ainv is None and c._lu.lus is not None
-    assert all(g.base.__dict__.get("_ST_A") is None for g in c.groups)  # the (n+1)^2 scatter is never built
+    assert c.system.A_const.shape[1] < 20 * c.n  # values on the pattern, not (n+1)^2
+    assert c.system.Ainv is None and c.system.lu.lus is not None
     x = np.atleast_2d(c.operating_point().x)[0]
     J = c.jacobian(0.0, x)
     assert J.shape == (c.nx, c.nx) and J.nnz <= 3 * c.nx  # tridiagonal
-    plan = next(iter(c._jac_plans.values()))
+    plan = next(iter(c.system.jac_plans.values()))
     assert plan.how == "structural" and plan.ncolours == 3
 
 
@@ -139,7 +138,7 @@ def test_forced_sparse_path_matches_dense(name):
     x = np.atleast_2d(opd.x)[0]
     Jd, Js = cd.jacobian(0.0, x), cs.jacobian(0.0, x).toarray()
     np.testing.assert_allclose(Js, Jd, rtol=1e-5, atol=1e-7 * np.max(np.abs(Jd)))
-    struct = next(p for k, p in cs._jac_plans.items() if k[0] == "rhs")
+    struct = next(p for k, p in cs.system.jac_plans.items() if k[0] == "rhs")
     numer = cs.jacobian_plan("rhs", lambda r: cs.evaluate(0.0, r), x, how="numerical")
     S = struct.pattern.matrix(np.ones(struct.nnz)).toarray() > 0
     Nm = numer.pattern.matrix(np.ones(numer.nnz)).toarray() > 0

@@ -13,10 +13,7 @@ names the worst-balanced state.
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.linalg import lsqr, splu
 
-from .. import sparse as sparse_la
 from ..derivatives import dense_jacobian
 from ..errors import HemocircuitError, SolverError
 from ..provenance import clock, stamp
@@ -67,6 +64,8 @@ def _jac(circuit, t, X, law_totals):
     """(J, F(X)): J dense (B, nx, nx), or on the sparse path a list of B csc matrices from
     coloured finite differences (pattern derived once per circuit and parameter set)."""
     if getattr(circuit, "sparse", False):
+        from .. import sparse as sparse_la  # scipy.sparse: large circuits only
+
         B = X.shape[0]
 
         def fun(rows):
@@ -212,6 +211,9 @@ def _sparse_step(Js, F, dt=None, skip=None):
     """Newton (dt None) or pseudo-transient (I/dt - J) steps, one sparse LU per member; a
     singular member falls back to least squares (LSQR) if it is alone, else takes no step.
     Members flagged in ``skip`` take no step."""
+    import scipy.sparse as sp
+    from scipy.sparse.linalg import lsqr, splu
+
     B, nx = F.shape
     dX = np.zeros_like(F)
     eye = sp.identity(nx, format="csc") if dt is not None else None

@@ -240,8 +240,7 @@ def _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step
                           f"between t0 = {t0:g} s and t_end = {t_end:g} s")
     if engine != "scipy" and compile == "wait" and (engine == "compiled" or method == "BDF"):
         from ..kernels import prebuild
-        from ..kernels.system import CompiledSystem
-        system = CompiledSystem.of(c)
+        system = c.system.compiled()  # the System chooses the engine
         if system is not None:  # a first compile: its second process starts before the operating point
             from ..kernels import background
             if not background.ready(system) and progress is not False:
@@ -261,8 +260,7 @@ def _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step
     if engine not in ("auto", "compiled", "scipy"):
         raise SolverError(f"engine {engine!r}: choose 'auto', 'compiled' or 'scipy'")
     if engine != "scipy" and (engine == "compiled" or method == "BDF"):
-        from ..kernels.system import CompiledSystem
-        system = CompiledSystem.of(c)
+        system = c.system.compiled()
         if system is None and engine == "compiled":
             raise SolverError("this circuit cannot run compiled (a component type without a kernel, or "
                               "too many nodal unknowns); use engine='scipy'")
@@ -329,8 +327,7 @@ def _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step
         switch = _scipy_segments(c, x, bounds, events, limits, one_segment, ts, xs, segs, handover, t_grid)
         if switch is not None:  # the background build is ready: the rest on the compiled engine
             k, t_s, x_s, c_k = switch
-            from ..kernels.system import CompiledSystem
-            compiled = _simulate_compiled(CompiledSystem.of(c_k), c_k, x_s, t_s, t_end, dt, events[k:], rtol, atol,
+            compiled = _simulate_compiled(c_k.system.compiled(), c_k, x_s, t_s, t_end, dt, events[k:], rtol, atol,
                                           max_step, first_step, pbar, t_grid=_output_grid(t0, t_end, dt),
                                           parts=(ts, xs, segs), bar_t0=t0, output_from=output_from)
     except KeyboardInterrupt as exc:
@@ -490,8 +487,6 @@ def _simulate_compiled(system, c, x, t0, t_end, dt, events, rtol, atol, max_step
     at most PIECE_STEPS steps each and, with a progress ``bar`` shown, about 50 per segment.
     A run handed over from the scipy path at t0 passes its output grid ``t_grid``, its series
     so far ``parts`` (ts, xs, segs; appended to) and its start ``bar_t0``."""
-    from ..kernels.system import CompiledSystem
-
     if t_grid is None:
         t_grid = _output_grid(t0, t_end, dt)
     if output_from is not None:
@@ -510,7 +505,7 @@ def _simulate_compiled(system, c, x, t0, t_end, dt, events, rtol, atol, max_step
             c = events[k - 1][1].apply(c)
             # an event may change waveforms, options or expressions: the layout follows the
             # circuit (cheap; the compiled engine itself is reused)
-            system = CompiledSystem.of(c)
+            system = c.system.compiled()
             if system is None:
                 raise SolverError(f"the event at t = {t_a:g} s leaves a circuit that cannot run compiled; "
                                   "use engine='scipy'", time=t_a)

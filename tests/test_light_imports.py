@@ -1,0 +1,77 @@
+"""What a small circuit's operating point loads (issue 32: a warm ``op payne06`` within 0.5 s).
+
+The dense path scatters stamps with numpy and the System imports scipy.sparse
+(``hemocircuit.sparse``) only for circuits above ``SPARSE_MIN_UNKNOWNS`` nodal unknowns, and
+numba only when it chooses the compiled engine: ``op``, ``check`` and ``--help`` load neither.
+Each check runs the command through the CLI's ``main`` in a fresh interpreter, then reads
+``sys.modules``.
+"""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from paths import ROOT
+
+PAYNE06 = str(ROOT / "netlists" / "payne06.yaml")
+LADDER_UNKNOWNS = 200
+
+
+def loaded_after(args):
+    """The top-level packages (and hemocircuit/scipy submodules) in sys.modules after
+    ``hemocircuit ARGS`` ran in a new interpreter, with its exit status."""
+    code = ("import io, json, sys, contextlib\n"
+            "from hemocircuit.cli import main\n"
+            "with contextlib.redirect_stdout(io.StringIO()):\n"
+            "    try:\n"
+            f"        status = main({list(args)!r})\n"
+            "    except SystemExit as exc:\n"
+            "        status = exc.code\n"
+            "print(json.dumps({'status': status, 'modules': sorted(sys.modules)}))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+@pytest.fixture(scope="module")
+def op_modules():
+    res = loaded_after(["op", PAYNE06])
+    assert res["status"] in (0, None)
+    return set(res["modules"])
+
+
+@pytest.mark.parametrize("heavy", ["scipy.sparse", "hemocircuit.sparse", "numba"])
+def test_op_of_a_small_circuit_does_not_import(op_modules, heavy):
+    assert heavy not in op_modules
+
+
+@pytest.mark.xfail(strict=True, reason="hemocircuit.graph's topology checks run networkx at every assembly")
+def test_op_of_a_small_circuit_does_not_import_networkx(op_modules):
+    assert "networkx" not in op_modules
+
+
+@pytest.mark.parametrize("args", [["check", PAYNE06], ["--help"]])
+def test_check_and_help_do_not_import_numba(args):
+    assert "numba" not in loaded_after(args)["modules"]
+
+
+def test_a_large_circuit_takes_the_sparse_path(tmp_path):
+    """The other side of the threshold: a ladder of resistors and compliances with more nodal
+    unknowns than SPARSE_MIN_UNKNOWNS loads scipy.sparse for its operating point (so the test
+    above can fail: the import is where the sparse path needs it)."""
+    from hemocircuit.system import SPARSE_MIN_UNKNOWNS
+
+    assert LADDER_UNKNOWNS > SPARSE_MIN_UNKNOWNS
+    lines = ["name: ladder", "elements:",
+             "  - {id: Pa, type: pressure_source, nodes: [n0, ground], value: 100 mmHg}"]
+    for k in range(LADDER_UNKNOWNS):
+        lines.append(f"  - {{id: R{k}, type: resistor, nodes: [n{k}, n{k + 1}], R: 0.01 mmHg*s/mL}}")
+        lines.append(f"  - {{id: C{k}, type: compliance, nodes: [n{k + 1}, ground], C: 0.1 mL/mmHg}}")
+    lines.append(f"  - {{id: Rout, type: resistor, nodes: [n{LADDER_UNKNOWNS}, ground], R: 1 mmHg*s/mL}}")
+    path = tmp_path / "ladder.yaml"
+    path.write_text("\n".join(lines) + "\n")
+    res = loaded_after(["op", str(path)])
+    assert res["status"] in (0, None)
+    assert "scipy.sparse" in res["modules"] and "hemocircuit.sparse" in res["modules"]
