@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import os
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
 
 from .errors import HemocircuitError, Interrupted
 
@@ -185,6 +184,7 @@ def _run_processes(fn, chunks, workers, done, failures, bar):
     """Chunks on local worker processes; on any interruption the workers are stopped first.
     ``bar`` (a progress Tracker) hears the runs the workers report as they finish."""
     import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor, as_completed  # not for the CLI's signal handling
     from functools import partial
 
     from . import progress as _progress
