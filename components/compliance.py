@@ -15,122 +15,17 @@ import math
 import numpy as np
 
 from hemocircuit.component import Component, Observable, Option, Param, State, Storage
-from hemocircuit.kernels.jit import njit
 
-_jit = njit(cache=True, nogil=True, error_model="numpy", _nrt=False)  # numba imported on first use
-
-
-class _Store(Component):
-    terminals = ("node", "ref")
-    role = "pressure"
-    options = {"clamp_at_zero": Option(False, kind=bool, doc="hold V >= 0 (dV/dt = 0 at the limit)")}
-
-    def branches(self):
-        return (("node", "ref"),)
-
-    def states(self):
-        return (State("V", "mL", 1.0, "stored volume"),)
-
-    def storages(self):
-        return (Storage("node", "ref", "V", state="V"),)
-
-    def observables(self):
-        return (Observable("V", "mL", "stored volume", state_only=True),
-                Observable("C", "mL/mmHg", "compliance dV/dP", state_only=True))
-
-    def physical_limits(self):
-        """A stored volume is not negative (mL)."""
-        return {"V": (0.0, None)}
-
-    def dc_stamp(self, p, A_loc, b_loc, keep):
-        """Open: the branch flows are 0 (except on the stores in ``keep``)."""
-        opened = ~np.asarray(keep, dtype=bool)
-        K = len(self.local_nodes)
-        for m in range(len(self.branches())):
-            r = K + m
-            A_loc[:, opened, r, :] = 0.0
-            A_loc[:, opened, r, r] = 1.0  # branch flow = 0
-            b_loc[:, opened, r] = 0.0
-        return A_loc, b_loc
-
-    def limited_states(self, p, x, rtol=1e-6):
-        """A clamped store collapsed to V <= 0 (the steady variant continues it below 0)."""
-        out = super().limited_states(p, x, rtol)
-        if self.opts["clamp_at_zero"]:
-            out[..., 0] |= x[..., 0] <= 0.0
-        return out
-
-    def volume(self, p, dP):
-        raise NotImplementedError
-
-    def initial_states(self, p, u, flows=None, x=None):
-        return self.volume(p, u[..., 0] - u[..., 1])[..., None]
-
-    # --- the equations: kernel functions at the end of this module (hemocircuit.kernels) ----
-    def kernel_options(self):
-        """[clamp_at_zero (0|1), extended (0|1)] (``extended`` is always 0 for the linear law)."""
-        return np.array([int(bool(self.opts["clamp_at_zero"])), int(bool(self.opts.get("extended", False)))],
-                        dtype=np.int64)
-
-
-class LinearCompliance(_Store):
-    """Linear compliance C [mL/mmHg] with unstressed volume V0 [mL]."""
-
-    type_name = "compliance"
-    parameters = {"C": Param("mL/mmHg", lower=0.0, lower_open=True, doc="compliance"),
-                  "V0": Param("mL", default="0 mL", doc="unstressed volume")}
-
-    def kernel(self):
-        from hemocircuit.kernels import Kernel
-        return Kernel(stamp=linear_stamp, derivs=store_derivs, observe=linear_observe, observables=("V", "C"))
-
-    def volume(self, p, dP):
-        """The inverse law V(dP) (the DC guess's state): V0 + C dP."""
-        return p["V0"] + p["C"] * dP
-
-
-class LogCompliance(_Store):
-    """Payne06 logarithmic compliance: V = Vn + ln(dP - P0)/k, k [1/mL] > 0."""
-
-    type_name = "log_compliance"
-    parameters = {"k": Param("1/mL", lower=0.0, lower_open=True, doc="stiffness coefficient"),
-                  "P0": Param("mmHg", doc="pressure offset (P_v1, P_a1)"),
-                  "Vn": Param("mL", doc="volume offset (V_vn, V_an)")}
-    options = {"clamp_at_zero": Option(True, kind=bool, doc="hold V >= 0 (dV/dt = 0 at the limit)"),
-               "extended": Option(False, kind=bool, doc="continue the law linearly below dP - P0 = EPS")}
-    #: steady states follow the thesis (section brainSS): pressures from the resistive network
-    #: even where dP <= P0 (a collapsed compartment, reported with V = 0), so the law is
-    #: continued linearly below dP - P0 = EPS while solving, and the clamp is off
-    steady_opts = {"clamp_at_zero": False, "extended": True}
-    EPS = 1e-3  # mmHg
-
-    def kernel(self):
-        from hemocircuit.kernels import Kernel
-        return Kernel(stamp=log_stamp, derivs=store_derivs, observe=log_observe, observables=("V", "C"))
-
-    def volume(self, p, dP):
-        """The inverse law V(dP) (the DC guess's state), continued linearly below EPS as log_pressure."""
-        k, P0, Vn = p["k"], p["P0"], p["Vn"]
-        e = dP - P0
-        V_eps = Vn + np.log(self.EPS) / k
-        return np.where(e >= self.EPS, Vn + np.log(np.maximum(e, self.EPS)) / k, V_eps + (e / self.EPS - 1) / k)
+from .svzerod._common import Block, branch, jit as _jit, kernel_method, open_branches
 
 
 # --- the equations (hemocircuit.kernels contract) -------------------------------------------
 # Local unknowns [P_node, P_ref, q] (q: flow node -> ref through the store), state [V] (mL).
 # p: compliance [C, V0]; log_compliance [k, P0, Vn].  iopt: [clamp_at_zero, extended].
 # Observables (state-only, in order): V, C.
-_EPS = LogCompliance.EPS  # compile-time constants of the kernels [mmHg], and numpy's log of it
-_LOG_EPS = float(np.log(_EPS))
-
-
-@_jit
-def _branch(value, A, b):
-    A[0, 2] = 1.0
-    A[1, 2] = -1.0
-    A[2, 0] = 1.0
-    A[2, 1] = -1.0
-    b[2] = value
+#: the log law is continued linearly below dP - P0 = EPS [mmHg] while solving for a steady state
+EPS = 1e-3
+_LOGEPS = float(np.log(EPS))  # compile-time constant of the kernels
 
 
 @_jit
@@ -150,7 +45,7 @@ def _observed_volume(V, iopt):
 
 @_jit
 def linear_stamp(p, x, u, t, iopt, A, b):
-    _branch((x[0] - p[1]) / p[0], A, b)
+    branch(A, b, 0, 1, 2, (x[0] - p[1]) / p[0])  # P_node - P_ref = (V - V0)/C
 
 
 @_jit
@@ -172,15 +67,15 @@ def log_pressure(k, P0, Vn, V, extended):
     """dP = P0 + exp(k (V - Vn)) (thesis eqs. Cv, P2), continued linearly below dP - P0 = EPS."""
     if not extended:
         return P0 + _exp_clipped(k * (V - Vn))
-    V_eps = Vn + _LOG_EPS / k
+    V_eps = Vn + _LOGEPS / k
     if V >= V_eps:  # then np.maximum(V, V_eps) is V
         return P0 + _exp_clipped(k * (V - Vn))
-    return P0 + _EPS * (1 + k * (V - V_eps))
+    return P0 + EPS * (1 + k * (V - V_eps))
 
 
 @_jit
 def log_stamp(p, x, u, t, iopt, A, b):
-    _branch(log_pressure(p[0], p[1], p[2], x[0], iopt[1] != 0), A, b)
+    branch(A, b, 0, 1, 2, log_pressure(p[0], p[1], p[2], x[0], iopt[1] != 0))
 
 
 @_jit
@@ -188,8 +83,79 @@ def log_observe(p, x, iopt, out):
     k, Vn = p[0], p[2]
     V = x[0]
     out[0] = _observed_volume(V, iopt)
-    V_eps = Vn + _LOG_EPS / k
+    V_eps = Vn + _LOGEPS / k
     if V >= V_eps:
         out[1] = math.exp(-k * (V - Vn)) / k
     else:
-        out[1] = 1.0 / (k * _EPS)
+        out[1] = 1.0 / (k * EPS)
+
+
+class _Store(Block):
+    terminals = ("node", "ref")
+    role = "pressure"
+    options = {"clamp_at_zero": Option(False, kind=bool, doc="hold V >= 0 (dV/dt = 0 at the limit)")}
+    BRANCHES = (("node", "ref"),)
+    STATES = (State("V", "mL", 1.0, "stored volume"),)
+    STORAGES = (Storage("node", "ref", "V", state="V"),)
+    OBSERVABLES = (Observable("V", "mL", "stored volume", state_only=True),
+                   Observable("C", "mL/mmHg", "compliance dV/dP", state_only=True))
+
+    def physical_limits(self):
+        """A stored volume is not negative (mL)."""
+        return {"V": (0.0, None)}
+
+    def dc_stamp(self, p, A_loc, b_loc, keep):
+        """Open: the branch flow is 0 (except on the stores in ``keep``)."""
+        return open_branches(A_loc, b_loc, (2,), keep)
+
+    def limited_states(self, p, x, rtol=1e-6):
+        """A clamped store collapsed to V <= 0 (the steady variant continues it below 0)."""
+        out = super().limited_states(p, x, rtol)
+        if self.opts["clamp_at_zero"]:
+            out[..., 0] |= x[..., 0] <= 0.0
+        return out
+
+    def initial_states(self, p, u, flows=None, x=None):
+        return self.volume(p, u[..., 0] - u[..., 1])[..., None]
+
+    def kernel_options(self):
+        """[clamp_at_zero (0|1), extended (0|1)] (``extended`` is always 0 for the linear law)."""
+        return np.array([int(bool(self.opts["clamp_at_zero"])), int(bool(self.opts.get("extended", False)))],
+                        dtype=np.int64)
+
+
+class LinearCompliance(_Store):
+    """Linear compliance C [mL/mmHg] with unstressed volume V0 [mL]."""
+
+    type_name = "compliance"
+    parameters = {"C": Param("mL/mmHg", lower=0.0, lower_open=True, doc="compliance"),
+                  "V0": Param("mL", default="0 mL", doc="unstressed volume")}
+    kernel = kernel_method(linear_stamp, store_derivs, linear_observe, ("V", "C"))
+
+    def volume(self, p, dP):
+        """The inverse law V(dP) (the DC guess's state): V0 + C dP."""
+        return p["V0"] + p["C"] * dP
+
+
+class LogCompliance(_Store):
+    """Payne06 logarithmic compliance: V = Vn + ln(dP - P0)/k, k [1/mL] > 0."""
+
+    type_name = "log_compliance"
+    parameters = {"k": Param("1/mL", lower=0.0, lower_open=True, doc="stiffness coefficient"),
+                  "P0": Param("mmHg", doc="pressure offset (P_v1, P_a1)"),
+                  "Vn": Param("mL", doc="volume offset (V_vn, V_an)")}
+    options = {"clamp_at_zero": Option(True, kind=bool, doc="hold V >= 0 (dV/dt = 0 at the limit)"),
+               "extended": Option(False, kind=bool, doc="continue the law linearly below dP - P0 = EPS")}
+    #: steady states follow the thesis (section brainSS): pressures from the resistive network
+    #: even where dP <= P0 (a collapsed compartment, reported with V = 0), so the law is
+    #: continued linearly below dP - P0 = EPS while solving, and the clamp is off
+    steady_opts = {"clamp_at_zero": False, "extended": True}
+    EPS = EPS
+    kernel = kernel_method(log_stamp, store_derivs, log_observe, ("V", "C"))
+
+    def volume(self, p, dP):
+        """The inverse law V(dP) (the DC guess's state), continued linearly below EPS as log_pressure."""
+        k, P0, Vn = p["k"], p["P0"], p["Vn"]
+        e = dP - P0
+        V_eps = Vn + np.log(self.EPS) / k
+        return np.where(e >= self.EPS, Vn + np.log(np.maximum(e, self.EPS)) / k, V_eps + (e / self.EPS - 1) / k)

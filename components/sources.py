@@ -11,10 +11,9 @@ import math
 import numpy as np
 
 from hemocircuit.component import Component, Drive, Param
-from hemocircuit.kernels.jit import njit
 from hemocircuit.netlist import GROUND
 
-_jit = njit(cache=True, nogil=True, error_model="numpy", _nrt=False)  # numba imported on first use
+from .svzerod._common import branch, imposed_flow, jit as _jit, kernel_method
 
 
 #: a source's input is its value; its built-in sine term has the parameters below
@@ -37,10 +36,8 @@ def _sine_params(unit):
     }
 
 
-# --- the equations (hemocircuit.kernels contract) -------------------------------------------
-# p = [value, amplitude, frequency, phase, start] (the ``parameters`` order); the circuit kernel
-# has already added the waveform value ``src`` to p[0].  No states, options or observables.
-# pressure_source: local unknowns [P_node, P_ref, q]; flow_source: [P_a, P_b].
+# p = [value, amplitude, frequency, phase, start] (the ``parameters`` order; the circuit kernel
+# has already added the waveform's value to p[0]); no states, options or observables.
 @_jit
 def kernel_value(p, t):
     """value(t) = p[value] (with the waveform's value added) + the built-in sine term."""
@@ -52,20 +49,12 @@ def kernel_value(p, t):
 
 @_jit
 def pressure_stamp(p, x, u, t, iopt, A, b):
-    A[0, 2] = 1.0
-    A[1, 2] = -1.0
-    A[2, 0] = 1.0
-    A[2, 1] = -1.0
-    b[2] = kernel_value(p, t)
+    branch(A, b, 0, 1, 2, kernel_value(p, t))  # local unknowns [P_node, P_ref, q]: P_node - P_ref = value
 
 
 @_jit
 def flow_stamp(p, x, u, t, iopt, A, b):
-    q = kernel_value(p, t)
-    b[0] = -q
-    b[1] = q
-
-
+    imposed_flow(b, 0, 1, kernel_value(p, t))  # local unknowns [P_a, P_b]: q = value from a to b
 
 
 class PressureSource(Component):
@@ -79,6 +68,7 @@ class PressureSource(Component):
     drive = _DRIVE
     role = "pressure"
     time_dependent = True
+    kernel = kernel_method(pressure_stamp)
 
     def branches(self):
         return (("node", "ref"),)
@@ -93,11 +83,6 @@ class PressureSource(Component):
         """P(node) when the reference is ground (otherwise no column holds the difference)."""
         return f"P({nodes[0]})" if nodes[1] == GROUND and nodes[0] != GROUND else None
 
-    def kernel(self):
-        from hemocircuit.kernels import Kernel
-        from hemocircuit.kernels.stateless import no_derivs, no_observables
-        return Kernel(stamp=pressure_stamp, derivs=no_derivs, observe=no_observables, observables=())
-
 
 class FlowSource(Component):
     """Imposes a flow value(t) [mL/s] from terminal ``a`` through the source to ``b``."""
@@ -110,14 +95,10 @@ class FlowSource(Component):
     drive = _DRIVE
     role = "flow"
     time_dependent = True
+    kernel = kernel_method(flow_stamp)
 
     varies_in_time = PressureSource.varies_in_time
     breakpoints = PressureSource.breakpoints
 
     def drive_output(self, eid, nodes):
         return f"Q({eid})"
-
-    def kernel(self):
-        from hemocircuit.kernels import Kernel
-        from hemocircuit.kernels.stateless import no_derivs, no_observables
-        return Kernel(stamp=flow_stamp, derivs=no_derivs, observe=no_observables, observables=())

@@ -1,65 +1,22 @@
 """Well-mixed tracer pools: dissolved species (NO) carried by the blood, exchanged and decaying.
 
-Thesis section "Downstream Transport of NO" (eqs. dcvdt, dctdt, cinv; docs/downstream_no.md).
-Two element types; neither changes the hydraulics:
+Thesis section "Downstream Transport of NO" (eqs. dcvdt, dctdt, cinv); the model, its two
+unit readings and their steady states are in docs/downstream_no.md.  Neither type changes the
+hydraulics:
 
-``tracer_pool``   nodes ``[a, b]`` -- a perfused, well-mixed blood pool (the venous blood).
-                  Its two terminals are an *ideal flow meter* placed in the pool's inflow path:
-                  a pressure-defining branch with P_a - P_b = 0 (a 0 V source used as an
-                  ammeter in SPICE), whose branch flow q [mL/s, a -> b] is the blood flow into
-                  the pool.  Inserting it in series with a resistor changes no pressure or flow.
-``tissue_pool``   no nodes -- a stagnant pool (the tissue around the veins), coupled only
-                  through its wall.
+``tracer_pool``  nodes [a, b]: a perfused pool (venous blood) whose terminals are an ideal flow
+                 meter in its inflow path (a branch with P_a - P_b = 0 carrying q [mL/s]).
+``tissue_pool``  no nodes: a stagnant pool (the tissue), coupled only through its wall.
 
-State: the pool's concentration ``C`` [M = mol/L], reported as the state-only observable ``C``,
-so each pool can follow the other's concentration through a parameter expression
-(``C_x: "= NOt.C"``).  Other inputs come the same way: the pool volume from a compliance
-(``V: "= Cv.V"``), the feed from the upstream arteriolar bed (``C_inf: "= art.Cb_inf"``).
-
-Dimensionally consistent model (``units_reading: consistent``, the default), in SI
-(q [m^3/s] = flow [mL/s] * 1e-6, V [m^3]):
-
+State C [M], also the state-only observable C (pools follow each other through expressions,
+``C_x: "= NOt.C"``).  SI inside: q [m^3/s] = flow [mL/s] * 1e-6, V [m^3]; q+ = max(q, 0).
+``units_reading: consistent`` (default):
   perfused:  V dC/dt = q+ (C_feed - C) - k_d V C - h l (C - C_x)
   tissue:    V dC/dt =                   - k_d V C - h l (C - C_x)
-
-This is the thesis's d(C V)/dt = q_in C_feed - q_out C - ... - C dV/dt with the volume's
-rate dV/dt = q_in - q_out (mass conservation of blood), so only the inflow needs metering,
-provided ``V`` is the volume of the compartment that the metered flow fills (for Payne06:
-the venous compliance, fed through R_sv).  q+ = max(q, 0): under reversed flow the inlet
-removes pool blood, which leaves C unchanged.  h [m^2/s] is the wall transfer coefficient
-per unit vessel length (as h_w of the arteriole, thesis eq. NO1) and l [m] the total length
-of exchanging vessel, so h l [m^3/s] is the wall's transfer conductance; k_d [1/s] a
-first-order decay rate.
-
-The feed concentration is the outlet concentration of an upstream plug-flow bed of n_feed
-identical tubes of length L_feed (thesis eq. cinv, C_in,v = C_b(L)):
-
-  C_feed = (C_inf - C_0) (1 - exp(-x)) + C_0,   x = k_feed L_feed n_feed / q
-
-with C_0 the concentration entering the bed, C_inf its far-downstream limit and k_feed [m^2/s]
-the loss per unit length (h_w + r_db A_b for the arteriole: its state-only observables
-``Cb_inf`` and ``k_NO``).  x = k_feed L_feed / (q / n_feed) uses one tube's flow.  For q <= 0,
-x = inf (C_feed = C_inf).  The thesis evaluates x with the bed's mean flow (q1 + q2)/2; the
-meter gives the flow into the pool (q2), which is the same at steady state.
-
-Thesis compatibility reading (``units_reading: thesis``; MODEL_NOTES "Downstream NO"): the
-thesis's eqs. dcvdt/dctdt add a decay rate [1/s] and a transfer coefficient [m^2/s] to flows;
-its numbers (venous 1.4e-20 M, tissue 1.6e-29 M at Pa = 80 mmHg) are reproduced by reading
-every quantity as its SI number -- flows in m^3/s, V in m^3 -- and dropping the missing factors:
-
-  perfused:  V dC/dt = q+ (C_feed - C) - k_d C - h (C - C_x),   x = k_feed L_feed / q
-  tissue:    V dC/dt =                   - k_d C - h (C - C_x)
-
-i.e. no V on the decay, no length l on the exchange, and the whole-bed flow used as one tube's
-flow in the exponent (n_feed ignored).  Steady states, with q2 = q3 (thesis eqs. C_v0, C_T0):
-  C_v0 = q C_feed / (q + D_v + G (1 - G / (G + D_T))),   C_T0 = G C_v0 / (G + D_T)
-with G = h l, D = k_d V (consistent) or G = h, D = k_d (thesis); C_x of the venous pool is
-the tissue and vice versa.  Time constants in the thesis reading (V in m^3) are not the
-thesis's (it does not give them); only its steady numbers are reproduced.
-
-Option ``scale`` [M]: the natural size of C, used for solver tolerances (a state's absolute
-tolerance is proportional to it).  Set it near the expected concentration: NO downstream
-spans 1e-14 .. 1e-29 M depending on the pool and the reading.
+  C_feed = (C_inf - C_0) (1 - exp(-x)) + C_0,   x = k_feed L_feed n_feed / q  (eq. cinv; inf at q <= 0)
+``units_reading: thesis`` (MODEL_NOTES "Downstream NO"): eqs. dcvdt/dctdt as printed, every
+quantity read as its SI number: no V on the decay (k_d C), no l on the exchange (h (C - C_x)),
+and x = k_feed L_feed / q.  Option ``scale`` [M]: C's natural size (solver tolerances).
 """
 from __future__ import annotations
 
@@ -68,10 +25,9 @@ import math
 import numpy as np
 
 from hemocircuit.component import Component, Observable, Option, Param, State
-from hemocircuit.kernels.jit import njit
 from hemocircuit.units import M3_PER_ML
 
-from .svzerod._common import branch, per_element
+from .svzerod._common import branch, jit as _jit, kernel_method, per_element
 
 _READINGS = ("consistent", "thesis")
 #: smallest pool volume used as a divisor [m^3] (a collapsed compliance reports V = 0)
@@ -90,123 +46,11 @@ def _common_parameters():
     }
 
 
-class _Pool(Component):
-    """Shared part: state C, wall exchange and decay, the two unit readings."""
-
-    constant_matrix = True
-    options = {
-        "units_reading": Option("consistent", choices=_READINGS,
-                                doc="'consistent' (SI, default) or 'thesis' (its numbers; MODEL_NOTES)"),
-        "scale": Option(1e-12, kind=float, lower=0.0, lower_open=True, upper=1e3, unit="M",
-                        doc="natural size of C [M] (solver tolerances); a number, 0 < scale <= 1e3"),
-    }
-
-    def __init__(self, opts=None):
-        super().__init__(opts)
-        try:
-            self.opts["scale"] = float(self.opts["scale"])  # YAML reads 1e-20 as a string
-        except (TypeError, ValueError):
-            raise ValueError(f"option 'scale' must be a number (M), got {self.opts['scale']!r}") from None
-        if not self.opts["scale"] > 0:
-            raise ValueError("option 'scale' must be > 0")
-
-    def states(self):
-        return (State("C", "M", self.opts["scale"], "tracer concentration in the pool"),)
-
-    def observables(self):
-        return (Observable("C", "M", "tracer concentration in the pool", state_only=True),)
-
-    def _thesis(self):
-        return self.opts["units_reading"] == "thesis"
-
-    def kernel_options(self):
-        """[units_reading 'thesis' (0|1)]; ``scale`` only sets tolerances, the kernel ignores it."""
-        return np.array([int(self._thesis())], dtype=np.int64)
-
-    def check(self, p):
-        if self._thesis() or "h" not in p or "l" not in p:
-            return []
-        if np.any((p["h"] > 0) & (p["l"] <= 0)):
-            return [(0, "wall exchange h > 0 needs the exchanging vessel length l > 0 "
-                        "(conductance h*l; units_reading: consistent)")]
-        return []
-
-
-class TracerPool(_Pool):
-    """Perfused well-mixed pool (venous blood, thesis eq. dcvdt) fed through a flow meter a -> b.
-
-    Flows [mL/s], volume [mL], concentrations [M]; see the module docstring for the equations.
-    """
-
-    type_name = "tracer_pool"
-    terminals = ("a", "b")
-    role = "pressure"
-    parameters = {
-        **_common_parameters(),
-        "C_0": Param("M", default="0 M", lower=0.0, doc="concentration entering the feeding bed (eq. cinv C_in)"),
-        "C_inf": Param("M", default="0 M", lower=0.0, doc="far-downstream limit of the feeding bed (e.g. '= art.Cb_inf')"),
-        "k_feed": Param("m**2/s", default="0 m**2/s", lower=0.0,
-                        doc="loss per unit length in the feeding bed (e.g. '= art.k_NO')"),
-        "L_feed": Param("m", default="0 m", lower=0.0, doc="length of the feeding tubes (e.g. '= art.L')"),
-        "n_feed": Param("dimensionless", default="1", lower=0.0, lower_open=True,
-                        doc="number of feeding tubes in parallel (e.g. '= art.n'; consistent reading only)"),
-    }
-
-    def branches(self):
-        return (("a", "b"),)
-
-    def edges(self):
-        return (("a", "b", "pressure"),)
-
-    def kernel(self):
-        from hemocircuit.kernels import Kernel
-        return Kernel(stamp=tracer_stamp, derivs=tracer_derivs, observe=pool_observe, observables=("C",),
-                      report=tracer_report)
-
-    def initial_states(self, p, u, flows=None, x=None):
-        return _steady(per_element(tracer_balance, self, p, u[..., 2]))
-
-    def observables(self):
-        return super().observables() + (
-            Observable("C_feed", "M", "concentration of the inflow (eq. cinv, C_in,v)"),)
-
-
-class TissuePool(_Pool):
-    """Stagnant well-mixed pool (tissue around the veins, thesis eq. dctdt); no nodes.
-
-    Volume [mL], concentrations [M]; see the module docstring for the equations.
-    """
-
-    type_name = "tissue_pool"
-    terminals = ()
-    parameters = _common_parameters()
-
-    def edges(self):
-        return ()
-
-    def kernel(self):
-        from hemocircuit.kernels import Kernel
-        return Kernel(stamp=tissue_stamp, derivs=tissue_derivs, observe=pool_observe, observables=("C",))
-
-    def initial_states(self, p, u, flows=None, x=None):
-        return np.broadcast_to(_steady(per_element(tissue_balance, self, p)), u.shape[:2] + (1,))
-
-
-def _steady(balance):
-    """The steady concentration a/b (0 where b <= 0) of V dC/dt = a - b C from the kernel's
-    balance [a, b, V] of every element, as the states (B, E, 1)."""
-    a, b = balance[..., 0], balance[..., 1]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        c = np.where(b > 0, a / np.where(b > 0, b, 1.0), 0.0)
-    return np.nan_to_num(c)[..., None]
-
-
 # --- the equations (hemocircuit.kernels contract) -------------------------------------------
 # State [C] (M); iopt = [thesis] (units_reading: 0 consistent, 1 thesis); observables: C
 # (and tracer_pool's C_feed).  p (the ``parameters`` order): V, k_d, h, l, C_x (both) then C_0,
 # C_inf, k_feed, L_feed, n_feed (tracer_pool).  tracer_pool local unknowns [P_a, P_b, q] (q the
 # metered flow a -> b); tissue_pool has none.
-_jit = njit(cache=True, nogil=True, error_model="numpy", _nrt=False)  # numba imported on first use
 _V, _K_D, _H, _L, _C_X, _C_0, _C_INF, _K_FEED, _L_FEED, _N_FEED = range(10)
 
 
@@ -288,3 +132,108 @@ def tissue_derivs(p, x, u, t, iopt, dx):
 @_jit
 def pool_observe(p, x, iopt, out):
     out[0] = x[0]
+
+
+class _Pool(Component):
+    """Shared part: state C, wall exchange and decay, the two unit readings."""
+
+    constant_matrix = True
+    options = {
+        "units_reading": Option("consistent", choices=_READINGS,
+                                doc="'consistent' (SI, default) or 'thesis' (its numbers; MODEL_NOTES)"),
+        "scale": Option(1e-12, kind=float, lower=0.0, lower_open=True, upper=1e3, unit="M",
+                        doc="natural size of C [M] (solver tolerances); a number, 0 < scale <= 1e3"),
+    }
+
+    def __init__(self, opts=None):
+        super().__init__(opts)
+        try:
+            self.opts["scale"] = float(self.opts["scale"])  # YAML reads 1e-20 as a string
+        except (TypeError, ValueError):
+            raise ValueError(f"option 'scale' must be a number (M), got {self.opts['scale']!r}") from None
+        if not self.opts["scale"] > 0:
+            raise ValueError("option 'scale' must be > 0")
+
+    def states(self):
+        return (State("C", "M", self.opts["scale"], "tracer concentration in the pool"),)
+
+    def observables(self):
+        return (Observable("C", "M", "tracer concentration in the pool", state_only=True),)
+
+    def _thesis(self):
+        return self.opts["units_reading"] == "thesis"
+
+    def kernel_options(self):
+        """[units_reading 'thesis' (0|1)]; ``scale`` only sets tolerances, the kernel ignores it."""
+        return np.array([int(self._thesis())], dtype=np.int64)
+
+    def check(self, p):
+        if self._thesis() or "h" not in p or "l" not in p:
+            return []
+        if np.any((p["h"] > 0) & (p["l"] <= 0)):
+            return [(0, "wall exchange h > 0 needs the exchanging vessel length l > 0 "
+                        "(conductance h*l; units_reading: consistent)")]
+        return []
+
+
+class TracerPool(_Pool):
+    """Perfused well-mixed pool (venous blood, thesis eq. dcvdt) fed through a flow meter a -> b.
+
+    Flows [mL/s], volume [mL], concentrations [M]; see the module docstring for the equations.
+    """
+
+    type_name = "tracer_pool"
+    terminals = ("a", "b")
+    role = "pressure"
+    parameters = {
+        **_common_parameters(),
+        "C_0": Param("M", default="0 M", lower=0.0, doc="concentration entering the feeding bed (eq. cinv C_in)"),
+        "C_inf": Param("M", default="0 M", lower=0.0, doc="far-downstream limit of the feeding bed (e.g. '= art.Cb_inf')"),
+        "k_feed": Param("m**2/s", default="0 m**2/s", lower=0.0,
+                        doc="loss per unit length in the feeding bed (e.g. '= art.k_NO')"),
+        "L_feed": Param("m", default="0 m", lower=0.0, doc="length of the feeding tubes (e.g. '= art.L')"),
+        "n_feed": Param("dimensionless", default="1", lower=0.0, lower_open=True,
+                        doc="number of feeding tubes in parallel (e.g. '= art.n'; consistent reading only)"),
+    }
+
+    kernel = kernel_method(tracer_stamp, tracer_derivs, pool_observe, ("C",), report=tracer_report)
+
+    def branches(self):
+        return (("a", "b"),)
+
+    def edges(self):
+        return (("a", "b", "pressure"),)
+
+    def initial_states(self, p, u, flows=None, x=None):
+        return _steady(per_element(tracer_balance, self, p, u[..., 2]))
+
+    def observables(self):
+        return super().observables() + (
+            Observable("C_feed", "M", "concentration of the inflow (eq. cinv, C_in,v)"),)
+
+
+class TissuePool(_Pool):
+    """Stagnant well-mixed pool (tissue around the veins, thesis eq. dctdt); no nodes.
+
+    Volume [mL], concentrations [M]; see the module docstring for the equations.
+    """
+
+    type_name = "tissue_pool"
+    terminals = ()
+    parameters = _common_parameters()
+    kernel = kernel_method(tissue_stamp, tissue_derivs, pool_observe, ("C",))
+
+    def edges(self):
+        return ()
+
+    def initial_states(self, p, u, flows=None, x=None):
+        return np.broadcast_to(_steady(per_element(tissue_balance, self, p)), u.shape[:2] + (1,))
+
+
+def _steady(balance):
+    """The steady concentration a/b (0 where b <= 0) of V dC/dt = a - b C from the kernel's
+    balance [a, b, V] of every element, as the states (B, E, 1)."""
+    a, b = balance[..., 0], balance[..., 1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        c = np.where(b > 0, a / np.where(b > 0, b, 1.0), 0.0)
+    return np.nan_to_num(c)[..., None]

@@ -9,7 +9,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from hemocircuit.component import Component, Observable
+from hemocircuit.kernels import Kernel
 from hemocircuit.kernels.jit import njit
+from hemocircuit.kernels.stateless import no_derivs, no_observables
 
 jit = njit(cache=True, nogil=True, error_model="numpy", _nrt=False)  # numba imported on first use
 
@@ -19,6 +22,51 @@ C_UNIT = "mL/mmHg"
 L_UNIT = "mmHg*s**2/mL"
 S_UNIT = "mmHg*s**2/mL**2"
 E_UNIT = "mmHg/mL"
+
+
+class Block(Component):
+    """A component type whose structure does not depend on its options, declared as class
+    attributes: BRANCHES, STATES, STORAGES, OBSERVABLES and EDGES (None: from ``role``)."""
+
+    BRANCHES = STATES = STORAGES = OBSERVABLES = ()
+    EDGES = None
+
+    def branches(self):
+        return self.BRANCHES
+
+    def states(self):
+        return self.STATES
+
+    def storages(self):
+        return self.STORAGES
+
+    def observables(self):
+        return self.OBSERVABLES
+
+    def edges(self):
+        return super().edges() if self.EDGES is None else self.EDGES
+
+
+def kernel_method(stamp, derivs=no_derivs, observe=no_observables, observables=(), **optional):
+    """A ``Component.kernel`` returning these kernel functions (``optional``: report, derivs_jac)."""
+    k = Kernel(stamp=stamp, derivs=derivs, observe=observe, observables=observables, **optional)
+    return lambda self: k
+
+
+def flow_observables(into="the inlet", out="the outlet"):
+    """The observables Q_in (flow into ``into``) and Q_out (flow out of ``out``) [mL/s]."""
+    return (Observable("Q_in", "mL/s", f"flow into {into}"), Observable("Q_out", "mL/s", f"flow out of {out}"))
+
+
+def short(A_loc, b_loc, G=1e6):
+    """DC guess of an inductor from local node 0 to 1: a conductance G [mL/s/mmHg], no imposed flow
+    (its local unknowns are the two pressures only, with no branch row for P_a = P_b)."""
+    A_loc[..., 0, 0] += G
+    A_loc[..., 0, 1] -= G
+    A_loc[..., 1, 0] -= G
+    A_loc[..., 1, 1] += G
+    b_loc[..., :2] = 0.0
+    return A_loc, b_loc
 
 
 def batch_shape(p, *shapes):

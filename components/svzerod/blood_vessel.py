@@ -25,7 +25,7 @@ import numpy as np
 
 from hemocircuit.component import Component, Observable, Option, Param, State, Storage
 
-from ._common import C_UNIT, L_UNIT, R_UNIT, S_UNIT, branch, imposed_flow, jit, stenosis_drop, stenosis_linearised
+from ._common import branch, C_UNIT, flow_observables, imposed_flow, jit, L_UNIT, R_UNIT, S_UNIT, stenosis_drop, stenosis_linearised
 
 _PARAMS = {
     "R_poiseuille": Param(R_UNIT, lower=0.0, doc="Poiseuille resistance"),
@@ -83,8 +83,7 @@ class Vessel(Component):
 
     def observables(self):
         v = (Observable("V", "mL", "volume of the capacitor", state_only=True),) if self.cap else ()
-        return v + (Observable("Q_in", "mL/s", "flow into the inlet"),
-                    Observable("Q_out", "mL/s", "flow out of the outlet"))
+        return v + flow_observables()
 
     def storages(self):
         """The capacitor is a volume store (closed loops conserve the blood volume); its

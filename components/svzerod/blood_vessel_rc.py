@@ -15,46 +15,7 @@ from __future__ import annotations
 
 from hemocircuit.component import Component, Observable, Param, State
 
-from ._common import C_UNIT, R_UNIT, jit
-
-
-class BloodVesselRC(Component):
-    __doc__ = __doc__
-    type_name = "blood_vessel_rc"
-    svzerod_blocks = ("BloodVesselRC",)
-    terminals = ("in", "out", "ref")
-    parameters = {"Rpd": Param(R_UNIT, lower=0.0, lower_open=True, doc="resistance"),
-                  "Cp": Param(C_UNIT, lower=0.0, lower_open=True, doc="capacitance at the inlet")}
-
-    def branches(self):
-        return (("in", "ref"),)
-
-    def edges(self):
-        # the flow goes from in to out; the inlet pressure is set by the state (a pressure
-        # definition relative to ref that exchanges no flow with it, so no (in, ref) path)
-        return (("in", "out", "conductive"),)
-
-    def states(self):
-        return (State("X", "mL", 1.0, "Cp * P_in (not stored blood)"),)
-
-    def observables(self):
-        return (Observable("Q_in", "mL/s", "flow into the inlet (= out of the outlet)"),
-                Observable("Q_out", "mL/s", "flow out of the outlet"))
-
-    def dc_stamp(self, p, A_loc, b_loc, keep):
-        """Steady state: dX/dt = 0, so q = (P_in - P_out)/Rpd: the branch becomes Rpd."""
-        A_loc[..., 3, :] = 0.0
-        A_loc[..., 3, 0], A_loc[..., 3, 1], A_loc[..., 3, 3] = 1.0, -1.0, -p["Rpd"]
-        b_loc[..., 3] = 0.0
-        return A_loc, b_loc
-
-    def initial_states(self, p, u, flows=None, x=None):
-        return (p["Cp"] * (u[..., 0] - u[..., 2]))[..., None]
-
-    def kernel(self):
-        from hemocircuit.kernels import Kernel
-        from hemocircuit.kernels.stateless import no_observables
-        return Kernel(stamp=bvrc_stamp, derivs=bvrc_derivs, observe=no_observables, observables=(), report=bvrc_report)
+from ._common import Block, C_UNIT, flow_observables, jit, kernel_method, R_UNIT
 
 
 # --- the equations: p = [Rpd, Cp]; state [X]; local unknowns [P_in, P_out, P_ref, q]
@@ -76,3 +37,27 @@ def bvrc_derivs(p, x, u, t, iopt, dx):
 def bvrc_report(p, x, u, t, iopt, out):
     out[0] = u[3]  # Q_in
     out[1] = u[3]  # Q_out
+
+
+class BloodVesselRC(Block):
+    __doc__ = __doc__
+    type_name = "blood_vessel_rc"
+    svzerod_blocks = ("BloodVesselRC",)
+    terminals = ("in", "out", "ref")
+    parameters = {"Rpd": Param(R_UNIT, lower=0.0, lower_open=True, doc="resistance"),
+                  "Cp": Param(C_UNIT, lower=0.0, lower_open=True, doc="capacitance at the inlet")}
+    kernel = kernel_method(bvrc_stamp, bvrc_derivs, report=bvrc_report)
+    BRANCHES = (("in", "ref"),)
+    EDGES = (("in", "out", "conductive"),)
+    STATES = (State("X", "mL", 1.0, "Cp * P_in (not stored blood)"),)
+    OBSERVABLES = flow_observables("the inlet (= out of the outlet)")
+
+    def dc_stamp(self, p, A_loc, b_loc, keep):
+        """Steady state: dX/dt = 0, so q = (P_in - P_out)/Rpd: the branch becomes Rpd."""
+        A_loc[..., 3, :] = 0.0
+        A_loc[..., 3, 0], A_loc[..., 3, 1], A_loc[..., 3, 3] = 1.0, -1.0, -p["Rpd"]
+        b_loc[..., 3] = 0.0
+        return A_loc, b_loc
+
+    def initial_states(self, p, u, flows=None, x=None):
+        return (p["Cp"] * (u[..., 0] - u[..., 2]))[..., None]

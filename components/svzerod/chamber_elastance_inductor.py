@@ -26,7 +26,7 @@ import numpy as np
 
 from hemocircuit.component import Component, Observable, Option, Param, State, Storage
 
-from ._common import E_UNIT, L_UNIT, branch, imposed_flow, jit, open_branches, per_element
+from ._common import Block, branch, E_UNIT, flow_observables, imposed_flow, jit, kernel_method, L_UNIT, open_branches, per_element
 from .activation import KINDS, act_parameters, activation, activation_breakpoints, check_activation
 
 OWN_PARAMS = {"Emax": Param(E_UNIT, lower=0.0, doc="maximum elastance"),
@@ -34,70 +34,6 @@ OWN_PARAMS = {"Emax": Param(E_UNIT, lower=0.0, doc="maximum elastance"),
         "Vrd": Param("mL", doc="rest volume at diastole"),
         "Vrs": Param("mL", doc="rest volume at systole"),
         "Impedance": Param(L_UNIT, lower=0.0, lower_open=True, doc="outflow inductance L")}
-
-
-class ChamberElastanceInductor(Component):
-    __doc__ = __doc__
-    type_name = "chamber_elastance_inductor"
-    svzerod_blocks = ("ChamberElastanceInductor",)
-    terminals = ("in", "out", "ref")
-    parameters = {**OWN_PARAMS, **act_parameters()}
-    options = {"activation": Option("half_cosine", choices=KINDS, doc="activation function A(t)")}
-    time_dependent = True
-
-    def branches(self):
-        return (("in", "ref"),)
-
-    def edges(self):
-        return (("in", "ref", "pressure"), ("in", "out", "flow"))
-
-    def states(self):
-        return (State("Vc", "mL", 10.0, "chamber volume"), State("Q_out", "mL/s", 0.1, "outflow (inductor)"))
-
-    def storages(self):
-        return (Storage("in", "ref", "Vc", state="Vc"),)
-
-    def observables(self):
-        return (Observable("Vc", "mL", "chamber volume", state_only=True),
-                Observable("Q_in", "mL/s", "flow into the chamber"),
-                Observable("Q_out", "mL/s", "flow out of the chamber"))
-
-    def check(self, p):
-        return check_activation(self.opts["activation"], p)
-
-    def breakpoints(self, p, t0, t1):
-        """The activation's kinks (activation.kink_phases): steps end there."""
-        return activation_breakpoints(self.opts["activation"], p, t0, t1)
-
-    def dc_stamp(self, p, A_loc, b_loc, keep):
-        """Steady state: the store open (q = 0) unless it anchors a conservation law, the
-        inductor a short (a 1e6 mL/s/mmHg conductance, as the inductor component)."""
-        open_branches(A_loc, b_loc, (3,), keep)
-        g = 1e6
-        A_loc[..., 0, 0] += g
-        A_loc[..., 0, 1] -= g
-        A_loc[..., 1, 0] -= g
-        A_loc[..., 1, 1] += g
-        b_loc[..., 0] = 0.0
-        b_loc[..., 1] = 0.0
-        return A_loc, b_loc
-
-    def initial_states(self, p, u, flows=None, x=None):
-        law = per_element(cei_law, self, p, 0.0)  # [E, Vrest] at t = 0
-        Vc = (u[..., 0] - u[..., 2]) / law[..., 0] + law[..., 1]
-        out = np.zeros(Vc.shape + (2,))
-        out[..., 0] = Vc
-        if flows is not None:
-            out[..., 1] = -flows[..., 1]
-        return out
-
-    def kernel_options(self):
-        return np.array([KINDS.index(self.opts["activation"])], dtype=np.int64)
-
-    def kernel(self):
-        from hemocircuit.kernels import Kernel
-        return Kernel(stamp=cei_stamp, derivs=cei_derivs, observe=cei_observe, observables=("Vc",),
-                      report=cei_report)
 
 
 # --- the equations: p = [Emax, Emin, Vrd, Vrs, Impedance, period, 13 activation parameters];
@@ -138,3 +74,52 @@ def cei_report(p, x, u, t, iopt, out):
     out[0] = x[0]  # Vc
     out[1] = u[3] + x[1]  # Q_in
     out[2] = x[1]  # Q_out
+
+
+class ChamberElastanceInductor(Block):
+    __doc__ = __doc__
+    type_name = "chamber_elastance_inductor"
+    svzerod_blocks = ("ChamberElastanceInductor",)
+    terminals = ("in", "out", "ref")
+    parameters = {**OWN_PARAMS, **act_parameters()}
+    options = {"activation": Option("half_cosine", choices=KINDS, doc="activation function A(t)")}
+    time_dependent = True
+    kernel = kernel_method(cei_stamp, cei_derivs, cei_observe, ("Vc",), report=cei_report)
+    BRANCHES = (("in", "ref"),)
+    EDGES = (("in", "ref", "pressure"), ("in", "out", "flow"))
+    STATES = (State("Vc", "mL", 10.0, "chamber volume"), State("Q_out", "mL/s", 0.1, "outflow (inductor)"))
+    STORAGES = (Storage("in", "ref", "Vc", state="Vc"),)
+    OBSERVABLES = (Observable("Vc", "mL", "chamber volume", state_only=True),
+                   *flow_observables("the chamber", "the chamber"))
+
+    def check(self, p):
+        return check_activation(self.opts["activation"], p)
+
+    def breakpoints(self, p, t0, t1):
+        """The activation's kinks (activation.kink_phases): steps end there."""
+        return activation_breakpoints(self.opts["activation"], p, t0, t1)
+
+    def dc_stamp(self, p, A_loc, b_loc, keep):
+        """Steady state: the store open (q = 0) unless it anchors a conservation law, the
+        inductor a short (a 1e6 mL/s/mmHg conductance, as the inductor component)."""
+        open_branches(A_loc, b_loc, (3,), keep)
+        g = 1e6
+        A_loc[..., 0, 0] += g
+        A_loc[..., 0, 1] -= g
+        A_loc[..., 1, 0] -= g
+        A_loc[..., 1, 1] += g
+        b_loc[..., 0] = 0.0
+        b_loc[..., 1] = 0.0
+        return A_loc, b_loc
+
+    def initial_states(self, p, u, flows=None, x=None):
+        law = per_element(cei_law, self, p, 0.0)  # [E, Vrest] at t = 0
+        Vc = (u[..., 0] - u[..., 2]) / law[..., 0] + law[..., 1]
+        out = np.zeros(Vc.shape + (2,))
+        out[..., 0] = Vc
+        if flows is not None:
+            out[..., 1] = -flows[..., 1]
+        return out
+
+    def kernel_options(self):
+        return np.array([KINDS.index(self.opts["activation"])], dtype=np.int64)

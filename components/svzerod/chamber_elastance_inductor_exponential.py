@@ -20,36 +20,10 @@ import numpy as np
 
 from hemocircuit.component import Param
 
-from ._common import E_UNIT, jit, per_element
+from ._common import E_UNIT, jit, kernel_method, per_element
 from .activation import act_parameters, activation
 from .chamber_elastance_inductor import (OWN_PARAMS, ChamberElastanceInductor, cei_derivs, cei_observe, cei_report,
                                          chamber_stamp)
-
-
-class ChamberElastanceInductorExponential(ChamberElastanceInductor):
-    __doc__ = __doc__
-    type_name = "chamber_elastance_inductor_exponential"
-    svzerod_blocks = ("ChamberElastanceInductorExponential",)
-    # Impedance and period at the slots chamber_elastance_inductor's kernels read (4, 5)
-    parameters = {"Emax": Param(E_UNIT, lower=0.0, doc="active elastance"),
-                  "Kxp": Param("mmHg", doc="passive pressure scale"),
-                  "Kxv": Param("1/mL", doc="passive volume exponent"),
-                  "Vaso": Param("mL", doc="rest volume"),
-                  "Impedance": OWN_PARAMS["Impedance"], **act_parameters()}
-
-    def initial_states(self, p, u, flows=None, x=None):
-        """Vc with P(Vc, 0) = the local pressure (ceie_volume)."""
-        V = per_element(ceie_volume, self, p, u[..., 0] - u[..., 2])
-        out = np.zeros(V.shape + (2,))
-        out[..., 0] = V
-        if flows is not None:
-            out[..., 1] = -flows[..., 1]
-        return out
-
-    def kernel(self):
-        from hemocircuit.kernels import Kernel
-        return Kernel(stamp=ceie_stamp, derivs=cei_derivs, observe=cei_observe, observables=("Vc",),
-                      report=cei_report)
 
 
 # --- the equations: p = [Emax, Kxp, Kxv, Vaso, Impedance, period, 13 activation parameters];
@@ -85,3 +59,25 @@ def ceie_volume(p, target, iopt):
         step = (atrium_pressure(a, p[0], p[1], p[2], p[3], V) - target) / (slope if slope > 0.0 else 1.0)
         V = V - min(max(step, -50.0), 50.0)
     return V
+
+
+class ChamberElastanceInductorExponential(ChamberElastanceInductor):
+    __doc__ = __doc__
+    type_name = "chamber_elastance_inductor_exponential"
+    svzerod_blocks = ("ChamberElastanceInductorExponential",)
+    # Impedance and period at the slots chamber_elastance_inductor's kernels read (4, 5)
+    parameters = {"Emax": Param(E_UNIT, lower=0.0, doc="active elastance"),
+                  "Kxp": Param("mmHg", doc="passive pressure scale"),
+                  "Kxv": Param("1/mL", doc="passive volume exponent"),
+                  "Vaso": Param("mL", doc="rest volume"),
+                  "Impedance": OWN_PARAMS["Impedance"], **act_parameters()}
+    kernel = kernel_method(ceie_stamp, cei_derivs, cei_observe, ("Vc",), report=cei_report)
+
+    def initial_states(self, p, u, flows=None, x=None):
+        """Vc with P(Vc, 0) = the local pressure (ceie_volume)."""
+        V = per_element(ceie_volume, self, p, u[..., 0] - u[..., 2])
+        out = np.zeros(V.shape + (2,))
+        out[..., 0] = V
+        if flows is not None:
+            out[..., 1] = -flows[..., 1]
+        return out

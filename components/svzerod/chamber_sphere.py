@@ -27,7 +27,7 @@ import numpy as np
 
 from hemocircuit.component import Component, Observable, Param, State, Storage
 
-from ._common import branch, imposed_flow, jit
+from ._common import Block, branch, flow_observables, imposed_flow, jit, kernel_method
 
 PARAMS = {"rho": ("mmHg*s**2/cm**2", True, "wall density"), "thick0": ("cm", True, "wall thickness d0"),
       "radius0": ("cm", True, "reference radius r0"), "W1": ("mmHg", False, "material constant W1"),
@@ -96,34 +96,20 @@ def sphere_report(p, x, u, t, iopt, out):
     out[3] = u[3] + 0.0 * qv  # Q_out
 
 
-class ChamberSphere(Component):
+class ChamberSphere(Block):
     __doc__ = __doc__
     type_name = "chamber_sphere"
     svzerod_blocks = ("ChamberSphere",)
     terminals = ("in", "out", "ref")
     parameters = {k: Param(u, lower=0.0 if pos else None, lower_open=pos, doc=d) for k, (u, pos, d) in PARAMS.items()}
     time_dependent = True
+    kernel = kernel_method(sphere_stamp, sphere_derivs, sphere_observe, ("V", "S"), report=sphere_report)
+    BRANCHES = (("in", "out"),)
+    EDGES = (("in", "out", "pressure"), ("in", "ref", "flow"))
+    STATES = (State("r", "cm", 0.1, "radius change from radius0"), State("v", "cm/s", 1.0, "wall velocity dr/dt"),
+              State("tau", "mmHg", 100.0, "active stress"), State("V", "mL", 10.0, "volume (from its initial value)"))
+    STORAGES = (Storage("in", "ref", "V", state="V"),)
+    OBSERVABLES = (Observable("V", "mL", "volume (from its initial value)", state_only=True),
+                   Observable("S", "mmHg", "spherical wall stress", state_only=True),
+                   *flow_observables("the chamber", "the chamber"))
 
-    def branches(self):
-        return (("in", "out"),)
-
-    def edges(self):
-        return (("in", "out", "pressure"), ("in", "ref", "flow"))
-
-    def states(self):
-        return (State("r", "cm", 0.1, "radius change from radius0"), State("v", "cm/s", 1.0, "wall velocity dr/dt"),
-                State("tau", "mmHg", 100.0, "active stress"), State("V", "mL", 10.0, "volume (from its initial value)"))
-
-    def storages(self):
-        return (Storage("in", "ref", "V", state="V"),)
-
-    def observables(self):
-        return (Observable("V", "mL", "volume (from its initial value)", state_only=True),
-                Observable("S", "mmHg", "spherical wall stress", state_only=True),
-                Observable("Q_in", "mL/s", "flow into the chamber"),
-                Observable("Q_out", "mL/s", "flow out of the chamber"))
-
-    def kernel(self):
-        from hemocircuit.kernels import Kernel
-        return Kernel(stamp=sphere_stamp, derivs=sphere_derivs, observe=sphere_observe, observables=("V", "S"),
-                      report=sphere_report)

@@ -29,72 +29,9 @@ import numpy as np
 
 from hemocircuit.component import Component, Observable, Param, State, Storage
 
-from ._common import batch_shape, branch, C_UNIT, conductance, E_UNIT, jit, open_branches, per_element, R_UNIT
+from ._common import batch_shape, Block, branch, C_UNIT, conductance, E_UNIT, flow_observables, jit, kernel_method, open_branches, per_element, R_UNIT
 from .activation import fourier_raw
 from .closed_loop_heart_pulmonary import ventricle_pressure
-
-
-class ClosedLoopCoronary(Component):
-    __doc__ = __doc__
-    type_name = "closed_loop_coronary"
-    svzerod_blocks = ("ClosedLoopCoronaryLeft", "ClosedLoopCoronaryRight")
-    terminals = ("in", "out", "ref")
-    parameters = {"Ra": Param(R_UNIT, lower=0.0, doc="small-artery resistance"),
-                  "Ram": Param(R_UNIT, lower=0.0, lower_open=True, doc="microvascular resistance"),
-                  "Rv": Param(R_UNIT, lower=0.0, lower_open=True, doc="venous resistance"),
-                  "Ca": Param(C_UNIT, lower=0.0, lower_open=True, doc="small-artery capacitance"),
-                  "Cim": Param(C_UNIT, lower=0.0, lower_open=True, doc="intramyocardial capacitance"),
-                  "im": Param("dimensionless", doc="P_im / P_vent (the heart's iml or imr)"),
-                  "E_s": Param(E_UNIT, doc="ventricular elastance scale (the heart's Elv_s or Erv_s)"),
-                  "V_u": Param("mL", doc="ventricular unstressed volume (the heart's Vlv_u or Vrv_u)"),
-                  "V_vent": Param("mL", doc="ventricular volume (the heart's V_LV or V_RV)"),
-                  "period": Param("s", lower=0.0, lower_open=True, doc="cardiac period (the heart's)")}
-    time_dependent = True
-
-    def internal_nodes(self):
-        return ("a", "m")
-
-    def branches(self):
-        return (("in", "a"), ("a", "ref"), ("m", "ref"))
-
-    def edges(self):
-        return (("in", "a", "conductive"), ("a", "ref", "pressure"), ("a", "m", "conductive"),
-                ("m", "ref", "pressure"), ("m", "out", "conductive"))
-
-    def states(self):
-        return (State("V_a", "mL", 1.0, "volume of Ca (Ca * P_a)"),
-                State("V_im", "mL", 1.0, "intramyocardial volume Cim (P_m - P_im)"))
-
-    def storages(self):
-        return (Storage("a", "ref", "V_a", state="V_a"), Storage("m", "ref", "V_im", state="V_im"))
-
-    def volume_observables(self):
-        """Two stores: both reported as ID.V_a, ID.V_im (one V(ID) column cannot hold both)."""
-        return ()
-
-    def observables(self):
-        return (Observable("V_a", "mL", "volume of Ca", state_only=True),
-                Observable("V_im", "mL", "intramyocardial volume", state_only=True),
-                Observable("P_im", "mmHg", "intramyocardial pressure im * P_vent"),
-                Observable("Q_in", "mL/s", "flow into the inlet"),
-                Observable("Q_out", "mL/s", "flow out of the outlet"))
-
-    def dc_stamp(self, p, A_loc, b_loc, keep):
-        """Steady state: both capacitors open (no flow) unless the element anchors a
-        conservation law, where Ca keeps its stamp (it pins the group's pressure)."""
-        open_branches(A_loc, b_loc, (6,), keep)
-        return open_branches(A_loc, b_loc, (7,))
-
-    def initial_states(self, p, u, flows=None, x=None):
-        out = np.zeros(batch_shape(p, u.shape[:2]) + (2,))
-        out[..., 0] = p["Ca"] * (u[..., 3] - u[..., 2])
-        out[..., 1] = p["Cim"] * (u[..., 4] - u[..., 2] - per_element(clcor_pim, self, p, 0.0))
-        return out
-
-    def kernel(self):
-        from hemocircuit.kernels import Kernel
-        return Kernel(stamp=clcor_stamp, derivs=clcor_derivs, observe=clcor_observe, observables=("V_a", "V_im"),
-                      report=clcor_report)
 
 
 # --- the equations: p = [Ra, Ram, Rv, Ca, Cim, im, E_s, V_u, V_vent, period]; states [V_a, V_im];
@@ -133,3 +70,51 @@ def clcor_report(p, x, u, t, iopt, out):
     out[2] = clcor_pim(p, t, iopt) + 0.0 * u[0]  # P_im
     out[3] = u[5]  # Q_in
     out[4] = (u[4] - u[1]) / p[2]  # Q_out
+
+
+class ClosedLoopCoronary(Block):
+    __doc__ = __doc__
+    type_name = "closed_loop_coronary"
+    svzerod_blocks = ("ClosedLoopCoronaryLeft", "ClosedLoopCoronaryRight")
+    terminals = ("in", "out", "ref")
+    parameters = {"Ra": Param(R_UNIT, lower=0.0, doc="small-artery resistance"),
+                  "Ram": Param(R_UNIT, lower=0.0, lower_open=True, doc="microvascular resistance"),
+                  "Rv": Param(R_UNIT, lower=0.0, lower_open=True, doc="venous resistance"),
+                  "Ca": Param(C_UNIT, lower=0.0, lower_open=True, doc="small-artery capacitance"),
+                  "Cim": Param(C_UNIT, lower=0.0, lower_open=True, doc="intramyocardial capacitance"),
+                  "im": Param("dimensionless", doc="P_im / P_vent (the heart's iml or imr)"),
+                  "E_s": Param(E_UNIT, doc="ventricular elastance scale (the heart's Elv_s or Erv_s)"),
+                  "V_u": Param("mL", doc="ventricular unstressed volume (the heart's Vlv_u or Vrv_u)"),
+                  "V_vent": Param("mL", doc="ventricular volume (the heart's V_LV or V_RV)"),
+                  "period": Param("s", lower=0.0, lower_open=True, doc="cardiac period (the heart's)")}
+    time_dependent = True
+    kernel = kernel_method(clcor_stamp, clcor_derivs, clcor_observe, ("V_a", "V_im"), report=clcor_report)
+    BRANCHES = (("in", "a"), ("a", "ref"), ("m", "ref"))
+    EDGES = (("in", "a", "conductive"), ("a", "ref", "pressure"), ("a", "m", "conductive"),
+             ("m", "ref", "pressure"), ("m", "out", "conductive"))
+    STATES = (State("V_a", "mL", 1.0, "volume of Ca (Ca * P_a)"),
+              State("V_im", "mL", 1.0, "intramyocardial volume Cim (P_m - P_im)"))
+    STORAGES = (Storage("a", "ref", "V_a", state="V_a"), Storage("m", "ref", "V_im", state="V_im"))
+    OBSERVABLES = (Observable("V_a", "mL", "volume of Ca", state_only=True),
+                   Observable("V_im", "mL", "intramyocardial volume", state_only=True),
+                   Observable("P_im", "mmHg", "intramyocardial pressure im * P_vent"),
+                   *flow_observables())
+
+    def internal_nodes(self):
+        return ("a", "m")
+
+    def volume_observables(self):
+        """Two stores: both reported as ID.V_a, ID.V_im (one V(ID) column cannot hold both)."""
+        return ()
+
+    def dc_stamp(self, p, A_loc, b_loc, keep):
+        """Steady state: both capacitors open (no flow) unless the element anchors a
+        conservation law, where Ca keeps its stamp (it pins the group's pressure)."""
+        open_branches(A_loc, b_loc, (6,), keep)
+        return open_branches(A_loc, b_loc, (7,))
+
+    def initial_states(self, p, u, flows=None, x=None):
+        out = np.zeros(batch_shape(p, u.shape[:2]) + (2,))
+        out[..., 0] = p["Ca"] * (u[..., 3] - u[..., 2])
+        out[..., 1] = p["Cim"] * (u[..., 4] - u[..., 2] - per_element(clcor_pim, self, p, 0.0))
+        return out

@@ -43,7 +43,7 @@ import numpy as np
 from hemocircuit.component import Component, Observable, Param, State, Storage
 from hemocircuit.derivatives import FD_REL
 
-from ._common import batch_shape, branch, C_UNIT, E_UNIT, jit, L_UNIT, R_UNIT
+from ._common import batch_shape, Block, branch, C_UNIT, E_UNIT, flow_observables, jit, kernel_method, L_UNIT, R_UNIT
 from .activation import activation_breakpoints, fourier_raw, wrapping_cosine
 from .chamber_elastance_inductor_exponential import atrium_pressure, atrium_slope
 
@@ -210,7 +210,7 @@ def heart_report(p, x, u, t, iopt, out):
     out[9] = -u[4]  # Q_out
 
 
-class ClosedLoopHeartAndPulmonary(Component):
+class ClosedLoopHeartAndPulmonary(Block):
     __doc__ = __doc__
     type_name = "closed_loop_heart_pulmonary"
     svzerod_blocks = ("ClosedLoopHeartAndPulmonary",)
@@ -218,19 +218,24 @@ class ClosedLoopHeartAndPulmonary(Component):
     parameters = {k: Param(u, lower=0.0 if (k in _POSITIVE or k in _NONNEG) else None,
                            lower_open=k in _POSITIVE, doc=d) for k, (u, d) in PARAMS.items()}
     time_dependent = True
-
-    def branches(self):
-        return (("in", "ref"), ("out", "ref"))
-
-    def edges(self):
-        return (("in", "ref", "pressure"), ("out", "ref", "pressure"))
-
-    def states(self):
-        return tuple(State(s, "mL" if s[0] == "V" else "mL/s", Q_SCALE, d) for s, d in zip(_STATES, (
-            "right atrial volume", "right atrial outflow (tricuspid)", "right ventricular volume",
-            "right ventricular outflow (pulmonary valve)", "pulmonary capacitor charge Cp P_pul",
-            "left atrial volume", "left atrial outflow (mitral)", "left ventricular volume",
-            "left ventricular outflow (aortic valve)", "aortic capacitor volume Cpa P_out")))
+    kernel = kernel_method(heart_stamp, heart_derivs, heart_observe, ("V_heart", "V_ao", "V_RV", "V_LV"), derivs_jac=heart_derivs_jac, report=heart_report)
+    BRANCHES = (("in", "ref"), ("out", "ref"))
+    EDGES = (("in", "ref", "pressure"), ("out", "ref", "pressure"))
+    STATES = tuple(State(s, "mL" if s[0] == "V" else "mL/s", Q_SCALE, d) for s, d in zip(_STATES, (
+          "right atrial volume", "right atrial outflow (tricuspid)", "right ventricular volume",
+          "right ventricular outflow (pulmonary valve)", "pulmonary capacitor charge Cp P_pul",
+          "left atrial volume", "left atrial outflow (mitral)", "left ventricular volume",
+          "left ventricular outflow (aortic valve)", "aortic capacitor volume Cpa P_out")))
+    STORAGES = (Storage("in", "ref", "V_heart"), Storage("out", "ref", "V_ao", state="V_ao"))
+    OBSERVABLES = (Observable("V_heart", "mL", "volume of the four chambers", state_only=True),
+                   Observable("V_ao", "mL", "aortic capacitor volume", state_only=True),
+                   Observable("V_RV", "mL", "right ventricular volume (read by closed_loop_coronary)", state_only=True),
+                   Observable("V_LV", "mL", "left ventricular volume (read by closed_loop_coronary)", state_only=True),
+                   Observable("P_RV", "mmHg", "right ventricular pressure"),
+                   Observable("P_pul", "mmHg", "pulmonary pressure"),
+                   Observable("P_LA", "mmHg", "left atrial pressure"),
+                   Observable("P_LV", "mmHg", "left ventricular pressure"),
+                   *flow_observables("the right atrium", "the aortic capacitor"))
 
     def breakpoints(self, p, t0, t1):
         """The atrial activation's kinks (wrapping_cosine; the ventricles' Fourier series is
@@ -242,25 +247,10 @@ class ClosedLoopHeartAndPulmonary(Component):
         the integration stops there and holds it on 0 while the valve stays closed."""
         return tuple((q, 0.0, None) for q in ("Q_RA", "Q_RV", "Q_LA", "Q_LV"))
 
-    def storages(self):
-        return (Storage("in", "ref", "V_heart"), Storage("out", "ref", "V_ao", state="V_ao"))
-
     def volume_observables(self):
         """Two stores: the chambers' volume is V(CLH), the aortic capacitor's CLH.V_ao (one
         V(ID) column cannot hold both)."""
         return ("V_heart",)
-
-    def observables(self):
-        return (Observable("V_heart", "mL", "volume of the four chambers", state_only=True),
-                Observable("V_ao", "mL", "aortic capacitor volume", state_only=True),
-                Observable("V_RV", "mL", "right ventricular volume (read by closed_loop_coronary)", state_only=True),
-                Observable("V_LV", "mL", "left ventricular volume (read by closed_loop_coronary)", state_only=True),
-                Observable("P_RV", "mmHg", "right ventricular pressure"),
-                Observable("P_pul", "mmHg", "pulmonary pressure"),
-                Observable("P_LA", "mmHg", "left atrial pressure"),
-                Observable("P_LV", "mmHg", "left ventricular pressure"),
-                Observable("Q_in", "mL/s", "flow into the right atrium"),
-                Observable("Q_out", "mL/s", "flow out of the aortic capacitor"))
 
     def dc_stamp(self, p, A_loc, b_loc, keep):
         """Steady state of the heart is not a DC state (it is time-varying); the DC guess keeps
@@ -274,8 +264,3 @@ class ClosedLoopHeartAndPulmonary(Component):
         out[..., 9] = p["Cpa"] * (u[..., 1] - u[..., 2])
         return out
 
-    def kernel(self):
-        from hemocircuit.kernels import Kernel
-        return Kernel(stamp=heart_stamp, derivs=heart_derivs, observe=heart_observe,
-                      observables=("V_heart", "V_ao", "V_RV", "V_LV"), derivs_jac=heart_derivs_jac,
-                      report=heart_report)

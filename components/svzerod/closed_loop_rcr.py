@@ -13,54 +13,7 @@ from __future__ import annotations
 
 from hemocircuit.component import Component, Observable, Param, State, Storage
 
-from ._common import branch, C_UNIT, conductance, jit, open_branches, R_UNIT
-
-
-class ClosedLoopRCR(Component):
-    __doc__ = __doc__
-    type_name = "closed_loop_rcr"
-    svzerod_blocks = ("ClosedLoopRCR",)
-    svzerod_steady_zeroed = (("C",), ("V",))  # their to_steady
-    terminals = ("in", "out", "ref")
-    parameters = {"Rp": Param(R_UNIT, lower=0.0, doc="proximal resistance"),
-                  "C": Param(C_UNIT, lower=0.0, lower_open=True, doc="capacitance"),
-                  "Rd": Param(R_UNIT, lower=0.0, lower_open=True, doc="distal resistance")}
-    #: the distal resistance may vary in time (a waveform: spontaneous fluctuations of the
-    #: peripheral resistance, a thigh-cuff release; docs/body.md)
-    waveform_params = ("Rd",)
-
-    def internal_nodes(self):
-        return ("c",)
-
-    def branches(self):
-        return (("in", "c"), ("c", "ref"))
-
-    def edges(self):
-        return (("in", "c", "conductive"), ("c", "out", "conductive"), ("c", "ref", "pressure"))
-
-    def states(self):
-        return (State("V", "mL", 1.0, "volume of C (C * P_c)"),)
-
-    def storages(self):
-        return (Storage("c", "ref", "V", state="V"),)
-
-    def observables(self):
-        return (Observable("V", "mL", "volume of C", state_only=True),
-                Observable("P_c", "mmHg", "pressure of the capacitor", state_only=True),
-                Observable("Q_in", "mL/s", "flow into the inlet"),
-                Observable("Q_out", "mL/s", "flow out of the outlet"))
-
-    def dc_stamp(self, p, A_loc, b_loc, keep):
-        """Steady state: C open (q_c = 0) unless it anchors a conservation law."""
-        return open_branches(A_loc, b_loc, (5,), keep)
-
-    def initial_states(self, p, u, flows=None, x=None):
-        return (p["C"] * (u[..., 3] - u[..., 2]))[..., None]
-
-    def kernel(self):
-        from hemocircuit.kernels import Kernel
-        return Kernel(stamp=clrcr_stamp, derivs=clrcr_derivs, observe=clrcr_observe, observables=("V", "P_c"),
-                      report=clrcr_report)
+from ._common import Block, branch, C_UNIT, conductance, flow_observables, jit, kernel_method, open_branches, R_UNIT
 
 
 # --- the equations: p = [Rp, C, Rd]; state [V]; local unknowns [P_in, P_out, P_ref, P_c, q_p, q_c]
@@ -88,3 +41,35 @@ def clrcr_report(p, x, u, t, iopt, out):
     clrcr_observe(p, x, iopt, out)  # V, P_c
     out[2] = u[4]  # Q_in
     out[3] = (u[3] - u[1]) / p[2]  # Q_out
+
+
+class ClosedLoopRCR(Block):
+    __doc__ = __doc__
+    type_name = "closed_loop_rcr"
+    svzerod_blocks = ("ClosedLoopRCR",)
+    svzerod_steady_zeroed = (("C",), ("V",))  # their to_steady
+    terminals = ("in", "out", "ref")
+    parameters = {"Rp": Param(R_UNIT, lower=0.0, doc="proximal resistance"),
+                  "C": Param(C_UNIT, lower=0.0, lower_open=True, doc="capacitance"),
+                  "Rd": Param(R_UNIT, lower=0.0, lower_open=True, doc="distal resistance")}
+    #: the distal resistance may vary in time (a waveform: spontaneous fluctuations of the
+    #: peripheral resistance, a thigh-cuff release; docs/body.md)
+    waveform_params = ("Rd",)
+    kernel = kernel_method(clrcr_stamp, clrcr_derivs, clrcr_observe, ("V", "P_c"), report=clrcr_report)
+    BRANCHES = (("in", "c"), ("c", "ref"))
+    EDGES = (("in", "c", "conductive"), ("c", "out", "conductive"), ("c", "ref", "pressure"))
+    STATES = (State("V", "mL", 1.0, "volume of C (C * P_c)"),)
+    STORAGES = (Storage("c", "ref", "V", state="V"),)
+    OBSERVABLES = (Observable("V", "mL", "volume of C", state_only=True),
+                   Observable("P_c", "mmHg", "pressure of the capacitor", state_only=True),
+                   *flow_observables())
+
+    def internal_nodes(self):
+        return ("c",)
+
+    def dc_stamp(self, p, A_loc, b_loc, keep):
+        """Steady state: C open (q_c = 0) unless it anchors a conservation law."""
+        return open_branches(A_loc, b_loc, (5,), keep)
+
+    def initial_states(self, p, u, flows=None, x=None):
+        return (p["C"] * (u[..., 3] - u[..., 2]))[..., None]

@@ -17,53 +17,7 @@ import numpy as np
 
 from hemocircuit.component import Component, Observable, Param, State
 
-from ._common import branch, C_UNIT, jit, R_UNIT
-
-
-class CoronaryBC(Component):
-    __doc__ = __doc__
-    type_name = "coronary_bc"
-    svzerod_blocks = ("CORONARY",)
-    svzerod_steady_zeroed = (("Ca", "Cc"), ("V_a", "V_im"))  # their to_steady
-    terminals = ("node", "ref")
-    parameters = {"Ra1": Param(R_UNIT, lower=0.0, doc="arterial resistance"),
-                  "Ra2": Param(R_UNIT, lower=0.0, lower_open=True, doc="micro-arterial resistance"),
-                  "Rv1": Param(R_UNIT, lower=0.0, lower_open=True, doc="venous resistance"),
-                  "Ca": Param(C_UNIT, lower=0.0, lower_open=True, doc="arterial capacitance"),
-                  "Cc": Param(C_UNIT, lower=0.0, lower_open=True, doc="intramyocardial capacitance"),
-                  "Pim": Param("mmHg", default="0 mmHg", doc="intramyocardial pressure (a waveform)"),
-                  "P_v": Param("mmHg", default="0 mmHg", doc="venous pressure")}
-    waveform_params = ("Pim",)
-    role = "pressure"
-
-    def branches(self):
-        return (("node", "ref"),)
-
-    def states(self):
-        return (State("V_a", "mL", 1.0, "volume of Ca"), State("V_im", "mL", 1.0, "volume of Cc"))
-
-    def observables(self):
-        return (Observable("Q_in", "mL/s", "flow into the block"),)
-
-    def dc_stamp(self, p, A_loc, b_loc, keep):
-        """Steady state: capacitors open, Q_in = (P - P_v)/(Ra1 + Ra2 + Rv1)."""
-        A_loc[..., 2, 2] = -(p["Ra1"] + p["Ra2"] + p["Rv1"])
-        b_loc[..., 2] = p["P_v"]
-        return A_loc, b_loc
-
-    def initial_states(self, p, u, flows=None, x=None):
-        q = u[..., 2]
-        Pa = u[..., 0] - u[..., 1] - p["Ra1"] * q
-        out = np.empty(u.shape[:2] + (2,))
-        out[..., 0] = p["Ca"] * Pa
-        out[..., 1] = p["Cc"] * (Pa - p["Ra2"] * q - p["Pim"])
-        return out
-
-    def kernel(self):
-        from hemocircuit.kernels import Kernel
-        from hemocircuit.kernels.stateless import no_observables
-        return Kernel(stamp=coronary_stamp, derivs=coronary_derivs, observe=no_observables, observables=(),
-                      report=coronary_report)
+from ._common import Block, branch, C_UNIT, jit, kernel_method, R_UNIT
 
 
 # --- the equations: p = [Ra1, Ra2, Rv1, Ca, Cc, Pim, P_v] (Pim with its waveform added);
@@ -92,3 +46,38 @@ def coronary_derivs(p, x, u, t, iopt, dx):
 @jit
 def coronary_report(p, x, u, t, iopt, out):
     out[0] = u[2]  # Q_in
+
+
+class CoronaryBC(Block):
+    __doc__ = __doc__
+    type_name = "coronary_bc"
+    svzerod_blocks = ("CORONARY",)
+    svzerod_steady_zeroed = (("Ca", "Cc"), ("V_a", "V_im"))  # their to_steady
+    terminals = ("node", "ref")
+    parameters = {"Ra1": Param(R_UNIT, lower=0.0, doc="arterial resistance"),
+                  "Ra2": Param(R_UNIT, lower=0.0, lower_open=True, doc="micro-arterial resistance"),
+                  "Rv1": Param(R_UNIT, lower=0.0, lower_open=True, doc="venous resistance"),
+                  "Ca": Param(C_UNIT, lower=0.0, lower_open=True, doc="arterial capacitance"),
+                  "Cc": Param(C_UNIT, lower=0.0, lower_open=True, doc="intramyocardial capacitance"),
+                  "Pim": Param("mmHg", default="0 mmHg", doc="intramyocardial pressure (a waveform)"),
+                  "P_v": Param("mmHg", default="0 mmHg", doc="venous pressure")}
+    waveform_params = ("Pim",)
+    role = "pressure"
+    kernel = kernel_method(coronary_stamp, coronary_derivs, report=coronary_report)
+    BRANCHES = (("node", "ref"),)
+    STATES = (State("V_a", "mL", 1.0, "volume of Ca"), State("V_im", "mL", 1.0, "volume of Cc"))
+    OBSERVABLES = (Observable("Q_in", "mL/s", "flow into the block"),)
+
+    def dc_stamp(self, p, A_loc, b_loc, keep):
+        """Steady state: capacitors open, Q_in = (P - P_v)/(Ra1 + Ra2 + Rv1)."""
+        A_loc[..., 2, 2] = -(p["Ra1"] + p["Ra2"] + p["Rv1"])
+        b_loc[..., 2] = p["P_v"]
+        return A_loc, b_loc
+
+    def initial_states(self, p, u, flows=None, x=None):
+        q = u[..., 2]
+        Pa = u[..., 0] - u[..., 1] - p["Ra1"] * q
+        out = np.empty(u.shape[:2] + (2,))
+        out[..., 0] = p["Ca"] * Pa
+        out[..., 1] = p["Cc"] * (Pa - p["Ra2"] * q - p["Pim"])
+        return out

@@ -23,7 +23,7 @@ import numpy as np
 
 from hemocircuit.component import Observable, Param
 
-from ._common import R_UNIT, jit
+from ._common import jit, kernel_method, R_UNIT
 from .activation import periodic_breakpoints
 from .coronary_bc import CoronaryBC, coronary_balance, coronary_stamp
 
@@ -42,43 +42,6 @@ def var_resistance(t, T, Rmin, Rmax, T_vc, T_vr):
     return r * r
 
 
-class CoronaryVarResBC(CoronaryBC):
-    __doc__ = __doc__
-    type_name = "coronary_var_res_bc"
-    svzerod_blocks = ("CORONARY_VAR_RES",)
-    # the first seven in coronary_bc's order (its compiled stamp reads p[0] = Ra1, p[3] = Ca)
-    parameters = {"Ra1": Param(R_UNIT, lower=0.0, doc="arterial resistance"),
-                  "Ra2_min": Param(R_UNIT, lower=0.0, lower_open=True, doc="minimum microvascular resistance"),
-                  "Rv1": CoronaryBC.parameters["Rv1"], "Ca": CoronaryBC.parameters["Ca"],
-                  "Cc": CoronaryBC.parameters["Cc"], "Pim": CoronaryBC.parameters["Pim"],
-                  "P_v": CoronaryBC.parameters["P_v"],
-                  "Ra2_max": Param(R_UNIT, lower=0.0, lower_open=True, doc="maximum microvascular resistance"),
-                  "T_vc": Param("s", lower=0.0, lower_open=True, doc="contraction time"),
-                  "T_vr": Param("s", lower=0.0, lower_open=True, doc="relaxation time"),
-                  "period": Param("s", default="1 s", lower=0.0, lower_open=True, doc="cardiac period T")}
-    time_dependent = True
-
-    def observables(self):
-        return super().observables() + (Observable("Ram", "mmHg*s/mL", "microvascular resistance Ram(t)"),)
-
-    def breakpoints(self, p, t0, t1):
-        """Where Ram(t)'s pieces meet (its second derivative jumps): each period's start, T_vc
-        and T_vc + T_vr; steps end there."""
-        return periodic_breakpoints(lambda T, a: [0.0, a["T_vc"], a["T_vc"] + a["T_vr"]], p, ("T_vc", "T_vr"), t0, t1)
-
-    def dc_stamp(self, p, A_loc, b_loc, keep):
-        return super().dc_stamp({**p, "Ra2": p["Ra2_min"]}, A_loc, b_loc, keep)
-
-    def initial_states(self, p, u, flows=None, x=None):
-        return super().initial_states({**p, "Ra2": p["Ra2_min"]}, u, flows, x)
-
-    def kernel(self):
-        from hemocircuit.kernels import Kernel
-        from hemocircuit.kernels.stateless import no_observables
-        return Kernel(stamp=coronary_stamp, derivs=coronary_var_res_derivs, observe=no_observables, observables=(),
-                      report=coronary_var_res_report)
-
-
 # --- the equations: p = [Ra1, Ra2_min, Rv1, Ca, Cc, Pim, P_v, Ra2_max, T_vc, T_vr, period];
 # states [V_a, V_im]; the stamp is coronary_bc's
 @jit
@@ -95,3 +58,35 @@ def coronary_var_res_derivs(p, x, u, t, iopt, dx):
 def coronary_var_res_report(p, x, u, t, iopt, out):
     out[0] = u[2]  # Q_in
     out[1] = _ram(p, t) + 0.0 * u[2]
+
+
+class CoronaryVarResBC(CoronaryBC):
+    __doc__ = __doc__
+    type_name = "coronary_var_res_bc"
+    svzerod_blocks = ("CORONARY_VAR_RES",)
+    # the first seven in coronary_bc's order (its compiled stamp reads p[0] = Ra1, p[3] = Ca)
+    parameters = {"Ra1": Param(R_UNIT, lower=0.0, doc="arterial resistance"),
+                  "Ra2_min": Param(R_UNIT, lower=0.0, lower_open=True, doc="minimum microvascular resistance"),
+                  "Rv1": CoronaryBC.parameters["Rv1"], "Ca": CoronaryBC.parameters["Ca"],
+                  "Cc": CoronaryBC.parameters["Cc"], "Pim": CoronaryBC.parameters["Pim"],
+                  "P_v": CoronaryBC.parameters["P_v"],
+                  "Ra2_max": Param(R_UNIT, lower=0.0, lower_open=True, doc="maximum microvascular resistance"),
+                  "T_vc": Param("s", lower=0.0, lower_open=True, doc="contraction time"),
+                  "T_vr": Param("s", lower=0.0, lower_open=True, doc="relaxation time"),
+                  "period": Param("s", default="1 s", lower=0.0, lower_open=True, doc="cardiac period T")}
+    time_dependent = True
+    kernel = kernel_method(coronary_stamp, coronary_var_res_derivs, report=coronary_var_res_report)
+
+    def observables(self):
+        return super().observables() + (Observable("Ram", "mmHg*s/mL", "microvascular resistance Ram(t)"),)
+
+    def breakpoints(self, p, t0, t1):
+        """Where Ram(t)'s pieces meet (its second derivative jumps): each period's start, T_vc
+        and T_vc + T_vr; steps end there."""
+        return periodic_breakpoints(lambda T, a: [0.0, a["T_vc"], a["T_vc"] + a["T_vr"]], p, ("T_vc", "T_vr"), t0, t1)
+
+    def dc_stamp(self, p, A_loc, b_loc, keep):
+        return super().dc_stamp({**p, "Ra2": p["Ra2_min"]}, A_loc, b_loc, keep)
+
+    def initial_states(self, p, u, flows=None, x=None):
+        return super().initial_states({**p, "Ra2": p["Ra2_min"]}, u, flows, x)

@@ -15,61 +15,8 @@ import numpy as np
 
 from hemocircuit.component import Component, Observable, Option, Param, State, Storage
 
-from ._common import branch, E_UNIT, jit, open_branches, per_element
+from ._common import Block, branch, E_UNIT, flow_observables, jit, kernel_method, open_branches, per_element
 from .activation import KINDS, act_parameters, activation, activation_breakpoints, check_activation
-
-
-class LinearElastanceChamber(Component):
-    __doc__ = __doc__
-    type_name = "linear_elastance_chamber"
-    svzerod_blocks = ("LinearElastanceChamber",)
-    terminals = ("in", "out", "ref")
-    parameters = {"Emax": Param(E_UNIT, lower=0.0, doc="active elastance (added at full activation)"),
-                  "Epass": Param(E_UNIT, lower=0.0, lower_open=True, doc="passive elastance"),
-                  "Vrest": Param("mL", doc="rest volume"),
-                  **act_parameters()}
-    options = {"activation": Option("piecewise_cosine", choices=KINDS, doc="activation function A(t)")}
-    time_dependent = True
-
-    def branches(self):
-        return (("in", "ref"), ("in", "out"))
-
-    def edges(self):
-        return (("in", "ref", "pressure"), ("in", "out", "pressure"))
-
-    def states(self):
-        return (State("Vc", "mL", 10.0, "chamber volume"),)
-
-    def storages(self):
-        return (Storage("in", "ref", "Vc", state="Vc"),)
-
-    def observables(self):
-        return (Observable("Vc", "mL", "chamber volume", state_only=True),
-                Observable("Q_in", "mL/s", "flow into the chamber"),
-                Observable("Q_out", "mL/s", "flow out of the chamber"))
-
-    def check(self, p):
-        return check_activation(self.opts["activation"], p)
-
-    def breakpoints(self, p, t0, t1):
-        """The activation's kinks (activation.kink_phases): steps end there."""
-        return activation_breakpoints(self.opts["activation"], p, t0, t1)
-
-    def dc_stamp(self, p, A_loc, b_loc, keep):
-        """Steady state: the store open (q = 0) unless it anchors a conservation law."""
-        return open_branches(A_loc, b_loc, (3,), keep)
-
-    def initial_states(self, p, u, flows=None, x=None):
-        E = per_element(lec_elastance, self, p, 0.0)
-        return ((u[..., 0] - u[..., 2]) / E + p["Vrest"])[..., None]
-
-    def kernel_options(self):
-        return np.array([KINDS.index(self.opts["activation"])], dtype=np.int64)
-
-    def kernel(self):
-        from hemocircuit.kernels import Kernel
-        return Kernel(stamp=lec_stamp, derivs=lec_derivs, observe=lec_observe, observables=("Vc",),
-                      report=lec_report)
 
 
 # --- the equations: p = [Emax, Epass, Vrest, period, 13 activation parameters];
@@ -102,3 +49,41 @@ def lec_report(p, x, u, t, iopt, out):
     out[0] = x[0]  # Vc
     out[1] = u[3] + u[4]  # Q_in
     out[2] = u[4]  # Q_out
+
+
+class LinearElastanceChamber(Block):
+    __doc__ = __doc__
+    type_name = "linear_elastance_chamber"
+    svzerod_blocks = ("LinearElastanceChamber",)
+    terminals = ("in", "out", "ref")
+    parameters = {"Emax": Param(E_UNIT, lower=0.0, doc="active elastance (added at full activation)"),
+                  "Epass": Param(E_UNIT, lower=0.0, lower_open=True, doc="passive elastance"),
+                  "Vrest": Param("mL", doc="rest volume"),
+                  **act_parameters()}
+    options = {"activation": Option("piecewise_cosine", choices=KINDS, doc="activation function A(t)")}
+    time_dependent = True
+    kernel = kernel_method(lec_stamp, lec_derivs, lec_observe, ("Vc",), report=lec_report)
+    BRANCHES = (("in", "ref"), ("in", "out"))
+    EDGES = (("in", "ref", "pressure"), ("in", "out", "pressure"))
+    STATES = (State("Vc", "mL", 10.0, "chamber volume"),)
+    STORAGES = (Storage("in", "ref", "Vc", state="Vc"),)
+    OBSERVABLES = (Observable("Vc", "mL", "chamber volume", state_only=True),
+                   *flow_observables("the chamber", "the chamber"))
+
+    def check(self, p):
+        return check_activation(self.opts["activation"], p)
+
+    def breakpoints(self, p, t0, t1):
+        """The activation's kinks (activation.kink_phases): steps end there."""
+        return activation_breakpoints(self.opts["activation"], p, t0, t1)
+
+    def dc_stamp(self, p, A_loc, b_loc, keep):
+        """Steady state: the store open (q = 0) unless it anchors a conservation law."""
+        return open_branches(A_loc, b_loc, (3,), keep)
+
+    def initial_states(self, p, u, flows=None, x=None):
+        E = per_element(lec_elastance, self, p, 0.0)
+        return ((u[..., 0] - u[..., 2]) / E + p["Vrest"])[..., None]
+
+    def kernel_options(self):
+        return np.array([KINDS.index(self.opts["activation"])], dtype=np.int64)

@@ -10,31 +10,7 @@ from __future__ import annotations
 
 from hemocircuit.component import Component, Observable, Param
 
-from ._common import check_rmin_rmax, conductance, jit, R_UNIT
-
-
-class PiecewiseValve(Component):
-    __doc__ = __doc__
-    type_name = "piecewise_valve"
-    svzerod_blocks = ("PiecewiseValve",)
-    terminals = ("in", "out")
-    parameters = {"Rmin": Param(R_UNIT, lower=0.0, lower_open=True, doc="resistance when open (P_out < P_in)"),
-                  "Rmax": Param(R_UNIT, lower=0.0, lower_open=True, doc="resistance when closed")}
-    role = "conductive"
-    linear_in_pressure = False
-    constant_matrix = False
-
-    def check(self, p):
-        return check_rmin_rmax(p)
-
-    def observables(self):
-        return (Observable("Q", "mL/s", "flow from in to out"),)
-
-    def kernel(self):
-        from hemocircuit.kernels import Kernel
-        from hemocircuit.kernels.stateless import no_derivs, no_observables
-        return Kernel(stamp=piecewise_valve_stamp, derivs=no_derivs, observe=no_observables, observables=(),
-                      report=piecewise_valve_report)
+from ._common import Block, check_rmin_rmax, conductance, jit, kernel_method, R_UNIT
 
 
 # --- the equations: p = [Rmin, Rmax]; local unknowns [P_in, P_out]
@@ -53,3 +29,20 @@ def piecewise_valve_stamp(p, x, u, t, iopt, A, b):
 def piecewise_valve_report(p, x, u, t, iopt, out):
     dp = u[0] - u[1]
     out[0] = _conductance(p, dp) * dp  # Q
+
+
+class PiecewiseValve(Block):
+    __doc__ = __doc__
+    type_name = "piecewise_valve"
+    svzerod_blocks = ("PiecewiseValve",)
+    terminals = ("in", "out")
+    parameters = {"Rmin": Param(R_UNIT, lower=0.0, lower_open=True, doc="resistance when open (P_out < P_in)"),
+                  "Rmax": Param(R_UNIT, lower=0.0, lower_open=True, doc="resistance when closed")}
+    role = "conductive"
+    linear_in_pressure = False
+    constant_matrix = False
+    kernel = kernel_method(piecewise_valve_stamp, report=piecewise_valve_report)
+    OBSERVABLES = (Observable("Q", "mL/s", "flow from in to out"),)
+
+    def check(self, p):
+        return check_rmin_rmax(p)

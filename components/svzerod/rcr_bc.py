@@ -12,49 +12,7 @@ from __future__ import annotations
 
 from hemocircuit.component import Component, Observable, Param, State
 
-from ._common import branch, C_UNIT, jit, R_UNIT
-
-
-class RCRBC(Component):
-    __doc__ = __doc__
-    type_name = "rcr_bc"
-    svzerod_blocks = ("RCR",)
-    svzerod_steady_zeroed = (("C",), ("V",))  # their to_steady
-    terminals = ("node", "ref")
-    parameters = {"Rp": Param(R_UNIT, lower=0.0, doc="proximal resistance"),
-                  "C": Param(C_UNIT, lower=0.0, lower_open=True, doc="capacitance"),
-                  "Rd": Param(R_UNIT, lower=0.0, lower_open=True, doc="distal resistance"),
-                  "Pd": Param("mmHg", default="0 mmHg", doc="distal pressure (constant or a waveform)")}
-    waveform_params = ("Pd",)
-    role = "pressure"
-
-    def branches(self):
-        return (("node", "ref"),)
-
-    def states(self):
-        return (State("V", "mL", 1.0, "volume of C (C * P_c)"),)
-
-    def observables(self):
-        return (Observable("Q_in", "mL/s", "flow into the block"),
-                Observable("P_c", "mmHg", "pressure of the capacitor", state_only=True))
-
-    def cycle_time_constants(self, p):
-        """Rd C [s]: svZeroDSolver counts the cycles of a run with RCR outlets from it (Solver.cpp)."""
-        return p["Rd"] * p["C"]
-
-    def dc_stamp(self, p, A_loc, b_loc, keep):
-        """Steady state: C open, so Q_in = (P - Pd)/(Rp + Rd) (Pd's constant part)."""
-        A_loc[..., 2, 2] = -(p["Rp"] + p["Rd"])
-        b_loc[..., 2] = p["Pd"]
-        return A_loc, b_loc
-
-    def initial_states(self, p, u, flows=None, x=None):
-        return (p["C"] * (u[..., 0] - u[..., 1] - p["Rp"] * u[..., 2]))[..., None]
-
-    def kernel(self):
-        from hemocircuit.kernels import Kernel
-        return Kernel(stamp=rcr_stamp, derivs=rcr_derivs, observe=rcr_observe, observables=("P_c",),
-                      report=rcr_report)
+from ._common import Block, branch, C_UNIT, jit, kernel_method, R_UNIT
 
 
 # --- the equations: p = [Rp, C, Rd, Pd] (Pd with its waveform added); state [V]; local unknowns [P_node, P_ref, Q_in]
@@ -78,3 +36,35 @@ def rcr_observe(p, x, iopt, out):
 def rcr_report(p, x, u, t, iopt, out):
     out[0] = u[2]  # Q_in
     rcr_observe(p, x, iopt, out[1:])  # P_c
+
+
+class RCRBC(Block):
+    __doc__ = __doc__
+    type_name = "rcr_bc"
+    svzerod_blocks = ("RCR",)
+    svzerod_steady_zeroed = (("C",), ("V",))  # their to_steady
+    terminals = ("node", "ref")
+    parameters = {"Rp": Param(R_UNIT, lower=0.0, doc="proximal resistance"),
+                  "C": Param(C_UNIT, lower=0.0, lower_open=True, doc="capacitance"),
+                  "Rd": Param(R_UNIT, lower=0.0, lower_open=True, doc="distal resistance"),
+                  "Pd": Param("mmHg", default="0 mmHg", doc="distal pressure (constant or a waveform)")}
+    waveform_params = ("Pd",)
+    role = "pressure"
+    kernel = kernel_method(rcr_stamp, rcr_derivs, rcr_observe, ("P_c",), report=rcr_report)
+    BRANCHES = (("node", "ref"),)
+    STATES = (State("V", "mL", 1.0, "volume of C (C * P_c)"),)
+    OBSERVABLES = (Observable("Q_in", "mL/s", "flow into the block"),
+                   Observable("P_c", "mmHg", "pressure of the capacitor", state_only=True))
+
+    def cycle_time_constants(self, p):
+        """Rd C [s]: svZeroDSolver counts the cycles of a run with RCR outlets from it (Solver.cpp)."""
+        return p["Rd"] * p["C"]
+
+    def dc_stamp(self, p, A_loc, b_loc, keep):
+        """Steady state: C open, so Q_in = (P - Pd)/(Rp + Rd) (Pd's constant part)."""
+        A_loc[..., 2, 2] = -(p["Rp"] + p["Rd"])
+        b_loc[..., 2] = p["Pd"]
+        return A_loc, b_loc
+
+    def initial_states(self, p, u, flows=None, x=None):
+        return (p["C"] * (u[..., 0] - u[..., 1] - p["Rp"] * u[..., 2]))[..., None]

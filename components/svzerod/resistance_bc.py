@@ -8,27 +8,7 @@ from __future__ import annotations
 
 from hemocircuit.component import Component, Observable, Param
 
-from ._common import conductance, jit, R_UNIT
-
-
-class ResistanceBC(Component):
-    __doc__ = __doc__
-    type_name = "resistance_bc"
-    svzerod_blocks = ("RESISTANCE",)
-    terminals = ("node", "ref")
-    parameters = {"R": Param(R_UNIT, lower=0.0, lower_open=True, doc="resistance"),
-                  "Pd": Param("mmHg", default="0 mmHg", doc="distal pressure (constant or a waveform)")}
-    waveform_params = ("Pd",)
-    role = "conductive"
-
-    def observables(self):
-        return (Observable("Q_in", "mL/s", "flow into the block"),)
-
-    def kernel(self):
-        from hemocircuit.kernels import Kernel
-        from hemocircuit.kernels.stateless import no_derivs, no_observables
-        return Kernel(stamp=resistance_stamp, derivs=no_derivs, observe=no_observables, observables=(),
-                      report=resistance_report)
+from ._common import Block, conductance, jit, kernel_method, R_UNIT
 
 
 # --- the equations: p = [R, Pd] (Pd with its waveform added); local unknowns [P_node, P_ref]
@@ -44,3 +24,16 @@ def resistance_stamp(p, x, u, t, iopt, A, b):
 @jit
 def resistance_report(p, x, u, t, iopt, out):
     out[0] = (u[0] - u[1] - p[1]) / p[0]  # Q_in
+
+
+class ResistanceBC(Block):
+    __doc__ = __doc__
+    type_name = "resistance_bc"
+    svzerod_blocks = ("RESISTANCE",)
+    terminals = ("node", "ref")
+    parameters = {"R": Param(R_UNIT, lower=0.0, lower_open=True, doc="resistance"),
+                  "Pd": Param("mmHg", default="0 mmHg", doc="distal pressure (constant or a waveform)")}
+    waveform_params = ("Pd",)
+    role = "conductive"
+    kernel = kernel_method(resistance_stamp, report=resistance_report)
+    OBSERVABLES = (Observable("Q_in", "mL/s", "flow into the block"),)

@@ -24,39 +24,7 @@ import math
 
 from hemocircuit.component import Component, Observable, Param
 
-from ._common import branch, check_rmin_rmax, jit, R_UNIT
-
-
-class ValveTanh(Component):
-    __doc__ = __doc__
-    type_name = "valve_tanh"
-    svzerod_blocks = ("ValveTanh",)
-    terminals = ("in", "out")
-    parameters = {"Rmin": Param(R_UNIT, lower=0.0, doc="resistance when open"),
-                  "Rmax": Param(R_UNIT, lower=0.0, lower_open=True, doc="resistance when closed"),
-                  "steepness": Param("1/mmHg", lower=0.0, lower_open=True, doc="steepness k of the tanh")}
-    role = "conductive"
-    linear_in_pressure = False
-    constant_matrix = False
-
-    def check(self, p):
-        return check_rmin_rmax(p)
-
-    def observables(self):
-        return (Observable("Q", "mL/s", "flow from in to out"),
-                Observable("status", "dimensionless", "their valve_status (1 + tanh(k (P_out - P_in)))/2"))
-
-    def branches(self):
-        return (("in", "out"),)
-
-    def edges(self):
-        return (("in", "out", "conductive"),)
-
-    def kernel(self):
-        from hemocircuit.kernels import Kernel
-        from hemocircuit.kernels.stateless import no_derivs, no_observables
-        return Kernel(stamp=valve_tanh_stamp, derivs=no_derivs, observe=no_observables, observables=(),
-                      report=valve_tanh_report)
+from ._common import Block, branch, check_rmin_rmax, jit, kernel_method, R_UNIT
 
 
 # --- the equations: p = [Rmin, Rmax, steepness]; local unknowns [P_in, P_out, Q]
@@ -86,3 +54,24 @@ def valve_tanh_stamp(p, x, u, t, iopt, A, b):
 def valve_tanh_report(p, x, u, t, iopt, out):
     out[0] = u[2]  # Q
     out[1] = valve_closure(p[2], u[0] - u[1])  # status
+
+
+class ValveTanh(Block):
+    __doc__ = __doc__
+    type_name = "valve_tanh"
+    svzerod_blocks = ("ValveTanh",)
+    terminals = ("in", "out")
+    parameters = {"Rmin": Param(R_UNIT, lower=0.0, doc="resistance when open"),
+                  "Rmax": Param(R_UNIT, lower=0.0, lower_open=True, doc="resistance when closed"),
+                  "steepness": Param("1/mmHg", lower=0.0, lower_open=True, doc="steepness k of the tanh")}
+    role = "conductive"
+    linear_in_pressure = False
+    constant_matrix = False
+    kernel = kernel_method(valve_tanh_stamp, report=valve_tanh_report)
+    OBSERVABLES = (Observable("Q", "mL/s", "flow from in to out"),
+                   Observable("status", "dimensionless", "their valve_status (1 + tanh(k (P_out - P_in)))/2"))
+    BRANCHES = (("in", "out"),)
+    EDGES = (("in", "out", "conductive"),)
+
+    def check(self, p):
+        return check_rmin_rmax(p)
