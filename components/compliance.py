@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from hemocircuit.component import Component, Observable, Option, Param, State, Storage
+from hemocircuit.component import Observable, Option, Param, State, Storage
 
 from .svzerod._common import Block, branch, jit as _jit, kernel_method, open_branches
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hemocircuit.component import Component, Observable, Param, State
+from hemocircuit.component import Observable, Param, State
 
 from .svzerod._common import Block, imposed_flow, jit, kernel_method, short
 

@@ -46,14 +46,6 @@ PENDING = {
     ("hemocircuit.kernels.prebuild", "dispatcher._cache._cache_file"): "numba's dispatcher cache",
     ("hemocircuit.kernels.prebuild", "dispatcher._cache._cache_file._index_path"): "numba's dispatcher cache",
     ("hemocircuit.kernels.expressions", "expr._key"): "kernels/expressions.py",
-    ("hemocircuit.svzerod.blocks",
-     "import hemocircuit.components.svzerod.chamber_sphere._P"): "components/svzerod: a public parameter table",
-    ("hemocircuit.svzerod.blocks",
-     "import hemocircuit.components.svzerod.closed_loop_heart_pulmonary._P"): "components/svzerod: idem",
-    ("hemocircuit.components.svzerod.chamber_elastance_inductor_exponential",
-     "import hemocircuit.components.svzerod.chamber_elastance_inductor._OWN"): "components/svzerod",
-    ("hemocircuit.components.svzerod.blood_vessel_crl",
-     "import hemocircuit.components.svzerod.blood_vessel._Vessel"): "components/svzerod",
 }
 #: how often each listed reach may occur (os._exit is called twice)
 COUNTS = {("hemocircuit.execution", "os._exit"): 2}

@@ -20,6 +20,8 @@ import math
 from hemocircuit.kernels.jit import equation, njit
 from hemocircuit.units import M3_PER_ML, PA_PER_MMHG
 
+from ..svzerod._common import conductance
+
 from .equations import (C_IN, CA_FLOOR, DP0, ETA, F1, F2, FRICTION_FLOOR, GAMMA_WB, K3, K4, K7, K_CA1, K_CA2,
                         K_CGMP, L0, L_VES, LAMBDA_OPT, LN10, LN_95, MAX_EXP, MU_B, N_CA1, N_CA2, N_CGMP, N_VES,
                         NO_L, NO_U, OMEGA_N, PCA_L, PCA_U, PCGMP_L, PCGMP_U, PSI_SERIES_X, Q1, Q2, Q3, R0, R_DB,
@@ -92,21 +94,11 @@ def stamp(p, x, u, t, iopt, A, b):
     r = l2r(x[j + 1], p)
     g = 1.0 / (resistance(r, p) * _R_FACTOR)   # eq Rsa: conductance of the bed [mL/s per mmHg]
     if iopt[OPT_VOLUME_FLOW] == 0:
-        # section artComp: a variable resistor in -> out; ref carries no flow
-        A[0, 0] = g
-        A[0, 1] = -g
-        A[1, 0] = -g
-        A[1, 1] = g
+        conductance(A, 0, 1, g)  # section artComp: a variable resistor in -> out; ref carries no flow
         return
     # section autoregFirst: halves R/2 in -> mid -> out; local nodes in 0, out 1, ref 2, mid 3
-    g2 = 2.0 * g
-    A[0, 0] = g2
-    A[0, 3] = -g2
-    A[3, 0] = -g2
-    A[3, 3] = g2 + g2
-    A[3, 1] = -g2
-    A[1, 3] = -g2
-    A[1, 1] = g2
+    conductance(A, 0, 3, 2.0 * g)
+    conductance(A, 3, 1, 2.0 * g)
     # eqs Vsa, dVsadt: q_v = 2 pi r L n dr/dt leaves mid into ref, dr/dt = (a + b P_im) dr/dlambda
     r, da, db = _lambda_rate(x, p, iopt)
     k_r = dr_dlambda(p)
@@ -149,25 +141,31 @@ def derivs(p, x, u, t, iopt, dx):
         dx[j + 2], dx[j + 3], dx[j + 4], dx[j + 5] = kinetics(K1, K2, M, Mp, AMp, AM, p)   # eq 4state
 
 
-@_jit
-def observe(p, x, iopt, out):
-    """State-only observables, circuit units, in the order of ``observables(ca_order)``:
-    r [um], lambda, Ca [M], (dCa [M/s],) Cw [M], R [mmHg*s/mL], V [mL], Cb_inf [M], k_NO [m^2/s]."""
+@_eq
+def _state_part(p, x, iopt, out):
+    """r [um], lambda, Ca [M], (dCa [M/s],) Cw [M] into out; returns (r [m], the next index)."""
     j = 2 if iopt[OPT_CA_ORDER] == 2 else 1
     r = l2r(x[j + 1], p)
     out[0] = r * 1e6
     out[1] = x[j + 1]
     out[2] = x[0]
-    i = 3
     if j == 2:
         out[3] = x[1]
-        i = 4
-    out[i] = x[j]
-    out[i + 1] = resistance(r, p) * _R_FACTOR                  # eq Rsa
-    out[i + 2] = bed_volume(r, p) / M3_PER_ML                  # eq Vsa
+    out[j + 2] = x[j]
+    return r, j + 3
+
+
+@_jit
+def observe(p, x, iopt, out):
+    """State-only observables, circuit units, in the order of ``observables(ca_order)``:
+    r [um], lambda, Ca [M], (dCa [M/s],) Cw [M], R [mmHg*s/mL], V [mL], Cb_inf [M], k_NO [m^2/s]."""
+    r, i = _state_part(p, x, iopt, out)
+    Cw = out[i - 1]
+    out[i] = resistance(r, p) * _R_FACTOR                      # eq Rsa
+    out[i + 1] = bed_volume(r, p) / M3_PER_ML                  # eq Vsa
     h_w = no_rates(p)[0]
-    out[i + 3] = cb_inf(x[j], r, h_w, p)                        # eqs cbbar, cinv
-    out[i + 4] = no_loss(r, h_w, p)                             # exponent of eq cinv [m^2/s]
+    out[i + 2] = cb_inf(Cw, r, h_w, p)                          # eqs cbbar, cinv
+    out[i + 3] = no_loss(r, h_w, p)                             # exponent of eq cinv [m^2/s]
 
 
 @_jit
@@ -175,43 +173,33 @@ def report(p, x, u, t, iopt, out):
     """Every observable, circuit units, in the order of ``Arteriole.observables()``: r [um],
     lambda, Ca, (dCa,) Cw, Cb_mean, cGMP [M], M, Mp, AMp, AM, sigma [Pa], tau_hat, Q [mL/s, the
     bed], R [mmHg*s/mL], V [mL], F_a, F_p [N], q_out [mL/s], Cb_inf [M], k_NO [m^2/s]."""
-    j = 2 if iopt[OPT_CA_ORDER] == 2 else 1
-    Cw, lam = x[j], x[j + 1]
+    r, i = _state_part(p, x, iopt, out)
+    Cw, lam = out[i - 1], out[1]
     P, dP = pressures(u, iopt)
     h_w = no_rates(p)[0]
-    r = l2r(lam, p)
     Q = flow(r, dP, p)
     _, _, M, Mp, AMp, AM = _bridges(x, p, iopt)
     a, bb = dlam_affine(lam, r, AMp, AM, p, iopt[OPT_PASSIVE] != 0)
-    lam_dot = a + bb * P
     R = resistance(r, p) * _R_FACTOR
-    out[0] = r * 1e6
-    out[1] = lam
-    out[2] = x[0]
-    i = 3
-    if j == 2:
-        out[3] = x[1]
-        i = 4
-    out[i] = Cw
-    out[i + 1] = cb_mean(Cw, r, transport_number(Q, r, h_w, p), h_w, p)
-    out[i + 2] = cgmp(Cw, p)
-    out[i + 3] = M
-    out[i + 4] = Mp
-    out[i + 5] = AMp
-    out[i + 6] = AM
-    out[i + 7] = wall_stress(P, r, p)
-    out[i + 8] = tau_hat(dP, r, p)
-    out[i + 9] = Q * p[N_VES] / M3_PER_ML
-    out[i + 10] = R
-    out[i + 11] = bed_volume(r, p) / M3_PER_ML
-    out[i + 12] = active_force(lam_dot, AMp, AM, overlap(lam, p), p)
-    out[i + 13] = passive_force(lam, p)
+    out[i] = cb_mean(Cw, r, transport_number(Q, r, h_w, p), h_w, p)
+    out[i + 1] = cgmp(Cw, p)
+    out[i + 2] = M
+    out[i + 3] = Mp
+    out[i + 4] = AMp
+    out[i + 5] = AM
+    out[i + 6] = wall_stress(P, r, p)
+    out[i + 7] = tau_hat(dP, r, p)
+    out[i + 8] = Q * p[N_VES] / M3_PER_ML
+    out[i + 9] = R
+    out[i + 10] = bed_volume(r, p) / M3_PER_ML
+    out[i + 11] = active_force(a + bb * P, AMp, AM, overlap(lam, p), p)
+    out[i + 12] = passive_force(lam, p)
     if iopt[OPT_VOLUME_FLOW] != 0:   # the outlet half R/2 from mid
-        out[i + 14] = 2.0 * (u[3] - u[1]) / R
+        out[i + 13] = 2.0 * (u[3] - u[1]) / R
     else:
-        out[i + 14] = (u[0] - u[1]) / R
-    out[i + 15] = cb_inf(Cw, r, h_w, p)
-    out[i + 16] = no_loss(r, h_w, p)
+        out[i + 13] = (u[0] - u[1]) / R
+    out[i + 14] = cb_inf(Cw, r, h_w, p)
+    out[i + 15] = no_loss(r, h_w, p)
 
 
 def observables(ca_order: int) -> tuple:

@@ -16,10 +16,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-#: Pa per mmHg (same value as hemocircuit.units.PA_PER_MMHG; pint's conventional mmHg)
-PA_PER_MMHG = 133.322387415
-#: Pa per cmH2O (Kuo91 experiments are in cmH2O)
-PA_PER_CMH2O = 98.0665
+from hemocircuit.units import PA_PER_MMHG
 
 
 class ParamSpec(NamedTuple):
@@ -174,7 +171,6 @@ def check_params(params: dict) -> list[str]:
             if np.any(np.equal(p[lo], p[hi])):
                 msgs.append(f"{lo} == {hi}: the 5 %/95 % sigmoid is undefined")
         # eq l2r: the ring of n_c relaxed cells must enclose a lumen (r(lambda = 1) > 0)
-        r1 = 0.5 * (np.asarray(p["l0"]) * p["n_c"] / np.pi - p["t_w"])
-        if np.any(r1 <= 0):
+        if np.any(np.asarray(p["l0"]) * p["n_c"] / np.pi <= p["t_w"]):
             msgs.append("l0 n_c / pi <= t_w: radius at lambda = 1 is not positive")
     return msgs

@@ -21,6 +21,7 @@ from .linear_elastance_chamber import LinearElastanceChamber
 from .closed_loop_rcr import ClosedLoopRCR
 from .closed_loop_heart_pulmonary import ClosedLoopHeartAndPulmonary
 
-__all__ = ["BloodVessel", "BloodVesselCRL", "BloodVesselRC", "ChamberElastanceInductor", "ChamberElastanceInductorExponential", "ChamberSphere",
-           "ClosedLoopCoronary",
-           "ClosedLoopHeartAndPulmonary", "ClosedLoopRCR", "CoronaryBC", "CoronaryVarResBC", "LinearElastanceChamber", "PiecewiseValve", "RCRBC", "ResistanceBC", "ValveTanh"]
+__all__ = ["BloodVessel", "BloodVesselCRL", "BloodVesselRC", "ChamberElastanceInductor",
+           "ChamberElastanceInductorExponential", "ChamberSphere", "ClosedLoopCoronary", "ClosedLoopHeartAndPulmonary",
+           "ClosedLoopRCR", "CoronaryBC", "CoronaryVarResBC", "LinearElastanceChamber", "PiecewiseValve", "RCRBC",
+           "ResistanceBC", "ValveTanh"]

@@ -13,14 +13,9 @@ Equations from SimVascular/svZeroDSolver src/model/ActivationFunction.cpp (commi
                     T - Tsa' + tp <= tc < T: 0.5 (1 - cos(2 pi (tc - tp - (T - Tsa'))/Tsa')); else 0
   fourier           tc = fmod(t, T); F = sum_i a_i cos(2 pi i tc/T) - b_i sin(2 pi i tc/T) (their
                     25-mode table FT_ELAST, J. Tran / Menon 2023); A = (F - min F)/(max F - min F)
-fmod is C's (sign of the dividend), as in their code: piecewise_cosine is 0 before its first
-contraction start.  Their two_hill normalisation scans [0, T) with a 1e-5 s step; here the
-maximum is found exactly: d/ds log A = 0 at m1/(1 + g1) = m2 g2/(1 + g2), whose left side
-minus right side decreases in s, so bisection finds it (then the maximum over [0, T) is at
-min(s*, T)).  The Fourier series is a function of the phase tc/T alone, so its min and max
-(their scan of 10000 points of the cycle, FourierActivation::calculate_normalization) are
-constants, computed once here with the same scan.  It has no parameters.
-
+fmod is C's (sign of the dividend), as theirs.  two_hill is normalised by its exact maximum
+(bisection on d/ds log A = 0) instead of their 1e-5 s scan, fourier by the min and max of
+their 10000-point scan of the cycle (constants: docs/svzerod.md).
 Chamber components take these as parameters (``ACT_PARAMS``, times in s, the rest
 dimensionless) and the option ``activation``; only the parameters of the chosen function are used.
 """
@@ -41,6 +36,11 @@ ACT_PARAMS = (("t_active", "s"), ("t_twitch", "s"),
               ("contract_start", "s"), ("relax_start", "s"), ("contract_duration", "s"), ("relax_duration", "s"),
               ("t_shift", "s"), ("tau_1", "s"), ("tau_2", "s"), ("m1", "dimensionless"), ("m2", "dimensionless"),
               ("Tsa", "dimensionless"), ("tpwave", "dimensionless"))
+#: defaults: the values of their test cases (chamber_elastance_inductor, piecewise_Chamber_and_Valve
+#: ventricle, closed_loop_two_hill LV, closedLoopHeart_singleVessel atria)
+_DEFAULTS = {"t_active": 0.2, "t_twitch": 0.3, "contract_start": 0.207, "relax_start": 0.29625,
+             "contract_duration": 0.08925, "relax_duration": 0.26975, "t_shift": 0.207, "tau_1": 0.18551724137931036,
+             "tau_2": 0.31172413793103454, "m1": 1.32, "m2": 27.4, "Tsa": 0.40742, "tpwave": 8.976868}
 
 #: the parameters each function needs (checked > 0 where they divide)
 USED = {"half_cosine": ("t_active", "t_twitch"),
@@ -49,13 +49,6 @@ USED = {"half_cosine": ("t_active", "t_twitch"),
         "wrapping_cosine": ("Tsa", "tpwave"),
         "fourier": ()}
 POSITIVE = ("t_twitch", "contract_duration", "relax_duration", "tau_1", "tau_2", "m1", "m2", "Tsa", "tpwave")
-
-
-#: defaults: the values of their test cases (chamber_elastance_inductor, piecewise_Chamber_and_Valve
-#: ventricle, closed_loop_two_hill LV, closedLoopHeart_singleVessel atria)
-_DEFAULTS = {"t_active": 0.2, "t_twitch": 0.3, "contract_start": 0.207, "relax_start": 0.29625,
-             "contract_duration": 0.08925, "relax_duration": 0.26975, "t_shift": 0.207, "tau_1": 0.18551724137931036,
-             "tau_2": 0.31172413793103454, "m1": 1.32, "m2": 27.4, "Tsa": 0.40742, "tpwave": 8.976868}
 
 
 #: their FT_ELAST table (ActivationFunction.cpp): (a_i, b_i) of cos and -sin of mode i
@@ -99,7 +92,7 @@ def fourier_raw(tc, T):
 
 
 def act_parameters():
-    """Component parameter declarations of the activation functions (defaults: _DEFAULTS)."""
+    """Component parameter declarations of the activation functions."""
     out = {"period": Param("s", default="1 s", lower=0.0, lower_open=True, doc="cardiac period T")}
     for name, unit in ACT_PARAMS:
         d = _DEFAULTS[name]

@@ -3,17 +3,12 @@
 Equations (SimVascular/svZeroDSolver src/model/BloodVessel.cpp, ``update_gradient`` residual):
     P_in - (R + S|Q_in|) Q_in - P_out - L dQ_out/dt = 0
     Q_in - Q_out - C d/dt[P_in - (R + S|Q_in|) Q_in] = 0
-i.e. inlet -> R (+ stenosis S|Q|) -> node c -> L -> outlet, with C from c to the reference
-(absolute zero pressure: the ``ref`` terminal is ground in imported models).
-Units: R_poiseuille [mmHg*s/mL], C [mL/mmHg], L [mmHg*s^2/mL], stenosis_coefficient S
-[mmHg*s^2/mL^2]; the importer converts their cgs values.
-
-C = 0 or L = 0 removes the state, so the structure is chosen by two options (set by the
-importer from the values): ``capacitive`` (C > 0) and ``inductive`` (L > 0); a third,
-``stenotic`` (S > 0), marks the quadratic drop: without it the vessel is linear in the
-pressures with a constant matrix (stamped once per parameter set, no Newton iteration).
-States: V = C * P_c [mL] (stored volume above zero pressure) when capacitive, and Q_out [mL/s]
-(the inductor's flow) when inductive.  Local unknowns (terminals in, out, ref):
+i.e. inlet -> R (+ stenosis S|Q|) -> node c -> L -> outlet, with C from c to ``ref`` (ground in
+imported models).  Units: R_poiseuille [mmHg*s/mL], C [mL/mmHg], L [mmHg*s^2/mL],
+stenosis_coefficient S [mmHg*s^2/mL^2].  Options (set by the importer from the values):
+``capacitive`` (C > 0), ``inductive`` (L > 0) and ``stenotic`` (S > 0; without it the vessel
+is affine in the pressures with a constant matrix).  States: V = C P_c [mL] when capacitive,
+Q_out [mL/s] when inductive.  Local unknowns (terminals in, out, ref):
   R   : branch (in, out) carrying q = Q_in = Q_out
   RC  : branches (in, ref) carrying Q_in and (out, ref) with P_out = P_c (carrying -Q_out)
   RL  : no branch; the state Q_out is imposed from in to out
@@ -24,10 +19,12 @@ from __future__ import annotations
 import numpy as np
 
 from hemocircuit.component import Component, Observable, Option, Param, State, Storage
+from hemocircuit.kernels import Kernel
 
-from ._common import branch, C_UNIT, flow_observables, imposed_flow, jit, L_UNIT, R_UNIT, S_UNIT, stenosis_drop, stenosis_linearised
+from ._common import (branch, C_UNIT, flow_observables, imposed_flow, jit, L_UNIT, R_UNIT, S_UNIT, stenosis_drop,
+                      stenosis_linearised)
 
-_PARAMS = {
+PARAMS = {
     "R_poiseuille": Param(R_UNIT, lower=0.0, doc="Poiseuille resistance"),
     "C": Param(C_UNIT, default=f"0 {C_UNIT}", lower=0.0, doc="capacitance (used when capacitive)"),
     "L": Param(L_UNIT, default=f"0 {L_UNIT}", lower=0.0, doc="inductance (used when inductive)"),
@@ -36,14 +33,85 @@ _PARAMS = {
 }
 
 
+# --- the equations: p = [R_poiseuille, C, L, stenosis_coefficient]; iopt = [capacitive, inductive,
+# stenotic]; layout as above.  The stenosis term is linearised at the iterate's flow only for a
+# stenotic vessel (an affine one is stamped once per nodal solve, its iterate not read)
+@jit
+def vessel_stamp(p, x, u, t, iopt, A, b):
+    R, S = p[0], p[3]
+    if iopt[2] == 0:
+        S = 0.0
+    if iopt[0] != 0:
+        Pc = x[0] / p[1]
+        slope, off = stenosis_linearised(R, S, u[3])
+        branch(A, b, 0, 2, 3, Pc + off)  # Q_in: in -> (R) -> c -> ref
+        A[3, 3] = -slope
+        if iopt[1] != 0:
+            imposed_flow(b, 2, 1, x[1])  # Q_out delivered at out, drawn from ref
+        else:
+            branch(A, b, 1, 2, 4, Pc)  # P_out - P_ref = P_c
+    elif iopt[1] != 0:
+        imposed_flow(b, 0, 1, x[0])
+    else:
+        slope, off = stenosis_linearised(R, S, u[3])
+        branch(A, b, 0, 1, 3, off)
+        A[3, 3] = -slope
+
+
+@jit
+def vessel_derivs(p, x, u, t, iopt, dx):
+    R, S = p[0], p[3]
+    if iopt[0] != 0:
+        Pc = x[0] / p[1]
+        if iopt[1] != 0:
+            dx[0] = u[3] - x[1]  # C dP_c/dt = Q_in - Q_out
+            dx[1] = (Pc - (u[1] - u[2])) / p[2]  # L dQ_out/dt = P_c - P_out
+        else:
+            dx[0] = u[3] + u[4]
+    elif iopt[1] != 0:
+        dx[0] = (u[0] - u[1] - stenosis_drop(R, S, x[0])) / p[2]
+
+
+@jit
+def vessel_observe(p, x, iopt, out):
+    if iopt[0] != 0:
+        out[0] = x[0]
+
+
+@jit
+def vessel_report(p, x, u, t, iopt, out):
+    """[V (capacitive),] Q_in, Q_out."""
+    if iopt[0] != 0:
+        out[0] = x[0]
+        out[1] = u[3]
+        out[2] = x[1] if iopt[1] != 0 else -u[4]
+    else:
+        q = x[0] if iopt[1] != 0 else u[3]
+        out[0] = q
+        out[1] = q
+
+
+def dc_series(A, c, R):
+    """DC guess: branch row c carries the flow from in (0) to out (1) through R."""
+    A[..., 0, c], A[..., 1, c] = 1.0, -1.0
+    A[..., c, 0], A[..., c, 1], A[..., c, c] = 1.0, -1.0, -R
+
+
+def dc_conductance(A, R):
+    """DC guess of an inductive vessel: a conductance 1/R from in to out (large when R = 0)."""
+    g = 1.0 / np.maximum(R, 1e-6)
+    A[..., 0, 0], A[..., 0, 1], A[..., 1, 0], A[..., 1, 1] = g, -g, -g, g
+
+
 class Vessel(Component):
     """Common structure of BloodVessel and BloodVesselCRL (options, states, DC stamp)."""
 
     terminals = ("in", "out", "ref")
-    parameters = _PARAMS
+    parameters = PARAMS
     options = {"capacitive": Option(False, kind=bool, doc="has the capacitor (C > 0)"),
                "inductive": Option(False, kind=bool, doc="has the inductor (L > 0)"),
                "stenotic": Option(False, kind=bool, doc="has the stenosis term (stenosis_coefficient > 0)")}
+    KERNEL = (vessel_stamp, vessel_derivs, vessel_report)
 
     @property
     def linear_in_pressure(self):
@@ -74,41 +142,41 @@ class Vessel(Component):
         return out
 
     def states(self):
-        s = ()
-        if self.cap:
-            s += (State("V", "mL", 1.0, "volume of the capacitor (C * its pressure)"),)
-        if self.ind:
-            s += (State("Q_out", "mL/s", 10.0, "outlet flow (inductor)"),)
-        return s
+        return (((State("V", "mL", 1.0, "volume of the capacitor (C * its pressure)"),) if self.cap else ())
+                + ((State("Q_out", "mL/s", 10.0, "outlet flow (inductor)"),) if self.ind else ()))
 
     def observables(self):
         v = (Observable("V", "mL", "volume of the capacitor", state_only=True),) if self.cap else ()
         return v + flow_observables()
 
     def storages(self):
-        """The capacitor is a volume store (closed loops conserve the blood volume); its
-        terminals are those of the edge that carries its flow to the reference."""
-        if not self.cap:
-            return ()
-        return (Storage(*self.store_edge(), volume="V", state="V"),)
+        """The capacitor is a volume store (closed loops conserve the blood volume) on the edge
+        that carries its flow to the reference."""
+        return (Storage(*self.store_edge(), volume="V", state="V"),) if self.cap else ()
 
-    def store_edge(self):
-        """The terminals of the edge that carries the capacitor's flow to the reference."""
-        return ("in", "ref")
+    def kernel_options(self):
+        return np.array([int(self.cap), int(self.ind), int(self.opts["stenotic"])], dtype=np.int64)
 
-    def restore_kept(self, keep, orig, A_loc, b_loc):
-        """Stores anchoring a conservation law keep their normal stamp in the DC guess."""
+    def kernel(self):
+        stamp, derivs, report = self.KERNEL
+        return Kernel(stamp=stamp, derivs=derivs, observe=vessel_observe, observables=("V",) if self.cap else (),
+                      report=report)
+
+    def dc_short(self):
+        return self.ind and not self.cap
+
+    def dc_stamp(self, p, A_loc, b_loc, keep):
+        """Steady state without stenosis: the capacitor open, the inductor a short (dc_fill);
+        stores anchoring a conservation law keep their normal stamp."""
+        orig = (A_loc.copy(), b_loc.copy())
+        A_loc[...] = 0.0
+        b_loc[...] = 0.0
+        self.dc_fill(A_loc, p["R_poiseuille"])
         kept = np.asarray(keep, dtype=bool)
         if self.cap and kept.any():
             A_loc[:, kept] = orig[0][:, kept]
             b_loc[:, kept] = orig[1][:, kept]
         return A_loc, b_loc
-
-    def kernel_options(self):
-        return np.array([int(self.cap), int(self.ind), int(self.opts["stenotic"])], dtype=np.int64)
-
-    def dc_short(self):
-        return self.ind and not self.cap
 
 
 class BloodVessel(Vessel):
@@ -131,26 +199,13 @@ class BloodVessel(Vessel):
     def store_edge(self):
         return ("in", "ref") if self.ind else ("out", "ref")
 
-    def dc_stamp(self, p, A_loc, b_loc, keep):
-        """Steady state without stenosis: the capacitor open, the inductor a short."""
-        R = p["R_poiseuille"]
-        orig = (A_loc.copy(), b_loc.copy())
-        A_loc[...] = 0.0
-        b_loc[...] = 0.0
-        if self.cap and self.ind:   # branch (in, ref) becomes in -> out through R
-            A_loc[..., 0, 3], A_loc[..., 1, 3] = 1.0, -1.0
-            A_loc[..., 3, 0], A_loc[..., 3, 1], A_loc[..., 3, 3] = 1.0, -1.0, -R
-        elif self.cap:              # Q_in = Q_out through R, P_out = P_in - R Q_in
-            A_loc[..., 0, 3], A_loc[..., 1, 4] = 1.0, 1.0
-            A_loc[..., 3, 0], A_loc[..., 3, 1], A_loc[..., 3, 3] = 1.0, -1.0, -R
-            A_loc[..., 4, 3], A_loc[..., 4, 4] = 1.0, 1.0
-        elif self.ind:              # a conductance 1/R (large when R = 0)
-            g = 1.0 / np.maximum(R, 1e-6)
-            A_loc[..., 0, 0], A_loc[..., 0, 1], A_loc[..., 1, 0], A_loc[..., 1, 1] = g, -g, -g, g
-        else:
-            A_loc[..., 0, 3], A_loc[..., 1, 3] = 1.0, -1.0
-            A_loc[..., 3, 0], A_loc[..., 3, 1], A_loc[..., 3, 3] = 1.0, -1.0, -R
-        return self.restore_kept(keep, orig, A_loc, b_loc)
+    def dc_fill(self, A, R):
+        if self.ind and not self.cap:
+            return dc_conductance(A, R)
+        dc_series(A, 3, R)  # branch 3 carries in -> out through R
+        if self.cap and not self.ind:  # Q_in = Q_out, P_out = P_in - R Q_in
+            A[..., 1, 3], A[..., 1, 4] = 0.0, 1.0
+            A[..., 4, 3], A[..., 4, 4] = 1.0, 1.0
 
     def initial_states(self, p, u, flows=None, x=None):
         out = np.zeros(u.shape[:2] + (len(self.states()),))
@@ -162,67 +217,3 @@ class BloodVessel(Vessel):
         elif self.ind:
             out[..., 0] = q_in
         return out
-
-    def kernel(self):
-        from hemocircuit.kernels import Kernel
-        return Kernel(stamp=vessel_stamp, derivs=vessel_derivs, observe=vessel_observe,
-                      observables=("V",) if self.cap else (), report=vessel_report)
-
-
-# --- the equations (hemocircuit.kernels contract) -------------------------------------------
-# p = [R_poiseuille, C, L, stenosis_coefficient]; iopt = [capacitive, inductive, stenotic];
-# layout as above.  The stenosis term is linearised at the iterate's flow only for a stenotic
-# vessel: an affine one is stamped once per nodal solve, its iterate not read (zeros)
-@jit
-def vessel_stamp(p, x, u, t, iopt, A, b):
-    R, S = p[0], p[3]
-    if iopt[2] == 0:
-        S = 0.0
-    if iopt[0] != 0:
-        Pc = x[0] / p[1]
-        slope, off = stenosis_linearised(R, S, u[3])
-        branch(A, b, 0, 2, 3, Pc + off)  # Q_in: in -> (R) -> c -> ref
-        A[3, 3] = -slope
-        if iopt[1] != 0:
-            imposed_flow(b, 2, 1, x[1])  # Q_out delivered at out, drawn from ref
-        else:
-            branch(A, b, 1, 2, 4, Pc)  # P_out - P_ref = P_c
-    elif iopt[1] != 0:
-        imposed_flow(b, 0, 1, x[0])
-    else:
-        slope, off = stenosis_linearised(R, S, u[3])
-        branch(A, b, 0, 1, 3, off)
-        A[3, 3] = -slope
-
-
-@jit
-def vessel_derivs(p, x, u, t, iopt, dx):
-    R, S = p[0], p[3]
-    if iopt[0] != 0:
-        Pc = x[0] / p[1]
-        if iopt[1] != 0:
-            dx[0] = u[3] - x[1]
-            dx[1] = (Pc - (u[1] - u[2])) / p[2]
-        else:
-            dx[0] = u[3] + u[4]
-    elif iopt[1] != 0:
-        dx[0] = (u[0] - u[1] - stenosis_drop(R, S, x[0])) / p[2]
-
-
-@jit
-def vessel_observe(p, x, iopt, out):
-    if iopt[0] != 0:
-        out[0] = x[0]
-
-
-@jit
-def vessel_report(p, x, u, t, iopt, out):
-    """[V (capacitive),] Q_in, Q_out."""
-    if iopt[0] != 0:
-        out[0] = x[0]
-        out[1] = u[3]
-        out[2] = x[1] if iopt[1] != 0 else -u[4]
-    else:
-        q = x[0] if iopt[1] != 0 else u[3]
-        out[0] = q
-        out[1] = q

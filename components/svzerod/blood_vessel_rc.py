@@ -13,7 +13,7 @@ q enters at ``in`` and leaves at ``out`` (Q_in = Q_out = q); dX/dt = q - (P_in -
 """
 from __future__ import annotations
 
-from hemocircuit.component import Component, Observable, Param, State
+from hemocircuit.component import Param, State
 
 from ._common import Block, C_UNIT, flow_observables, jit, kernel_method, R_UNIT
 

@@ -10,13 +10,8 @@ with A(t) the activation function (option ``activation``, parameters as in
 components/svzerod/activation.py).  Pressures relative to ``ref`` (ground in imported models).
 Units: Emax, Emin [mmHg/mL], Vrd, Vrs [mL], Impedance L [mmHg*s^2/mL] > 0, period [s].
 States: Vc [mL] (a volume store, so closed loops conserve it), Q_out [mL/s].
-Q_out's scale is 0.1 mL/s, not 10: the scale sets the finite-difference step of the
-integrator's Jacobian (1e-7 x max(|Q_out|, scale)), and Q_out usually feeds a ValveTanh, whose
-flow switches between its closed and open branches over about 1/(k Rmax) (1e-7 mL/s for
-chamber_elastance_inductor's k = 100 cm^2/dyn, Rmax = 1e5 dyn s/cm^5).  A step of 1e-6 mL/s
-(scale 10) spans ten such widths, the Jacobian is wrong there and RODAS5P crept through each
-valve-1 opening and closing in 6 000 - 15 000 steps (21 700 per cycle, ~80 s for the case's 30
-cycles); with 1e-8 mL/s it takes ~50 (docs/svzerod.md, "Speed").
+Q_out's scale is 0.1 mL/s, not 10: it sets the engine's difference step (1e-7 x the scale),
+which must stay below the switching width of the ValveTanh it feeds (docs/svzerod.md, "Speed").
 Local unknowns [P_in, P_out, P_ref, q]: branch (in, ref) with P_in - P_ref = E (Vc - Vrest)
 carrying q = dVc/dt; Q_out (state) imposed from in to out, so Q_in = q + Q_out.
 """
@@ -24,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hemocircuit.component import Component, Observable, Option, Param, State, Storage
+from hemocircuit.component import Observable, Option, Param, State, Storage
 
 from ._common import Block, branch, E_UNIT, flow_observables, imposed_flow, jit, kernel_method, L_UNIT, open_branches, per_element
 from .activation import KINDS, act_parameters, activation, activation_breakpoints, check_activation

@@ -25,7 +25,7 @@ import math
 
 import numpy as np
 
-from hemocircuit.component import Component, Observable, Param, State, Storage
+from hemocircuit.component import Observable, Param, State, Storage
 
 from ._common import Block, branch, flow_observables, imposed_flow, jit, kernel_method
 

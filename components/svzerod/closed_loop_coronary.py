@@ -10,11 +10,8 @@ their residuals, with P_a = P_in - Ra Q_in,
     V_im = Cim (P_out + Rv Q_out - P_im),   P_im = im * P_vent
 are the circuit  in -> Ra -> a (Ca to the reference) -> Ram -> m (Cim to P_im) -> Rv -> out.
 Left: P_vent = P_LV, im = iml; right: P_vent = P_RV, im = imr (their heart block "CLH").
-Their P_LV (P_RV) is the heart's Elv_s F(t) (V_LV - Vlv_u) (Erv_s, V_RV, Vrv_u), F the raw
-25-mode Fourier series (activation.fourier_raw); here the block computes it from parameters the
-importer ties to the heart with netlist expressions: ``im: "= CLH.iml"``, ``E_s: "= CLH.Elv_s"``,
-``V_u: "= CLH.Vlv_u"``, ``period: "= CLH.period"`` and the state-only observable
-``V_vent: "= CLH.V_LV"``, so P_im follows the ventricle's state at every evaluation, as theirs.
+P_vent = F(t) E_s (V_vent - V_u) as the heart's (F: activation.fourier_raw), from parameters the
+importer ties to the heart by expressions (``im: "= CLH.iml"``, ``V_vent: "= CLH.V_LV"``, ...).
 Units: Ra [mmHg*s/mL] >= 0, Ram, Rv [mmHg*s/mL] > 0, Ca, Cim [mL/mmHg] > 0, im
 dimensionless, E_s [mmHg/mL], V_u, V_vent [mL], period [s].  States (volume stores, so the
 closed loop conserves them): V_a = Ca P_a and V_im = Cim (P_m - P_im) [mL] (their volume_im).
@@ -27,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hemocircuit.component import Component, Observable, Param, State, Storage
+from hemocircuit.component import Observable, Param, State, Storage
 
 from ._common import batch_shape, Block, branch, C_UNIT, conductance, E_UNIT, flow_observables, jit, kernel_method, open_branches, per_element, R_UNIT
 from .activation import fourier_raw

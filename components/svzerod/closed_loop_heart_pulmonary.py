@@ -16,22 +16,16 @@ Equations (SimVascular/svZeroDSolver src/model/ClosedLoopHeartPulmonary.cpp, ``u
 AA: their atrial activation (the ``wrapping_cosine`` of activation.py with Tsa, tpwave); F(t):
 their 25-mode Fourier series of ventricular elastance, NOT normalised (as in this block).
 Valves: v = 0 (closed) while P_upstream <= P_downstream and Q <= 0, else 1; their post_solve
-sets a closed valve's Q to 0.  Here a closed valve's dQ/dt is 0 and Q >= 0 is a hard limit
-(the integration stops where Q reaches 0 and puts it there), the same semantics: on the
-solution Q >= 0, so "Q <= 0" is "Q = 0", and v = 0 only at Q = 0 exactly with P_upstream <=
-P_downstream.  Below the bound (Q < 0: only the integrator's stages go there, never an
-accepted step) the valve is open: the open valve's equations continued smoothly.  Their
-v(Q <= 0) instead made f jump on the bound's far side: the Rosenbrock stages sampled both sides
-and the steps' results stayed just above 0 (Q_RA ~1e-7 mL/s with dQ/dt = -4e3 mL/s^2 at
-t = 6.0195 s of closedLoopHeart_singleVessel), so the integrator crept on with steps of
-~1e-10 s (300 000 steps reached t = 6.019459 s) without ever reaching the bound.
+sets a closed valve's Q to 0.  Here Q >= 0 is a hard limit (the integration stops where Q
+reaches 0 and holds it there) and v = 0 only on it (Q = 0 exactly, dP <= 0): the same on the
+solution.  Below the bound (only the integrator's stages go there) the valve is open, the
+open valve continued smoothly; their v(Q <= 0) made f jump there and the integrator crept along
+the bound with ~1e-10 s steps (docs/svzerod.md, "Speed").
 Note (theirs, kept): the left atrium fills with the right ventricle's outflow v_RV Q_RV; the
 pulmonary RC only sets the back-pressure P_pul.  So the blood volume is
 V_RA + V_RV + V_LA + V_LV + Cpa P_out (not Cp P_pul), which is what the stores declare.
-Units: L* [mmHg*s^2/mL], R* and Rpd [mmHg*s/mL], Cp, Cpa [mL/mmHg], Erv_s, Elv_s, Emax_* [mmHg/mL],
-Kxp_* [mmHg], Kxv_* [1/mL], V* [mL], Tsa, tpwave, iml, imr dimensionless (iml, imr scale the
-intramyocardial pressure of the closed-loop coronary blocks, which read them, Elv_s/Erv_s,
-Vlv_u/Vrv_u and the state-only observables V_LV/V_RV through netlist expressions), period [s].
+Units: PARAMS (iml, imr, Elv_s/Erv_s, Vlv_u/Vrv_u and the state-only V_LV/V_RV are read by
+the closed_loop_coronary blocks through netlist expressions).
 States: V_RA, Q_RA, V_RV, Q_RV, V_pul = Cp P_pul, V_LA, Q_LA, V_LV, Q_LV, V_ao = Cpa P_out.
 Local unknowns [P_in, P_out, P_ref, q_in, q_out]: branch (in, ref) P_in - P_ref = P_RA carrying
 Q_in; branch (out, ref) P_out - P_ref = V_ao/Cpa carrying -Q_out.
@@ -40,7 +34,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hemocircuit.component import Component, Observable, Param, State, Storage
+from hemocircuit.component import Observable, Param, State, Storage
 from hemocircuit.derivatives import FD_REL
 
 from ._common import batch_shape, Block, branch, C_UNIT, E_UNIT, flow_observables, jit, kernel_method, L_UNIT, R_UNIT
@@ -146,13 +140,11 @@ def heart_derivs(p, x, u, t, iopt, dx):
 
 @jit
 def _valve_row(Jx, i, q, v, dp, R, L, up, a_up, down, a_down):
-    """Row i (dQ/dt = v (P_up - P_down - R Q) / L) of a valve's flow Q = x[q]: the pressures'
-    slopes a_up, a_down in the states up, down while open.  The own column, d/dQ: -R/L while
-    open; for a closed valve (v = 0, Q = 0 on its bound) the forward difference quotient the
-    engine's element-local differences take, (dp - R h) / (L h) with h = FD_REL Q_SCALE (the
-    valve opens at Q = h): f jumps there, and this large entry is what has kept the
-    Rosenbrock stages of a closed valve at its bound (-R/L there: 77 % more steps at rtol
-    1e-5; 0, session 7: 52 % more; docs/performance.md, "Session 15")."""
+    """Row i (dQ/dt = v (P_up - P_down - R Q) / L) of a valve's flow Q = x[q]; a_up, a_down: the
+    pressures' slopes in the states up, down.  d/dQ: -R/L while open; for a closed valve (v = 0
+    on its bound Q = 0) the engine's forward quotient (dp - R h) / (L h), h = FD_REL Q_SCALE (f
+    jumps at Q = h; this entry keeps the Rosenbrock stages of a closed valve on its bound:
+    docs/performance.md)."""
     Jx[i, up] = v * a_up / L
     Jx[i, down] = -v * a_down / L
     if v != 0.0:

@@ -11,7 +11,7 @@ q_c = dV/dt; Rd a conductance from c to out.
 """
 from __future__ import annotations
 
-from hemocircuit.component import Component, Observable, Param, State, Storage
+from hemocircuit.component import Observable, Param, State, Storage
 
 from ._common import Block, branch, C_UNIT, conductance, flow_observables, jit, kernel_method, open_branches, R_UNIT
 

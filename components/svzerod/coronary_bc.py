@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hemocircuit.component import Component, Observable, Param, State
+from hemocircuit.component import Observable, Param, State
 
 from ._common import Block, branch, C_UNIT, jit, kernel_method, R_UNIT
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hemocircuit.component import Component, Observable, Option, Param, State, Storage
+from hemocircuit.component import Observable, Option, Param, State, Storage
 
 from ._common import Block, branch, E_UNIT, flow_observables, jit, kernel_method, open_branches, per_element
 from .activation import KINDS, act_parameters, activation, activation_breakpoints, check_activation

@@ -8,7 +8,7 @@ current pressures are on (the nodal Newton iteration settles on a consistent sid
 """
 from __future__ import annotations
 
-from hemocircuit.component import Component, Observable, Param
+from hemocircuit.component import Observable, Param
 
 from ._common import Block, check_rmin_rmax, conductance, jit, kernel_method, R_UNIT
 

@@ -10,7 +10,7 @@ unknowns [P_node, P_ref, Q_in]: the branch row P_node - P_ref - Rp Q_in = V/C.
 """
 from __future__ import annotations
 
-from hemocircuit.component import Component, Observable, Param, State
+from hemocircuit.component import Observable, Param, State
 
 from ._common import Block, branch, C_UNIT, jit, kernel_method, R_UNIT
 

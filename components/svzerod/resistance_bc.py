@@ -6,7 +6,7 @@ Q the flow from ``node`` into the block (to ``ref``, ground in imported models).
 """
 from __future__ import annotations
 
-from hemocircuit.component import Component, Observable, Param
+from hemocircuit.component import Observable, Param
 
 from ._common import Block, conductance, jit, kernel_method, R_UNIT
 

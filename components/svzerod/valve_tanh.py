@@ -6,23 +6,18 @@ Equations (SimVascular/svZeroDSolver src/model/ValveTanh.cpp, ``update_constant`
 (their third equation only writes the output ``valve_status`` = (1 + tanh(k (P_out - P_in)))/2,
 reported here as the observable ``status``).  Open (Rmin) when P_in > P_out.
 Units: Rmin, Rmax [mmHg*s/mL] (0 <= Rmin <= Rmax, Rmax > 0), steepness k [1/mmHg].
-Stamp: their residual form, a branch (in, out) carrying Q with P_in - P_out - R(dP) Q = 0
-(dP = P_in - P_out) linearised at the current iterate (dP0, Q0):
-    (1 - Q0 R'(dP0)) dP - R(dP0) Q = -Q0 R'(dP0) dP0,   R' = -(Rmax - Rmin) k / (2 cosh^2(k dP)).
-Newton on this form, in series with an inductor (Q given), solves dP = Q R(dP), whose slope
-1 - Q R' >= 1 for forward flow: it converges where the conductance form Q = dP/R(dP) (slope
-changing 1e5-fold within 1e-7 mmHg at their steepness 1e4) does not, and R -> 0 (Rmin = 0)
-is a short, not a division by zero.  For reverse flow (Q R' > 0) the slope 1 - Q R' may
-vanish in the switching band; there the iteration uses slope 1 (a fixed-point step
-dP = Q R(dP)), which has the same solution (the residual is exact, only the step changes).
-(1 + tanh(-k dP))/2 is evaluated as s = 1/(1 + exp(2 k dP)) (the same function), which stays
-> 0 where 1 + tanh underflows to 0 (the exponent is clipped at 700).
+Stamp: their residual P_in - P_out - R(dP) Q = 0 on a branch (in, out) carrying Q, linearised
+at the iterate (dP0, Q0): (1 - Q0 R'(dP0)) dP - R(dP0) Q = -Q0 R'(dP0) dP0, with
+R' = -(Rmax - Rmin) k / (2 cosh^2(k dP)).  This form converges where the conductance form
+Q = dP/R(dP) does not (its slope changes 1e5-fold within 1e-7 mmHg at their k = 1e4), and
+Rmin = 0 is a short; where 1 - Q R' < 1 (reverse flow) the step uses slope 1 (same solution).
+(1 + tanh(-k dP))/2 is evaluated as 1/(1 + exp(2 k dP)), exponent clipped at 700.
 """
 from __future__ import annotations
 
 import math
 
-from hemocircuit.component import Component, Observable, Param
+from hemocircuit.component import Observable, Param
 
 from ._common import Block, branch, check_rmin_rmax, jit, kernel_method, R_UNIT
 
