@@ -74,6 +74,7 @@ def readme_examples():
 
 
 TESTED = {"steady_state_curves.py", "lee97_phosphorylation.py", "kuo91_dynamics.py", "compare_variants.py",
+          "body_autoregulation.py",
           "payne06_phase_vs_tau.py", "svzerod_closed_loop.py", "fitting/", "sensitivity/", "quickstart.ipynb"}
 
 
@@ -109,6 +110,24 @@ def test_steady_state_curves(tmp_path):
     kuo = (d["preset"] == "kuo91") & (d["case"] == "active_no_flow")
     assert np.interp(60.0, d["P [mmHg]"][kuo], r[kuo]) == pytest.approx(60.0, abs=3.0)  # the thesis's set point
     assert_pngs(tmp_path, ["steady_kuo91.png", "steady_falcone91.png", "steady_passive_both.png"])
+
+
+def test_body_autoregulation(tmp_path):
+    """Smoke mode: 50 s records, 20 s windows, a cuff release at 20 s.  What the clinic sees:
+    impaired (passive) arterioles lose the phase lead and gain flow per pressure, the ARI falls
+    to about 0, and a slower Ca (larger tau_Ca) lessens the LF phase lead."""
+    run_example("body_autoregulation.py", tmp_path)
+    out = tmp_path / "body_autoregulation"
+    t = read_csv(out / "tfa.csv")
+    lf = {case: t["phase_deg"][(t["case"] == case) & (t["band"] == "LF")][0] for case in ("intact", "impaired")}
+    gain = {case: t["gain"][(t["case"] == case) & (t["band"] == "LF")][0] for case in ("intact", "impaired")}
+    assert lf["intact"] > lf["impaired"] + 5 and gain["impaired"] > 1.3 * gain["intact"]
+    a = read_csv(out / "ari.csv")
+    ari = dict(zip(a["case"], a["ari"]))
+    assert ari["intact"] >= 2 and ari["impaired"] <= 1
+    tau = read_csv(out / "tau_phase.csv")
+    assert tau["lf_phase_deg"][0] > tau["lf_phase_deg"][-1]  # tau_Ca 2 s leads more than 20 s
+    assert_pngs(out, ["tfa.png", "cuff.png", "tau_phase.png"])
 
 
 def test_lee97_phosphorylation(tmp_path):
