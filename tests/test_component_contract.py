@@ -7,8 +7,10 @@ entry-point group -- with no knowledge of particular types:
   consistently, and every unit parses with pint;
 * the numerical hooks return the documented shapes and types (stamp, derivatives, observe,
   default/initial states, dc_stamp, breakpoints, limited_states);
-* ``kernel()``, when not None, gives the same stamp, derivatives and state-only observables
-  as the numpy hooks.
+* the kernel functions compiled give what they give as Python (the one definition, run both
+  ways); the flows an element stamps into its nodes fill the volume it stores (conservation);
+  the analytic partials of ``derivs_jac`` match central differences of ``derivs``.
+  (Closed forms of the simple types: tests/test_kernels_simple.py.)
 
 Parameter values: each type's defaults (its preset for the current options) for every option
 combination, the values of its elements in the bundled netlists (with the states and local
@@ -20,6 +22,7 @@ from __future__ import annotations
 import glob
 import math
 import numbers
+import zlib
 
 import numpy as np
 import pytest
@@ -333,45 +336,131 @@ def _close(got, ref, what, scale_ref=None):
     np.testing.assert_allclose(got, ref, rtol=1e-10, atol=1e-12 * scale + 1e-300, equal_nan=True, err_msg=what)
 
 
+def _pmat(comp, p, n):
+    return np.ascontiguousarray(np.stack([np.broadcast_to(p[nm], (1, n))[0] for nm in comp.parameters], axis=1),
+                                dtype=float)
+
+
+def _call_kernel(k, comp, pe, xe, ue, t, pick):
+    """Every output of the kernel functions for one element, each function taken by ``pick``
+    (its compiled dispatcher or its Python function): A, b, dx, the state-only observables,
+    the report and (dx, Jx, Ju, flag) of derivs_jac, where the type has them."""
+    iopt = comp.kernel_options()
+    S, L = len(comp.states()), len(comp.local_nodes) + len(comp.branches())
+    A, b, dx = np.zeros((L, L)), np.zeros(L), np.full(S, np.nan)
+    ob = np.full(len(k.observables), np.nan)
+    pick(k.stamp)(pe, xe, ue, t, iopt, A, b)
+    pick(k.derivs)(pe, xe, ue, t, iopt, dx)
+    pick(k.observe)(pe, xe, iopt, ob)
+    out = [A, b, dx, ob]
+    if k.report is not None:
+        rep = np.full(len(comp.observables()), np.nan)
+        pick(k.report)(pe, xe, ue, t, iopt, rep)
+        out.append(rep)
+    if k.derivs_jac is not None:
+        d2, Jx, Ju = np.zeros(S), np.zeros((S, S)), np.zeros((S, L))
+        flag = pick(k.derivs_jac)(pe, xe, ue, t, iopt, d2, Jx, Ju)
+        out += [d2, Jx, Ju, np.array([float(flag)])]
+    return out
+
+
+def _compiled(fn):
+    return getattr(fn, "dispatcher", fn)  # hemocircuit.kernels.jit.njit makes it on first use
+
+
+def _python(fn):
+    return fn.py_func
+
+
 @pytest.mark.parametrize("name", NAMES)
-def test_kernel_matches_the_numpy_hooks(name, netlist_samples):
+def test_compiled_kernels_equal_their_python_functions(name, netlist_samples):
+    """The one definition of a type's equations runs compiled in the engine and as Python
+    everywhere else (hemocircuit.elementwise): both give the same numbers, to rounding, for
+    every kernel function on the samples and on random points around them (states and local
+    unknowns perturbed by up to 5 %, two times)."""
     cls = TYPES[name]
     if cls().kernel() is None:
         pytest.skip(f"'{name}' has no kernel (numpy path only)")
+    rng = np.random.default_rng(zlib.crc32(name.encode()))
     for comp, p, x, u in samples_of(cls, netlist_samples):
         k = comp.kernel()
         assert k.observables == tuple(o.name for o in comp.observables() if o.state_only)
-        iopt = comp.kernel_options()
-        S, L = len(comp.states()), len(comp.local_nodes) + len(comp.branches())
         n = x.shape[1]
-        pmat = np.ascontiguousarray(np.stack([np.broadcast_to(p[nm], (1, n))[0] for nm in comp.parameters], axis=1))
-        for t in (0.0, 1.5):
-            A_np, b_np = comp.stamp(p, x, None if comp.linear_in_pressure else u, t, None)
-            A_np = np.broadcast_to(A_np, (1, n, L, L))[0]
-            b_np = np.broadcast_to(b_np, (1, n, L))[0]
-            dx_np = np.broadcast_to(comp.derivatives(p, x, u, t, None), (1, n, S))[0]
-            # At an equilibrium (the netlists' samples) a rate is the near-cancelling difference of
-            # much larger terms, and its rounding is relative to those terms: the rates 0.1 % away
-            # from that state give their size.
-            dx_kick = np.broadcast_to(comp.derivatives(p, x * 1.001, u, t, None), (1, n, S))[0]
-            ob_np = comp.observe(p, x, None, t, None)
-            for e in range(n):
-                xe, ue = np.ascontiguousarray(x[0, e], dtype=float), np.ascontiguousarray(u[0, e], dtype=float)
-                A, b = np.zeros((L, L)), np.zeros(L)
-                k.stamp(pmat[e], xe, ue, t, iopt, A, b)
-                dx = np.full(S, np.nan)
-                k.derivs(pmat[e], xe, ue, t, iopt, dx)
-                out = np.full(len(k.observables), np.nan)
-                k.observe(pmat[e], xe, iopt, out)
-                where = f"{name} {comp.opts} element {e} t={t}"
-                _close(A, A_np[e], f"stamp A, {where}")
-                _close(b, b_np[e], f"stamp b, {where}")
-                _close(dx, dx_np[e], f"derivatives, {where}", np.concatenate([dx_np[e], dx_kick[e]]))
-                xk = np.ascontiguousarray(xe * 1.001)
-                k.derivs(pmat[e], xk, ue, t, iopt, dx)
-                _close(dx, dx_kick[e], f"derivatives 0.1 % off the sampled states, {where}")
-                for j, o in enumerate(k.observables):
-                    _close(out[j], np.broadcast_to(ob_np[o], (1, n))[0, e], f"observable {o}, {where}")
+        pmat = _pmat(comp, p, n)
+        for e in range(n):
+            for draw in range(4):
+                f = 1.0 if draw == 0 else 1.0 + 0.05 * rng.uniform(-1.0, 1.0)
+                xe = np.ascontiguousarray(x[0, e] * (1.0 + 0.05 * rng.uniform(-1, 1, x.shape[-1]) * (draw > 0)))
+                ue = np.ascontiguousarray(u[0, e] * f)
+                for t in (0.0, 1.37):
+                    with np.errstate(all="ignore"):
+                        got = _call_kernel(k, comp, pmat[e], xe, ue, t, _compiled)
+                        ref = _call_kernel(k, comp, pmat[e], xe, ue, t, _python)
+                    for i, (g, r) in enumerate(zip(got, ref)):
+                        _close(g, r, f"{name} {comp.opts} element {e} draw {draw} t={t}: output {i}")
+
+
+def _stored_rate(comp, k, pe, xe, dx, iopt):
+    """d/dt of the volume the element stores [mL/s]: the rate of each storage's state, or, for a
+    volume derived from the states (an arteriolar bed's pi r^2 L n, the heart's chambers), the
+    central difference of its observable along dx/dt."""
+    names = [s.name for s in comp.states()]
+    rate = 0.0
+    for st in comp.storages():
+        if st.state is not None:
+            rate += dx[names.index(st.state)]
+            continue
+        j = k.observables.index(st.volume)
+        size = np.maximum(np.abs(xe), [st.scale for st in comp.states()])
+        h = 1e-6 / max(np.max(np.abs(dx) / size), 1e-300)
+        vals = []
+        for sgn in (1.0, -1.0):
+            ob = np.zeros(len(k.observables))
+            k.observe(pe, np.ascontiguousarray(xe + sgn * h * dx), iopt, ob)
+            vals.append(ob[j])
+        rate += (vals[0] - vals[1]) / (2 * h)
+    return rate
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_stamped_flows_fill_the_stores(name, netlist_samples):
+    """Conservation of blood, generically: the flows an element draws from its nodes (A u - b
+    of its stamp, node rows), summed over every node but the reference side of its stores
+    (``Storage.minus``, where a store's other plate takes the flow back), equal the rate of
+    change of the volume it stores (its ``storages()``; 0 for an element without one), for
+    any local unknowns -- the samples and random ones around them (not at a state held on a
+    hard limit, ``limited_states``: a clamped compliance at V = 0 stops draining by design)."""
+    cls = TYPES[name]
+    if cls().kernel() is None:
+        pytest.skip(f"'{name}' has no kernel (numpy path only)")
+    rng = np.random.default_rng(7)
+    for comp, p, x, u in samples_of(cls, netlist_samples):
+        k = comp.kernel()
+        iopt = comp.kernel_options()
+        S, K = len(comp.states()), len(comp.local_nodes)
+        L = K + len(comp.branches())
+        minus = {st.minus for st in comp.storages()}
+        rows = [j for j, nd in enumerate(comp.local_nodes) if nd not in minus]
+        n = x.shape[1]
+        pmat = _pmat(comp, p, n)
+        limited = comp.limited_states(p, x)
+        for e in range(n):
+            if limited[0, e].any():
+                continue  # a state held at its limit (a collapsed, clamped compliance): the model's choice
+            for draw in range(3):
+                ue = np.ascontiguousarray(u[0, e] + (draw > 0) * rng.uniform(-5.0, 5.0, L))
+                xe = np.ascontiguousarray(x[0, e], dtype=float)
+                for t in (0.0, 0.41):
+                    A, b, dx = np.zeros((L, L)), np.zeros(L), np.zeros(S)
+                    k.stamp(pmat[e], xe, ue, t, iopt, A, b)
+                    k.derivs(pmat[e], xe, ue, t, iopt, dx)
+                    flows = A @ ue - b
+                    net = float(np.sum(flows[rows]))
+                    rate = _stored_rate(comp, k, pmat[e], xe, dx, iopt)
+                    scale = np.max(np.abs(flows[:K]), initial=0.0) + abs(rate) + 1e-12
+                    assert abs(net - rate) <= 1e-6 * scale, (
+                        f"{name} {comp.opts} element {e} t={t}: flows into the element {net!r}, "
+                        f"stored volume rate {rate!r}")
 
 
 @pytest.mark.parametrize("name", [n for n in NAMES if TYPES[n]().kernel() is not None

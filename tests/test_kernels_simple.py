@@ -1,5 +1,6 @@
-"""Compiled kernels of the simple element types, waveform records and expression bytecode,
-each against its numpy / Python reference (component hooks, Waveform.__call__,
+"""The simple element types against closed forms computed by hand (resistor, inductor, linear
+and log compliance, sources, ResistanceBC, RCR, BloodVessel, valves at their limits); waveform
+records and expression bytecode against their Python references (Waveform.__call__,
 Expression.evaluate) over random inputs, every option combination and the branch edges."""
 import math
 import pickle
@@ -14,6 +15,7 @@ from hemocircuit.components.compliance import LinearCompliance, LogCompliance
 from hemocircuit.components.inductor import Inductor
 from hemocircuit.components.resistor import Resistor
 from hemocircuit.components.sources import FlowSource, PressureSource
+from hemocircuit.components.svzerod import BloodVessel, PiecewiseValve, RCRBC, ResistanceBC, ValveTanh
 from hemocircuit.components.tracer_pools import TissuePool, TracerPool
 from hemocircuit.expressions import Expression, Reference, constant_reference
 from hemocircuit.kernels import Kernel
@@ -163,8 +165,8 @@ def _run_kernel(comp, p, x, u, t, src=None):
 
 
 @pytest.mark.parametrize("type_name,opts", CASES, ids=[f"{t}-{o}" for t, o in CASES])
-def test_component_kernel_matches_numpy(type_name, opts):
-    cls, gen = TYPES[type_name]
+def test_component_kernels_are_numba_functions(type_name, opts):
+    cls, _ = TYPES[type_name]
     comp = cls(opts)
     k = comp.kernel()
     assert isinstance(k, Kernel)
@@ -174,23 +176,151 @@ def test_component_kernel_matches_numpy(type_name, opts):
         assert isinstance(f, numba.core.registry.CPUDispatcher) and f.targetoptions.get("nogil")
     iopt = comp.kernel_options()
     assert iopt.dtype == np.int64 and iopt.ndim == 1
-    rng = np.random.default_rng(zlib.crc32(repr((type_name, sorted(opts.items()))).encode()))
-    source = cls in (PressureSource, FlowSource)
-    for t in (0.0, 0.7, 3.0, 5.5, 9.25):
-        p, x, u = gen(rng)
-        if source:
-            p["start"][0, :10] = t  # exactly at the start of the sine term
-        for with_src in ((False, True) if source else (False,)):
-            s = rng.uniform(-30.0, 30.0, (1, E)) if with_src else None  # a waveform's value
-            A_np, b_np = comp.stamp(p, x, u if not comp.linear_in_pressure else None, t, src=s)
-            dx_np = comp.derivatives(p, x, u, t, src=s)
-            ob = comp.observe(p, x, None, t, src=s)
-            A_k, b_k, dx_k, obs_k = _run_kernel(comp, p, x, u, t, src=s)
-            close(A_k, A_np[0])
-            close(b_k, b_np[0])
-            close(dx_k, dx_np[0])
-            for j, name in enumerate(k.observables):
-                close(obs_k[:, j], ob[name][0])
+
+
+# ---------------------------------------------------- closed forms, computed by hand ---------
+def evaluate(comp, p, x, u, t=0.0, src=None):
+    """(flows A u - b of the stamp [node rows then branch residuals], dx/dt, {observable: value})
+    of ONE element through the component's hooks (its kernel functions)."""
+    p = {k: np.full((1, 1), float(v)) for k, v in p.items()}
+    x = np.array(x, dtype=float).reshape(1, 1, -1)
+    u = np.array(u, dtype=float).reshape(1, 1, -1)
+    s = None if src is None else np.full((1, 1), float(src))
+    L = u.shape[-1]
+    A, b = comp.stamp(p, x, None if comp.linear_in_pressure else u, t, s)
+    A = np.broadcast_to(A, (1, 1, L, L))[0, 0]
+    b = np.broadcast_to(b, (1, 1, L))[0, 0]
+    dx = np.broadcast_to(comp.derivatives(p, x, u, t, s), x.shape)[0, 0]
+    obs = {k: float(np.broadcast_to(v, (1, 1))[0, 0]) for k, v in comp.observe(p, x, u, t, s).items()}
+    return A @ u[0, 0] - b, dx, obs
+
+
+def test_resistor_closed_form():
+    # q = (P_a - P_b)/R = (10 - 4)/2 = 3 mL/s leaves a, enters b
+    flows, dx, _ = evaluate(Resistor(), {"R": 2.0}, [], [10.0, 4.0])
+    close(flows, [3.0, -3.0])
+    assert dx.shape == (0,)
+
+
+def test_inductor_closed_form():
+    # the state q = 2 mL/s flows a -> b; dq/dt = (P_a - P_b)/L = (10 - 4)/0.5 = 12 mL/s^2
+    flows, dx, obs = evaluate(Inductor(), {"L": 0.5}, [2.0], [10.0, 4.0])
+    close(flows, [2.0, -2.0])
+    close(dx, [12.0])
+    assert obs["q"] == 2.0
+
+
+def test_linear_compliance_closed_form():
+    # P_node - P_ref = (V - V0)/C = (5 - 1)/2 = 2 mmHg: at P = 3, 1 the branch row is satisfied;
+    # the branch flow 0.7 mL/s leaves node, returns at ref and fills the store: dV/dt = 0.7
+    p = {"C": 2.0, "V0": 1.0}
+    flows, dx, obs = evaluate(LinearCompliance(), p, [5.0], [3.0, 1.0, 0.7])
+    close(flows, [0.7, -0.7, 0.0], atol=1e-15)
+    close(dx, [0.7])
+    assert obs == {"V": 5.0, "C": 2.0}
+    flows, _, _ = evaluate(LinearCompliance(), p, [5.0], [4.0, 1.0, 0.0])
+    close(flows[2], 1.0)  # residual: 3 mmHg across, 2 mmHg from the volume
+    clamped = LinearCompliance({"clamp_at_zero": True})
+    close(evaluate(clamped, p, [0.0], [0.0, 0.0, -0.7])[1], [0.0])  # empty: no more draining
+    close(evaluate(clamped, p, [0.0], [0.0, 0.0, 0.7])[1], [0.7])  # filling goes on
+    assert evaluate(clamped, p, [-1.0], [0.0, 0.0, 0.0])[2]["V"] == 0.0
+
+
+def test_log_compliance_closed_form():
+    # dP = P0 + exp(k (V - Vn)) = 2 + exp(0.5 * (5 - 3)) = 2 + e;  C = exp(-k (V - Vn))/k = 2/e
+    p = {"k": 0.5, "P0": 2.0, "Vn": 3.0}
+    flows, dx, obs = evaluate(LogCompliance({"clamp_at_zero": False}), p, [5.0], [2.0 + math.e, 0.0, 1.5])
+    close(flows, [1.5, -1.5, 0.0], atol=1e-15)
+    close(dx, [1.5])
+    close([obs["V"], obs["C"]], [5.0, 2.0 / math.e])
+    # below V_eps = Vn + ln(EPS)/k = 3 + ln(1e-3)/0.5: the plain law, and the extension
+    # dP = P0 + EPS (1 + k (V - V_eps)), C = 1/(k EPS) = 2000 mL/mmHg
+    V, V_eps = -12.0, 3.0 + 2.0 * math.log(1e-3)
+    plain = evaluate(LogCompliance({"clamp_at_zero": False}), p, [V], [0.0, 0.0, 0.0])
+    close(-plain[0][2], 2.0 + math.exp(0.5 * (V - 3.0)))
+    ext = evaluate(LogCompliance({"clamp_at_zero": False, "extended": True}), p, [V], [0.0, 0.0, 0.0])
+    close(-ext[0][2], 2.0 + 1e-3 * (1.0 + 0.5 * (V - V_eps)))
+    close(ext[2]["C"], 2000.0)
+
+
+SINE = {"amplitude": 10.0, "frequency": 0.25, "phase": 0.0, "start": 1.0}
+
+
+def test_pressure_source_closed_form():
+    # value(t) = 80 + 10 sin(2 pi 0.25 (t - 1)) for t >= 1: 90 mmHg at t = 2; 80 before the start,
+    # plus a waveform's value (5 mmHg) added to the value
+    comp = PressureSource()
+    for t, src, value in ((2.0, None, 90.0), (0.5, None, 80.0), (0.5, 5.0, 85.0)):
+        flows, _, _ = evaluate(comp, {"value": 80.0, **SINE}, [], [0.0, 0.0, 4.0], t, src)
+        close(flows, [4.0, -4.0, -value])  # the branch flow 4 mL/s; P_node - P_ref - value = -value
+    flows, _, _ = evaluate(comp, {"value": 80.0, **SINE}, [], [100.0, 10.0, 0.0], 2.0)
+    close(flows[2], 0.0)
+
+
+def test_flow_source_closed_form():
+    # q = 3 + 1 sin(2 pi 0.5 (1 - 0) + pi/2) = 3 + sin(3 pi/2) = 2 mL/s from a to b at t = 1
+    p = {"value": 3.0, "amplitude": 1.0, "frequency": 0.5, "phase": math.pi / 2, "start": 0.0}
+    flows, _, _ = evaluate(FlowSource(), p, [], [50.0, 7.0], 1.0)
+    close(flows, [2.0, -2.0])
+
+
+def test_resistance_bc_closed_form():
+    # Q = (P - Pd)/R = (10 - 2)/4 = 2 mL/s into the block
+    flows, _, obs = evaluate(ResistanceBC(), {"R": 4.0, "Pd": 2.0}, [], [10.0, 0.0])
+    close(flows, [2.0, -2.0])
+    close(obs["Q_in"], 2.0)
+
+
+def test_rcr_closed_form():
+    # V = 8 mL, C = 2: P_c = 4 mmHg; P = 7 = P_c + Rp Q with Rp = 1, Q = 3;
+    # C dP_c/dt = Q - (P_c - Pd)/Rd = 3 - (4 - 1)/3 = 2, so dV/dt = 2 mL/s
+    p = {"Rp": 1.0, "C": 2.0, "Rd": 3.0, "Pd": 1.0}
+    flows, dx, obs = evaluate(RCRBC(), p, [8.0], [7.0, 0.0, 3.0])
+    close(flows, [3.0, -3.0, 0.0], atol=1e-15)
+    close(dx, [2.0])
+    close([obs["P_c"], obs["Q_in"]], [4.0, 3.0])
+
+
+def test_blood_vessel_closed_forms():
+    p = {"R_poiseuille": 2.0, "C": 0.5, "L": 0.5, "stenosis_coefficient": 0.0}
+    # R alone: P_in - P_out = R q: 10 - 4 = 2 * 3
+    flows, _, obs = evaluate(BloodVessel(), p, [], [10.0, 4.0, 0.0, 3.0])
+    close(flows, [3.0, -3.0, 0.0, 0.0], atol=1e-15)
+    assert obs["Q_in"] == obs["Q_out"] == 3.0
+    # a zero stenosis coefficient changes nothing; S = 0.5 adds S|q|q: 10 - 4 = (2 + 0.5 * 2) 2
+    st = BloodVessel({"stenotic": True})
+    close(evaluate(st, p, [], [10.0, 4.0, 0.0, 3.0])[0], [3.0, -3.0, 0.0, 0.0], atol=1e-15)
+    close(evaluate(st, {**p, "stenosis_coefficient": 0.5}, [], [10.0, 4.0, 0.0, 2.0])[0], [2.0, -2.0, 0.0, 0.0],
+          atol=1e-15)
+    # RC: V = 3, C = 0.5: P_c = 6 = P_out; P_in = P_c + R Q_in = 6 + 2 * 1; Q_out = 0.4:
+    # dV/dt = Q_in - Q_out = 0.6
+    flows, dx, obs = evaluate(BloodVessel({"capacitive": True}), p, [3.0], [8.0, 6.0, 0.0, 1.0, -0.4])
+    close(flows, [1.0, -0.4, -0.6, 0.0, 0.0], atol=1e-15)
+    close(dx, [0.6])
+    close([obs["V"], obs["Q_in"], obs["Q_out"]], [3.0, 1.0, 0.4])
+    # RL: L dQ/dt = P_in - P_out - R Q = 10 - 4 - 2 * 1 = 4, dQ/dt = 8
+    flows, dx, _ = evaluate(BloodVessel({"inductive": True}), p, [1.0], [10.0, 4.0, 0.0])
+    close(flows, [1.0, -1.0, 0.0])
+    close(dx, [8.0])
+
+
+def test_valve_limits():
+    # ValveTanh open (P_in > P_out by 5 mmHg, k = 10: the Rmax weight 1/(1 + e^100) ~ 4e-44): R = Rmin,
+    # Q = 5/0.1 = 50 satisfies the branch row; closed (5 mmHg the other way): R = Rmax, Q = -5/1000
+    p = {"Rmin": 0.1, "Rmax": 1000.0, "steepness": 10.0}
+    flows, _, obs = evaluate(ValveTanh(), p, [], [10.0, 5.0, 50.0])
+    close(flows, [50.0, -50.0, 0.0], atol=1e-12)
+    close(obs["status"], 0.0, atol=1e-40)
+    flows, _, obs = evaluate(ValveTanh(), p, [], [5.0, 10.0, -0.005])
+    close(flows, [-0.005, 0.005, 0.0], atol=1e-12)
+    close(obs["status"], 1.0)
+    # halfway (equal pressures): R = (Rmin + Rmax)/2, status 1/2
+    close(evaluate(ValveTanh(), p, [], [5.0, 5.0, 0.0])[2]["status"], 0.5)
+    # PiecewiseValve: Q = dP/Rmin forward, dP/Rmax backward
+    pv = {"Rmin": 0.5, "Rmax": 100.0}
+    close(evaluate(PiecewiseValve(), pv, [], [10.0, 5.0])[0], [10.0, -10.0])
+    close(evaluate(PiecewiseValve(), pv, [], [5.0, 10.0])[0], [-0.05, 0.05])
+    close(evaluate(PiecewiseValve(), pv, [], [5.0, 10.0])[2]["Q"], -0.05)
 
 
 def test_option_encodings():
@@ -231,8 +361,9 @@ def test_inputs_reach_every_branch():
                               comp.derivatives(p, x, u, 0.0))
 
 
-def test_kernels_propagate_nan_like_numpy():
-    """np.maximum / np.minimum keep NaN; the kernels' clamps must too."""
+def test_kernels_propagate_nan():
+    """The kernels' clamps (max(V, 0), max(q, 0), the volume floor) keep a NaN input NaN, as
+    np.maximum does: a NaN state, flow or volume gives NaN, never a clamped finite number."""
     for type_name, opts in [("log_compliance", {"clamp_at_zero": True, "extended": True}),
                             ("log_compliance", {"clamp_at_zero": True, "extended": False}),
                             ("compliance", {"clamp_at_zero": True}), ("tracer_pool", {})]:
@@ -245,15 +376,13 @@ def test_kernels_propagate_nan_like_numpy():
             p = dict(p)
             p["V"] = p["V"].copy()
             p["V"][0, 15:20] = np.nan
-        with np.errstate(invalid="ignore"):
-            A_np, b_np = comp.stamp(p, x, None, 0.0)
-            dx_np = comp.derivatives(p, x, u, 0.0)
-            ob = comp.observe(p, x, None, 0.0)
         A_k, b_k, dx_k, obs_k = _run_kernel(comp, p, x, u, 0.0)
-        close(b_k, b_np[0])
-        close(dx_k, dx_np[0])
-        for j, name in enumerate(comp.kernel().observables):
-            close(obs_k[:, j], ob[name][0])
+        assert np.all(np.isnan(obs_k[5:10, 0])), type_name  # V (compliances) or C (pools)
+        assert np.all(np.isfinite(obs_k[20:, 0])), type_name
+        if type_name == "tracer_pool":
+            assert np.all(np.isnan(dx_k[5:20, 0])) and np.all(np.isfinite(dx_k[20:, 0]))
+        else:
+            assert np.all(np.isnan(b_k[5:10, 2])) and np.all(np.isfinite(b_k[20:, 2]))
 
 
 # =========================================================== waveforms =======================
