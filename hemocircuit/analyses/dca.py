@@ -51,10 +51,10 @@ def register_cli(sub, common):
     _series_options(sp)
     sp.add_argument("--window", type=float, default=100.0, help="Welch window length [s] (default 100)")
     sp.add_argument("--overlap", type=float, default=0.5, help="window overlap, a fraction (default 0.5)")
-    sp.add_argument("--detrend", choices=("constant", "linear"), default="constant",
-                    help="what each window loses before its FFT: its mean (default) or its linear trend")
-    sp.add_argument("--smoothing", type=int, default=3,
-                    help="points of triangular spectral smoothing (default 3, as the CARNet script; 1: none)")
+    sp.add_argument("--detrend", choices=("constant", "linear"), default="linear",
+                    help="what each window loses before its FFT: its linear trend (default) or its mean")
+    sp.add_argument("--smoothing", type=int, default=1,
+                    help="points of triangular spectral smoothing (default 1: none; 3 as the CARNet script)")
     sp.add_argument("--keep-negative-phase", action="store_true",
                     help="count negative phases below 0.1 Hz (left out by default as wrap-around)")
     sp.set_defaults(func=cmd_tfa)
