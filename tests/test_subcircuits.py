@@ -3,6 +3,7 @@ its ports wired to nodes; names, parameters, nesting, and clear errors."""
 import shutil
 import textwrap
 
+import numpy as np
 import pytest
 
 import hemocircuit as hc
@@ -155,3 +156,40 @@ def test_declared_ports_must_all_be_connected_and_cycles_are_named(folder):
         """, "b.yaml")
     with pytest.raises(NetlistError, match=r"instances form a cycle: .*a.yaml -> .*b.yaml -> .*a.yaml"):
         hc.load(str(folder.path / "a.yaml"))
+
+
+def _flat_side(p, rla):
+    return f"""
+  - {{id: {p}Rla, type: resistor, nodes: [carotid, {p}alpha], R: {rla} mmHg*s/mL}}
+  - {{id: {p}Rsv, type: resistor, nodes: [{p}beta, {p}v], R: 1.32 mmHg*s/mL}}
+  - {{id: {p}Cv, type: log_compliance, nodes: [{p}v, {p}ic], k: 0.186 1/mL, P0: -2.25 mmHg, Vn: 28 mL}}
+  - {{id: {p}Pic, type: pressure_source, nodes: [{p}ic, ground], value: 10 mmHg}}
+  - {{id: {p}Rlv, type: resistor, nodes: [{p}v, jugular], R: 0.56 mmHg*s/mL}}
+  - {{id: {p}art, type: arteriole, nodes: [{p}alpha, {p}beta, {p}ic], preset: kuo91, volume_flow: true,
+     L: 50 mm, n: 16000}}"""
+
+
+def test_two_instances_equal_the_hand_written_flat_netlist(folder):
+    """The same circuit written out by hand (L_*, R_* for left.*, right.*): operating point and a
+    pressure-step transient equal to 1e-12; --set reaches into an instance's arteriole."""
+    from hemocircuit.protocol import Protocol
+    flat = folder("""
+        name: flat
+        elements:
+          - {id: Pa, type: pressure_source, nodes: [carotid, ground], value: 80 mmHg}
+          - {id: Pv, type: pressure_source, nodes: [jugular, ground], value: 6 mmHg}""" +
+                  textwrap.indent(_flat_side("L_", 0.4) + _flat_side("R_", 0.8), "        ") + "\n", "flat.yaml")
+    runs = {}
+    for name, path in (("inst", folder(TWO, "two.yaml")), ("flat", flat)):
+        c = hc.load(path)
+        proto = Protocol.from_dict({"events": [{"at": "1 s", "set": {"Pa.value": "90 mmHg"}}]}, circuit=c)
+        runs[name] = (c.operating_point(), c.simulate(20.0, dt=0.5, protocol=proto, rtol=1e-8))
+    pairs = {"Q(left.Rla)": "Q(L_Rla)", "Q(right.Rla)": "Q(R_Rla)", "P(right.alpha)": "P(R_alpha)",
+             "left.art.r": "L_art.r", "right.art.Ca": "R_art.Ca", "V(left.Cv)": "V(L_Cv)"}
+    (op_i, tr_i), (op_f, tr_f) = runs["inst"], runs["flat"]
+    for a, b in pairs.items():
+        assert op_i[a] == pytest.approx(op_f[b], rel=1e-12, abs=0)
+        np.testing.assert_allclose(tr_i[a], tr_f[b], rtol=1e-12, atol=0)
+    c = hc.load(folder(TWO, "two.yaml")).with_values({"left.art.tau_Ca": "5 s"})
+    assert c.parameters.values["left.art.tau_Ca"][0] == pytest.approx(5.0)
+    assert c.parameters.values["right.art.tau_Ca"][0] != pytest.approx(5.0)
