@@ -401,8 +401,13 @@ class Result:
         names, units = [], {}
         for head in rows[0]:
             n, u = parse_label(head)
+            if n in units:
+                raise ValueError(f"column {n!r} appears twice in the header")
             names.append(n)
             units[n] = u
+        for i, row in enumerate(rows[1:]):
+            if len(row) != len(names):  # zip would drop the columns past a short row
+                raise ValueError(f"data row {i + 1} has {len(row)} cells, the header {len(names)}")
         cells = list(zip(*rows[1:])) if len(rows) > 1 else [()] * len(names)
         cols = {n: _typed(list(c)) for n, c in zip(names, cells)}
         return cls._make(cols, units, index, meta)

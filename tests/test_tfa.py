@@ -274,3 +274,27 @@ def test_output_noise_at_a_chosen_coherence(coherence):
     for k in range(3):
         assert res["coherence"][k] == pytest.approx(coherence, abs=0.05)
         assert res["gain"][k] == pytest.approx(1.0, rel=0.02 if coherence > 0.6 else 0.05)
+
+
+@pytest.mark.parametrize("text, message", [
+    ("time;ABP;CBFV\n0;90;60\n0.1;91;61\n", "separate the columns with commas"),
+    ("time,ABP,ABP\n0,90,60\n0.1,91,61\n", "column 'ABP' appears twice in the header"),
+    ("time,ABP,CBFV\n0,90,60\n0.1,91\n", "data row 2 has 2 cells, the header 3"),
+    ("", "no table"),
+])
+def test_odd_recordings_get_clear_errors(tmp_path, capsys, text, message):
+    path = tmp_path / "rec.csv"
+    path.write_text(text)
+    assert main(["tfa", str(path), "--input", "ABP", "--output", "CBFV"]) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err
+
+
+def test_a_header_with_spaces_and_units_is_read(tmp_path):
+    path = tmp_path / "rec.csv"
+    t, x = _series_at(10.0, 300, seed=14)
+    with open(path, "w") as fh:
+        fh.write("Time [s], ABP [mmHg] , CBFV [cm/s]\n")
+        fh.writelines(f"{a},{b},{0.5 * b}\n" for a, b in zip(t, x))
+    t2, x2, y2, names, units = read_series(path, "ABP", "CBFV", time="Time")
+    assert units == ("mmHg", "cm/s") and np.allclose(y2, 0.5 * x2) and len(t2) == len(t)

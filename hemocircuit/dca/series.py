@@ -42,6 +42,9 @@ def read_series(path, input, output, time=None):
     from ..results import Result
     res = Result.load(path)
     names = list(res.keys())
+    if len(names) == 1 and any(sep in names[0] for sep in ";\t"):
+        raise HemocircuitError(f"{path}: the header is one column {names[0]!r}; separate the columns with commas "
+                               "(a CSV file), not semicolons or tabs")
     if time is None:
         time = next((n for n in list(res.index) + ["time", "t", "Time", "TIME"] if n in res.data), None)
         if time is None:
