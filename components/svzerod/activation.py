@@ -101,6 +101,23 @@ def act_parameters():
     return out
 
 
+class Activated:
+    """Mixin of the chambers driven by an activation function (their option ``activation``)."""
+
+    time_dependent = True
+
+    def check(self, p):
+        return check_activation(self.opts["activation"], p)
+
+    def breakpoints(self, p, t0, t1):
+        """The activation's kinks (kink_phases): steps end there."""
+        return activation_breakpoints(self.opts["activation"], p, t0, t1)
+
+    def kernel_options(self):
+        """[activation kind (index in KINDS)]."""
+        return np.array([KINDS.index(self.opts["activation"])], dtype=np.int64)
+
+
 def check_activation(kind, p):
     """Cross-parameter checks: the chosen function's dividing parameters are > 0."""
     out = []

@@ -22,7 +22,7 @@ import numpy as np
 from hemocircuit.component import Observable, Option, Param, State, Storage
 
 from ._common import Block, branch, E_UNIT, flow_observables, imposed_flow, jit, kernel_method, L_UNIT, open_branches, per_element
-from .activation import KINDS, act_parameters, activation, activation_breakpoints, check_activation
+from .activation import KINDS, Activated, act_parameters, activation
 
 OWN_PARAMS = {"Emax": Param(E_UNIT, lower=0.0, doc="maximum elastance"),
         "Emin": Param(E_UNIT, lower=0.0, doc="minimum elastance"),
@@ -71,14 +71,13 @@ def cei_report(p, x, u, t, iopt, out):
     out[2] = x[1]  # Q_out
 
 
-class ChamberElastanceInductor(Block):
+class ChamberElastanceInductor(Activated, Block):
     __doc__ = __doc__
     type_name = "chamber_elastance_inductor"
     svzerod_blocks = ("ChamberElastanceInductor",)
     terminals = ("in", "out", "ref")
     parameters = {**OWN_PARAMS, **act_parameters()}
     options = {"activation": Option("half_cosine", choices=KINDS, doc="activation function A(t)")}
-    time_dependent = True
     kernel = kernel_method(cei_stamp, cei_derivs, cei_observe, ("Vc",), report=cei_report)
     BRANCHES = (("in", "ref"),)
     EDGES = (("in", "ref", "pressure"), ("in", "out", "flow"))
@@ -86,13 +85,6 @@ class ChamberElastanceInductor(Block):
     STORAGES = (Storage("in", "ref", "Vc", state="Vc"),)
     OBSERVABLES = (Observable("Vc", "mL", "chamber volume", state_only=True),
                    *flow_observables("the chamber", "the chamber"))
-
-    def check(self, p):
-        return check_activation(self.opts["activation"], p)
-
-    def breakpoints(self, p, t0, t1):
-        """The activation's kinks (activation.kink_phases): steps end there."""
-        return activation_breakpoints(self.opts["activation"], p, t0, t1)
 
     def dc_stamp(self, p, A_loc, b_loc, keep):
         """Steady state: the store open (q = 0) unless it anchors a conservation law, the
@@ -116,5 +108,3 @@ class ChamberElastanceInductor(Block):
             out[..., 1] = -flows[..., 1]
         return out
 
-    def kernel_options(self):
-        return np.array([KINDS.index(self.opts["activation"])], dtype=np.int64)

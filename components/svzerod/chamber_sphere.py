@@ -36,7 +36,6 @@ PARAMS = {"rho": ("mmHg*s**2/cm**2", True, "wall density"), "thick0": ("cm", Tru
       "alpha_max": ("1/s", False, "activation rate in systole"), "alpha_min": ("1/s", False, "activation rate in diastole"),
       "tsys": ("s", False, "systole start in the cycle"), "tdias": ("s", False, "diastole start in the cycle"),
       "steepness": ("s", True, "activation switch width"), "period": ("s", True, "cardiac period T")}
-_P = PARAMS  # the old name, read by hemocircuit/svzerod/importer.py until it reads PARAMS
 
 
 @jit

@@ -58,7 +58,6 @@ PARAMS = {"period": ("s", "cardiac period (their cardiac_cycle_period)"),
       "Kxp_la": ("mmHg", "LA passive pressure scale"), "Kxv_la": ("1/mL", "LA passive volume exponent"),
       "Emax_ra": (E_UNIT, "RA active elastance"), "Emax_la": (E_UNIT, "LA active elastance"),
       "Vaso_ra": ("mL", "RA rest volume"), "Vaso_la": ("mL", "LA rest volume")}
-_P = PARAMS  # the old name, read by hemocircuit/svzerod/importer.py until it reads PARAMS
 _POSITIVE = {"period", "tpwave", "Tsa", "Lra_v", "Lrv_a", "Lla_v", "Llv_a", "Rpd", "Cp", "Cpa"}
 _NONNEG = {"Rra_v", "Rrv_a", "Rla_v", "Rlv_ao"}
 

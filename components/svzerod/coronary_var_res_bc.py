@@ -67,9 +67,7 @@ class CoronaryVarResBC(CoronaryBC):
     # the first seven in coronary_bc's order (its compiled stamp reads p[0] = Ra1, p[3] = Ca)
     parameters = {"Ra1": Param(R_UNIT, lower=0.0, doc="arterial resistance"),
                   "Ra2_min": Param(R_UNIT, lower=0.0, lower_open=True, doc="minimum microvascular resistance"),
-                  "Rv1": CoronaryBC.parameters["Rv1"], "Ca": CoronaryBC.parameters["Ca"],
-                  "Cc": CoronaryBC.parameters["Cc"], "Pim": CoronaryBC.parameters["Pim"],
-                  "P_v": CoronaryBC.parameters["P_v"],
+                  **{k: CoronaryBC.parameters[k] for k in ("Rv1", "Ca", "Cc", "Pim", "P_v")},
                   "Ra2_max": Param(R_UNIT, lower=0.0, lower_open=True, doc="maximum microvascular resistance"),
                   "T_vc": Param("s", lower=0.0, lower_open=True, doc="contraction time"),
                   "T_vr": Param("s", lower=0.0, lower_open=True, doc="relaxation time"),

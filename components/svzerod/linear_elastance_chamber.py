@@ -11,12 +11,11 @@ E (Vc - Vrest) carrying q = dVc/dt, and branch (in, out) with P_in = P_out carry
 """
 from __future__ import annotations
 
-import numpy as np
 
 from hemocircuit.component import Observable, Option, Param, State, Storage
 
 from ._common import Block, branch, E_UNIT, flow_observables, jit, kernel_method, open_branches, per_element
-from .activation import KINDS, act_parameters, activation, activation_breakpoints, check_activation
+from .activation import KINDS, Activated, act_parameters, activation
 
 
 # --- the equations: p = [Emax, Epass, Vrest, period, 13 activation parameters];
@@ -51,7 +50,7 @@ def lec_report(p, x, u, t, iopt, out):
     out[2] = u[4]  # Q_out
 
 
-class LinearElastanceChamber(Block):
+class LinearElastanceChamber(Activated, Block):
     __doc__ = __doc__
     type_name = "linear_elastance_chamber"
     svzerod_blocks = ("LinearElastanceChamber",)
@@ -61,7 +60,6 @@ class LinearElastanceChamber(Block):
                   "Vrest": Param("mL", doc="rest volume"),
                   **act_parameters()}
     options = {"activation": Option("piecewise_cosine", choices=KINDS, doc="activation function A(t)")}
-    time_dependent = True
     kernel = kernel_method(lec_stamp, lec_derivs, lec_observe, ("Vc",), report=lec_report)
     BRANCHES = (("in", "ref"), ("in", "out"))
     EDGES = (("in", "ref", "pressure"), ("in", "out", "pressure"))
@@ -69,13 +67,6 @@ class LinearElastanceChamber(Block):
     STORAGES = (Storage("in", "ref", "Vc", state="Vc"),)
     OBSERVABLES = (Observable("Vc", "mL", "chamber volume", state_only=True),
                    *flow_observables("the chamber", "the chamber"))
-
-    def check(self, p):
-        return check_activation(self.opts["activation"], p)
-
-    def breakpoints(self, p, t0, t1):
-        """The activation's kinks (activation.kink_phases): steps end there."""
-        return activation_breakpoints(self.opts["activation"], p, t0, t1)
 
     def dc_stamp(self, p, A_loc, b_loc, keep):
         """Steady state: the store open (q = 0) unless it anchors a conservation law."""
@@ -85,5 +76,3 @@ class LinearElastanceChamber(Block):
         E = per_element(lec_elastance, self, p, 0.0)
         return ((u[..., 0] - u[..., 2]) / E + p["Vrest"])[..., None]
 
-    def kernel_options(self):
-        return np.array([KINDS.index(self.opts["activation"])], dtype=np.int64)

@@ -957,7 +957,7 @@ class _Importer:
         case is SI read as numbers: any consistent system gives the same numbers); their
         internal variables radius, velo, stress, tau, volume as output columns with the factors
         from ours (cm, mmHg, mL)."""
-        from hemocircuit.components.svzerod.chamber_sphere import _P
+        from hemocircuit.components.svzerod.chamber_sphere import PARAMS as _P
 
         P, Lu, V = self.u["P"], self.u["L"], self.u["V"]
         ours = {"mmHg*s**2/cm**2": f"({P})*s**2/({Lu})**2", "cm": Lu, "mmHg": P, "mmHg*s": f"({P})*s",
@@ -1031,7 +1031,7 @@ class _Importer:
 
     def heart_values(self, prm):
         """Their ClosedLoopHeartAndPulmonary parameters with units of this unit system."""
-        from hemocircuit.components.svzerod.closed_loop_heart_pulmonary import _P
+        from hemocircuit.components.svzerod.closed_loop_heart_pulmonary import PARAMS as _P
 
         P, V = self.u["P"], self.u["V"]
         ours = {"mmHg*s/mL": self.uR, "mmHg*s**2/mL": self.uL, "mL/mmHg": self.uC, "mmHg/mL": self.uE,
