@@ -29,7 +29,7 @@ import numpy as np
 
 import hemocircuit as hc
 from hemocircuit.fitting.datasets import write_table
-from hemocircuit.fitting.problem import _with_values
+from hemocircuit.fitting.experiments import with_values
 from hemocircuit.protocol import Protocol
 from hemocircuit.units import conversion_factor
 
@@ -53,7 +53,7 @@ CASES = {  # name: (structural options, dP [cmH2O])
 def steady_radius(base, preset, options, pup_mmhg, pdown_mmhg):
     """Operating points of the isolated arteriole at every (Pup, Pdown), one batch; r in um."""
     c = base.with_options({"art.preset": preset, **options})
-    c = _with_values(c, {"Pup.value": pup_mmhg, "Pdown.value": pdown_mmhg}, B=len(pup_mmhg))
+    c = with_values(c, {"Pup.value": pup_mmhg, "Pdown.value": pdown_mmhg}, B=len(pup_mmhg))
     op = c.operating_point()
     assert op.units["art.r"] == "um"
     return np.asarray(op["art.r"], dtype=float)

@@ -10,7 +10,7 @@
 
 ``evaluate(assign, epochs, B)`` returns the observed quantity (B, n) in the observed column's
 unit (NaN where a member failed).  Every parameter change goes through
-:func:`hemocircuit.fitting.problem._with_values`.
+:func:`with_values`.
 """
 from __future__ import annotations
 
@@ -18,6 +18,14 @@ import numpy as np
 
 from ..derived import evaluate_derived
 from ..errors import FitSpecError, HemocircuitError
+
+
+def with_values(circuit, mapping, B=None):
+    """``circuit`` with parameters changed: mapping {ID.PARAM: quantity string, number in the
+    declared unit, or array of B values}; ``B`` makes a single circuit a batch of B members."""
+    B = circuit.B if B is None else int(B)
+    c = circuit if B == circuit.B else circuit.batch(B)
+    return c.with_values(mapping) if mapping else c
 
 
 def _observed(circuit, observe, values, spec_file, key):
@@ -134,12 +142,11 @@ class SteadyExperiment:
         self._warm = WarmStarts()
 
     def evaluate(self, assign, epochs, B):
-        from .problem import _with_values
 
         n = self.n
         mapping = {p: np.repeat(np.broadcast_to(np.asarray(v, float), (B,)), n) for p, v in assign.items()}
         mapping.update({p: np.tile(v, B) for p, v in self.inputs.items()})
-        c = _with_values(self.base, mapping, B * n)
+        c = with_values(self.base, mapping, B * n)
         keys = WarmStarts.keys(assign, epochs, B)
         warm = self._warm.lookup(keys)
         if warm is not None:
@@ -211,14 +218,13 @@ class TransientExperiment:
     def evaluate(self, assign, epochs, B):
         """epochs: {(ID.PARAM, time): (B,) values} for the epoch parameters."""
         from ..batch_integrator import integrate
-        from .problem import _with_values
 
         def member_values(v):
             return np.broadcast_to(np.asarray(v, float), (B,)).copy()
 
         first = {p: member_values(v) for p, v in assign.items()}
         first.update({p: member_values(v) for (p, t), v in epochs.items() if t == 0.0})
-        c = _with_values(self.base, first, B)
+        c = with_values(self.base, first, B)
         keys = WarmStarts.keys(assign, epochs, B)
         warm = self._warm.lookup(keys)
         X, _, ok = solve_steady(c, None if warm is None else np.concatenate(warm, axis=0))
@@ -233,7 +239,7 @@ class TransientExperiment:
                 ev = events[k - 1]
                 change = dict(ev.set)
                 change.update({p: member_values(v) for (p, t), v in epochs.items() if t == float(ev.at)})
-                c = _with_values(c, change)
+                c = with_values(c, change)
             last = k == len(bounds) - 2
             sel = (self.times >= t_a) & ((self.times <= t_b) if last else (self.times < t_b))
             if t_b <= t_a:

@@ -14,7 +14,7 @@ least squares.  The thesis's error (sections sspassivefit, activefitting) is the
 minimised "the sum of the rms errors" of the flow and no-flow cases, which is
 :meth:`FitProblem.rms_error`.
 
-Every parameter change of the fitting code goes through :func:`_with_values` (Circuit.with_values).
+Every parameter change of the fitting code goes through :func:`hemocircuit.fitting.experiments.with_values` (Circuit.with_values).
 """
 from __future__ import annotations
 
@@ -27,18 +27,10 @@ from .. import inputs
 from ..errors import FitSpecError, HemocircuitError, NetlistError
 from ..spec_inputs import check_limit, read, shown
 from .datasets import read_table
-from .experiments import SteadyExperiment, TransientExperiment, observed_unit
+from .experiments import SteadyExperiment, TransientExperiment, observed_unit, with_values
 from .spec import load_spec, parse_value
 
 _PATH = re.compile(r"(?<![\w.])([A-Za-z_]\w*\.[A-Za-z_]\w*)(?![\w(])")
-
-
-def _with_values(circuit, mapping, B=None):
-    """``circuit`` with parameters changed: mapping {ID.PARAM: quantity string, number in the
-    declared unit, or array of B values}; ``B`` makes a single circuit a batch of B members."""
-    B = circuit.B if B is None else int(B)
-    c = circuit if B == circuit.B else circuit.batch(B)
-    return c.with_values(mapping) if mapping else c
 
 
 def _options_and_values(circuit, mapping):
@@ -116,7 +108,7 @@ class FitProblem:
             for v, side in ((a, "lower"), (b, "upper")):
                 if p.epoch is None:
                     try:
-                        _with_values(c, {p.base_path: v})
+                        with_values(c, {p.base_path: v})
                     except NetlistError as exc:
                         raise err(f"the {side} bound {v:.6g} {unit} is not a value {p.base_path} may take "
                                   f"({exc.bare_message}); narrow the bounds", f"{key}.bounds") from None
@@ -173,7 +165,7 @@ class FitProblem:
 
     def _set(self, c, mapping, key):
         try:
-            return _with_values(c, mapping)
+            return with_values(c, mapping)
         except NetlistError as exc:
             raise FitSpecError(exc.bare_message, file=self.spec.file, key=key) from None
 
