@@ -123,12 +123,12 @@ def main(argv=None):
     csv_path = os.path.join(args.out_dir, "payne06_phase_vs_tau.csv")
     res.save(csv_path)
     png_path = os.path.join(args.out_dir, "payne06_phase_vs_tau.png")
-    _plot(png_path, table, summary)
+    plot(png_path, table, summary)
     print(f"wrote {csv_path}\nwrote {png_path}\ntotal {time.perf_counter() - t0:.1f} s")
     return res, summary, wall
 
 
-def _plot(path, table, summary):
+def plot(path, table, summary):
     import matplotlib
 
     matplotlib.use("Agg")

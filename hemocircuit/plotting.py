@@ -163,7 +163,7 @@ def plot_series(res, path, select=None, title=None):
     ax0.set_xlabel(res.label(x_name))
     if spans_decades(x_all, 1.5) and x_name in ("frequency",):
         ax0.set_xscale("log")
-    head = title or res._title()
+    head = title or res.figure_title()
     if omitted:
         head += f"\n(panels for {', '.join(omitted)} left out; choose columns with --show)"
     axes[0, 0].set_title(head, fontsize=10)

@@ -499,7 +499,8 @@ class Result:
         from .plotting import plot_series
         return plot_series(self, path, select=select, title=title)
 
-    def _title(self):
+    def figure_title(self):
+        """'NETLIST.yaml: analysis', the default title of its figures."""
         prov = self.metadata.get("provenance", {}) or {}
         net = prov.get("netlist")
         return f"{os.path.basename(net) if net else ''}: {self.analysis}".strip(": ")

@@ -41,7 +41,7 @@ def run(ctx):
             table[vf, o] = tuple(np.array([r[k] for r in rs]) for k in
                                  ("art.tau_Ca", f"phase({o}/Pa.value)", f"rel_amplitude({o})", "periods", "settled"))
             summary[vf, o] = ex.reversals(table[vf, o][0], table[vf, o][1])
-    ex._plot(ctx.figure_path("phase"), table, summary)
+    ex.plot(ctx.figure_path("phase"), table, summary)
     ctx.existing_figure("phase", "Phase of q1 and q2 against Pa at 0.1 Hz (positive: flow leads) for tau_Ca, with the "
                                  "bed's volume flow as written and neglected.", "figautoregPhase")
 

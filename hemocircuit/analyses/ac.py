@@ -225,7 +225,7 @@ def plot_result(res, path, select=None, title=None):
     ax2.set_ylabel("phase [deg] (+ = output leads)")
     ax2.set_xlabel("frequency [Hz]")
     ax2.grid(alpha=0.3, which="both")
-    ax1.set_title(title or res._title())
+    ax1.set_title(title or res.figure_title())
     save_figure(fig, path)
     return str(path)
 

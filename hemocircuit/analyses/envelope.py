@@ -226,7 +226,7 @@ def plot_result(res, path, select=None, title=None):
     ax.set_ylabel(f"{output} [{res.units.get(f'min({output})', '')}]")
     win = (res.metadata.get("settings") or {}).get("window")
     last = f"the last {100 * float(win):.0f} % of each run" if win else "the last part of each run"
-    ax.set_title(title or f"{res._title()}: {output}, steady state and range over {last}", fontsize=10)
+    ax.set_title(title or f"{res.figure_title()}: {output}, steady state and range over {last}", fontsize=10)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0)
     save_figure(fig, path)

@@ -352,7 +352,7 @@ def plot_result(res, path, select=None, title=None):
     for a in (a1, a2):
         a.grid(alpha=0.3, which="both")
     a1.legend(fontsize=7)
-    a1.set_title(title or res._title())
+    a1.set_title(title or res.figure_title())
     save_figure(fig, path)
     return str(path)
 

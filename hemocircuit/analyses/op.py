@@ -352,8 +352,9 @@ def _calibrate_group(circuit, t, ks, pending, totals):
         laws = [(lambda X, k=j: target(X, k)) if j in aims else totals[j] for j in range(len(totals))]
         X, ok, res = _solve_with_fallbacks(cal, X0, laws, t)
         if not ok:
-            where = ", ".join(f"'{circuit.law_specs[k]['node']}' ({circuit.law_specs[k]['pressure']} mmHg)" for k in ks)
-            raise SolverError(f"calibration of the conserved volume at node(s) {where} when {spec0['when']} did not "
+            where = ", ".join(f"node '{circuit.law_specs[k]['node']}' ({circuit.law_specs[k]['pressure']} mmHg)"
+                              for k in ks)
+            raise SolverError(f"calibration of the conserved volume at {where} when {spec0['when']} did not "
                               "converge", where="computing the operating point")
         return cal.law_volumes(X)
 

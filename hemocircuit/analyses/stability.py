@@ -430,7 +430,7 @@ def plot_result(res, path, select=None, title=None):
     ax2.set_xlabel("Re(lambda) [1/s]")
     ax2.set_ylabel("Im(lambda) [rad/s]")
     ax2.grid(alpha=0.3)
-    fig.suptitle(title or f"{res._title()}: eigenvalues along {param}")
+    fig.suptitle(title or f"{res.figure_title()}: eigenvalues along {param}")
     save_figure(fig, path)
     return str(path)
 
