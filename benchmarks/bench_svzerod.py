@@ -75,7 +75,8 @@ def main(argv=None):
     if not os.path.isdir(os.path.join(folder, "cases")):
         print(f"no svZeroDSolver cases in {folder}: skipped")
         return 0
-    from hemocircuit.svzerod.conformance import case_rtol, compare, read_result, simulate_case, their_times, tolerances
+    from hemocircuit.svzerod.conformance import compare, read_result, simulate_case, their_times
+    from hemocircuit.svzerod.tolerances import case_rtol, tolerances
     from hemocircuit.svzerod.importer import guess_units, import_svzerod
 
     theirs = their_times(os.path.join(folder, "README.md"))
@@ -122,7 +123,8 @@ def matched_row(model, cfg, converged, repeat):
     solver at MULTIPLES of the case's points per cycle (N -> k (N - 1) + 1: every output time
     of the case kept), against their converged rows."""
     import pysvzerod
-    from hemocircuit.svzerod.conformance import compare_their_rows, parse_result, tolerances
+    from hemocircuit.svzerod.conformance import compare_their_rows, parse_result
+    from hemocircuit.svzerod.tolerances import tolerances
 
     tol_p, tol_q = tolerances(model.name, model)
     n = cfg["simulation_parameters"]["number_of_time_pts_per_cardiac_cycle"]
@@ -155,7 +157,7 @@ def print_matched(matched):
 def shooting_row(folder, their_text, repeat, tol=1e-5):
     """closedLoopHeart_singleVessel's periodic steady state by Anderson-accelerated shooting
     (analyses.periodic.shoot, method='anderson', no multipliers) from their initial condition,
-    at the rtol of the timed run above (conformance.case_rtol), to a residual ``tol`` (scaled
+    at the rtol of the timed run above (svzerod.tolerances.case_rtol), to a residual ``tol`` (scaled
     x(T) - x(0); below the 2.3e-5 their 10 cycles leave, measured in session 10); beside it
     the residual their 10 cycles leave, cycle by cycle with our integrator at the same rtol
     (max scaled difference of the states between cycles 9 and 10).  Against their 10 cycles'
@@ -165,7 +167,7 @@ def shooting_row(folder, their_text, repeat, tol=1e-5):
     from hemocircuit.analyses.periodic import _flow, shoot
     from hemocircuit.ic import apply_ic
     from hemocircuit.svzerod import import_svzerod, load_svzerod
-    from hemocircuit.svzerod.conformance import case_rtol
+    from hemocircuit.svzerod.tolerances import case_rtol
 
     path = os.path.join(folder, "cases", "closedLoopHeart_singleVessel.json")
     c, model = load_svzerod(path, units="mmHg"), import_svzerod(path, units="mmHg")

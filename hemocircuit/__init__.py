@@ -11,7 +11,7 @@ Circuit units: pressure mmHg, flow mL/s, volume mL, time s (see hemocircuit.unit
 """
 from .errors import HemocircuitError, NetlistError, SolverError, TopologyError  # noqa: F401
 
-__version__ = "0.1.0"
+from .version import __version__  # noqa: F401
 
 _LAZY = {"Circuit", "assemble", "load"}
 

@@ -202,7 +202,7 @@ class Circuit:
                     if np.all(arr[:, i] == e.values[name]) and wf is e.waveforms.get(name):
                         continue  # as assembled: the new assembly has the right value
                     updates.append((ngi, ni, name, arr[:, i], wf))
-        return new.with_parameters(ps._with_columns(updates)) if updates else new
+        return new.with_parameters(ps.with_columns(updates)) if updates else new
 
     def steady_variant(self) -> "Circuit":
         """This circuit with each component's ``steady_opts`` applied (for steady-state solves:

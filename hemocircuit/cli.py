@@ -20,7 +20,7 @@ import sys
 from .arguments import assignments, parse_sets, quantity_to, range_spacing
 from .commands import circuit_of_args, computed, load_args, record, report_grid, save_outputs
 from .errors import HemocircuitError, Interrupted
-from .loading import events_only, load_circuit  # noqa: F401 - load_circuit: the loader, also as cli.load_circuit
+from .loading import events_only
 
 EXIT_ERROR = 2            # an error the user can fix (message on stderr)
 EXIT_FAILED_MEMBERS = 3   # a batch completed, but some members failed (each reported)
@@ -204,7 +204,7 @@ def build_parser(command=None):
     module that defines it is imported (``hemocircuit CMD`` starts without importing the
     others); None: every command (also ``--help``, which lists the analysis commands from
     their sources without importing them)."""
-    from . import __version__
+    from .version import __version__
 
     p = argparse.ArgumentParser(prog="hemocircuit", description="Lumped-parameter hemodynamic circuits.")
     p.add_argument("--version", action="version", version=f"hemocircuit {__version__}")

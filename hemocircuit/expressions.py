@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import limits
-from .errors import NetlistError, did_you_mean, excerpt
+from .errors import NetlistError, excerpt
 from .units import Q_, parse_with_unit, si_factor
 
 _FUNCS = {"exp": np.exp, "log": np.log, "sqrt": np.sqrt}
@@ -138,6 +138,10 @@ class Expression:
     def __setstate__(self, state):
         self.__dict__.update(state)
         self._code = compile(self._source, "<expr>", "eval")
+
+    def si_factor(self, key):
+        """The factor from reference ``key``'s unit to SI, as the expression applies it."""
+        return self.si[self._key[key]]
 
     def _named(self):
         return {self._key[k]: r for k, r in self.refs.items()}

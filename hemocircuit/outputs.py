@@ -138,3 +138,15 @@ def input_path(circuit, name) -> str:
         return name
     eid = input_element(circuit, name)
     return f"{eid}.{drive_of(circuit, eid)[1].value}"
+
+
+def interest_of(circuit):
+    """{'outputs': [...], 'derived': {name: {expr, unit}}}: what the default plots draw
+    (stored by :func:`hemocircuit.provenance.stamp` in ``metadata['interest']``)."""
+    try:
+        outs = default_outputs(circuit, "default", required=False)
+    except Exception:  # noqa: BLE001 - a plot preference must never fail an analysis
+        outs = []
+    derived = {k: {"expr": str(v.get("expr", "")), "unit": str(v.get("unit", ""))}
+               for k, v in (getattr(circuit.netlist, "derived", None) or {}).items()}
+    return {"outputs": list(outs), "derived": derived}

@@ -195,7 +195,7 @@ class ParameterSet:
         new.flags.writeable = False
         return new
 
-    def _with_columns(self, updates) -> "ParameterSet":
+    def with_columns(self, updates) -> "ParameterSet":
         """Raw replacement of already checked values: [(gi, i, name, column (1 or B,), waveform
         or None)]; the waveform replaces any other on that parameter.  (Circuit.with_options
         carries values over to a re-assembled structure with it.)"""

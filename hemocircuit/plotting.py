@@ -25,19 +25,6 @@ _UNIT_QUANTITY = {"mmHg": "pressure", "Pa": "stress", "mL/s": "flow", "mL": "vol
 _STYLES = ["-", "--", ":", "-."]
 
 
-def interest_of(circuit):
-    """{'outputs': [...], 'derived': {name: {expr, unit}}}: what the default plots draw
-    (stored by :func:`hemocircuit.provenance.stamp` in ``metadata['interest']``)."""
-    from .outputs import default_outputs
-    try:
-        outs = default_outputs(circuit, "default", required=False)
-    except Exception:  # noqa: BLE001 - a plot preference must never fail an analysis
-        outs = []
-    derived = {k: {"expr": str(v.get("expr", "")), "unit": str(v.get("unit", ""))}
-               for k, v in (getattr(circuit.netlist, "derived", None) or {}).items()}
-    return {"outputs": list(outs), "derived": derived}
-
-
 def quantity(names, unit):
     """A y-axis quantity for columns ``names`` sharing ``unit``: the column's name if one,
     'pressure'/'flow'/'volume' for P()/Q()/V() columns, else a name for the unit."""
@@ -108,7 +95,7 @@ def plot_series(res, path, select=None, title=None):
     """The default plot of a result with an independent variable (the last index column):
     one panel per unit, a line per column and grid member (module docstring)."""
     from .errors import HemocircuitError
-    from .grid import members
+    from .labels import members
     from .io import pyplot, save_figure
 
     if not res.index:

@@ -34,7 +34,7 @@ def versions():
     import numpy
     import scipy
 
-    from . import __version__
+    from .version import __version__
     return {"hemocircuit": __version__, "python": platform.python_version(), "numpy": numpy.__version__,
             "scipy": scipy.__version__}
 
@@ -55,7 +55,7 @@ def stamp(result, analysis, circuit=None, settings=None, started=None, status=No
         if sources is not None and sources.files:
             record_sources(prov, "netlist", sources, circuit.file)
     if circuit is not None and "interest" not in md:  # what the default plots draw (hemocircuit.plotting)
-        from .plotting import interest_of
+        from .outputs import interest_of
         md["interest"] = interest_of(circuit)
     prov["date"] = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
     if started is not None:

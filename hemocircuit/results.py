@@ -34,6 +34,7 @@ import re
 
 import numpy as np
 
+
 _LABEL = re.compile(r"^(.*) \[([^\[\]]*)\]$")
 _INT = re.compile(r"^[-+]?\d+$")
 
@@ -129,11 +130,6 @@ def _pyarrow():
 def _csv_quote(text):
     """Quoted as the csv module quotes (and "" for an empty cell, so a one-column row survives)."""
     return '"' + text.replace('"', '""') + '"' if not text or any(c in text for c in ',"\n\r') else text
-
-
-def label_value(v) -> str:
-    """A grid or sweep value as written in plot legends and messages (4 significant figures)."""
-    return f"{v:.4g}" if isinstance(v, (float, np.floating)) else str(v)
 
 
 def _fmt(v, width=0):

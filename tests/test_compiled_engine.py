@@ -442,7 +442,7 @@ def test_output_from_keeps_the_later_rows(tmp_path, monkeypatch):
     same rows, bit for bit, as the full run's (on both engines); a run longer than a piece of
     the compiled integrator continues through the early rows it keeps as restart points; a
     time outside the run is refused."""
-    from hemocircuit.analyses import transient
+    from hemocircuit.analyses import compiled_run
     from hemocircuit.errors import SolverError
 
     c = _pwl_rc(tmp_path, n=50)
@@ -458,7 +458,7 @@ def test_output_from_keeps_the_later_rows(tmp_path, monkeypatch):
         assert late.metadata["settings"]["output_from"] == 7.0
         lates[engine] = late
     late = lates["compiled"]
-    monkeypatch.setattr(transient, "PIECE_STEPS", 40)  # the run takes 102 steps: 3 pieces
+    monkeypatch.setattr(compiled_run, "PIECE_STEPS", 40)  # the run takes 102 steps: 3 pieces
     pieces = c.simulate(10.0, dt=0.01, x0=np.array([40.0]), engine="compiled", rtol=1e-7, progress=False,
                         output_from=7.0)
     assert np.asarray(pieces.t).tolist() == np.asarray(late.t).tolist()
@@ -575,7 +575,7 @@ def test_output_grid_ends_once_at_t_end():
     """The output times from t0 every dt, and t_end once: t0 + k dt that rounds just below
     t_end (0.7 + 10 x 0.1 = 1.7000000000000002, 2.1 + 20 x 0.05 ...) used to be followed by
     t_end itself, a second row at the same time (99 of 284 (t0, dt) pairs below)."""
-    from hemocircuit.analyses.transient import _output_grid
+    from hemocircuit.analyses.compiled_run import output_grid as _output_grid
 
     for t0 in np.arange(0.0, 50.0, 0.7):
         for dt in (0.1, 0.05, 0.01, 0.3):

@@ -41,17 +41,7 @@ ALLOWED = {
 #: Reaches in modules others are reworking (issue 32): they count toward MAX_REACHES until gone.
 PENDING = {
     ("hemocircuit.execution", "result_queue._writer"): "multiprocessing queue internals (execution.py)",
-    ("hemocircuit.circuit", "ps._with_columns"): "circuit.py: ParameterSet.with_columns is public now",
     ("hemocircuit.kernels.prebuild", "dispatcher._cache"): "numba's dispatcher cache (no public API)",
-    ("hemocircuit.kernels.prebuild", "dispatcher._cache._cache_file"): "numba's dispatcher cache",
-    ("hemocircuit.kernels.prebuild", "dispatcher._cache._cache_file._index_path"): "numba's dispatcher cache",
-    ("hemocircuit.kernels.expressions", "expr._key"): "kernels/expressions.py",
-    # found by this test when it was written (session 20), not yet removed (issue 32):
-    ("hemocircuit.analyses.periodic", "import hemocircuit.analyses.envelope._law_states"): "envelope: make public",
-    ("hemocircuit.analyses.periodic", "import hemocircuit.analyses.envelope._period"): "envelope: make public",
-    ("hemocircuit.kernels.background", "import hemocircuit.analyses.transient._simulate_compiled"):
-        "the transient/background cycle: move the compiled run below both",
-    ("hemocircuit.sensitivity", "import hemocircuit.sensitivity.spec._check_runs"): "sensitivity.spec: make public",
     ("hemocircuit.svzerod.conformance", "import hemocircuit.svzerod.importer._as_float"): "importer split",
     ("hemocircuit.svzerod.conformance", "import hemocircuit.svzerod.importer._show"): "importer split",
     ("hemocircuit.svzerod.output", "import hemocircuit.svzerod.importer._ident"): "importer split",
@@ -166,19 +156,7 @@ def scanned():
 #: The import cycles that remain (issue 32), each with where it should break.  A cycle that is
 #: not inside one of these fails the test; while any of these remains the test is an expected
 #: failure that lists them; with none left it passes.
-KNOWN_CYCLES = {
-    frozenset({"hemocircuit", "hemocircuit.analyses.dc", "hemocircuit.analyses.op", "hemocircuit.batch",
-               "hemocircuit.grid", "hemocircuit.plotting", "hemocircuit.provenance", "hemocircuit.results"}):
-        "results -> plotting/provenance and provenance -> hemocircuit.__version__",
-    frozenset({"hemocircuit.build", "hemocircuit.circuit", "hemocircuit.graph", "hemocircuit.netlist",
-               "hemocircuit.parameters", "hemocircuit.structure", "hemocircuit.svzerod.importer"}):
-        "netlist -> svzerod.importer -> circuit.load",
-    frozenset({"hemocircuit.analyses.periodic", "hemocircuit.svzerod.conformance", "hemocircuit.svzerod.cycles",
-               "hemocircuit.svzerod.output", "hemocircuit.svzerod.steady_initial"}):
-        "svzerod.cycles -> analyses.periodic.shoot; output <-> cycles/steady_initial",
-    frozenset({"hemocircuit.analyses.transient", "hemocircuit.kernels.background"}):
-        "background -> transient._simulate_compiled",
-}
+KNOWN_CYCLES = {}
 
 
 def test_no_import_cycles(scanned):

@@ -455,7 +455,8 @@ def test_chamber_case_keeps_its_start_and_passes():
     import json
 
     from hemocircuit.analyses.op import operating_point
-    from hemocircuit.svzerod.conformance import DRIFT_ATOL, DRIFT_ATOL_OTHERS, drift_atol, keeps_its_start, run_case
+    from hemocircuit.svzerod.conformance import run_case
+    from hemocircuit.svzerod.tolerances import DRIFT_ATOL, DRIFT_ATOL_OTHERS, drift_atol, keeps_its_start
     from hemocircuit.svzerod.importer import guess_units
     from hemocircuit.svzerod.output import _circuits
     from hemocircuit.svzerod.steady_initial import their_steady_initial

@@ -197,7 +197,7 @@ def plot_result(res, path, select=None, title=None):
     names = [k[len("rel_gain("):-1] for k in res.keys() if k.startswith("rel_gain(")]
     if select:
         names = [n for n in names if n.split("/")[0] in select] or names
-    from ..grid import members
+    from ..labels import members
     groups = members(res, [k for k in res.index if k != "frequency"])
     # the relative gain where every output has one; else |H| with its unit (an input or output
     # that is 0 at the operating point has no relative change)

@@ -26,10 +26,11 @@ from ..execution import default_workers, finish_batch, member_results, run_chunk
 from ..derived import derived_units
 from ..io import pyplot, save_figure
 from ..provenance import clock, stamp
-from ..results import Result, label_value
+from ..labels import label_value
+from ..results import Result
 
 
-def _law_states(c):
+def law_states(c):
     held = set()
     for s in c.law_specs:
         for g, i, vol, sign in s["terms"]:
@@ -87,7 +88,7 @@ def _summary(bc, k, r, grid, steady, opt):
         row.update({f"{o} min": float(y.min()), f"{o} max": float(y.max()), f"{o} mean": float(y[sel].mean()),
                     f"{o} steady": float(steady[o][k])})
     row["oscillating"] = bool(any(osc.values()))
-    row["period [s]"] = _period(tw, y0) if row["oscillating"] else float("nan")
+    row["period [s]"] = period_of(tw, y0) if row["oscillating"] else float("nan")
     row["warnings"] = [str(f) for f in plausibility.warnings(findings)]
     if opt.get("keep_series"):
         row["series"] = {o: cols[o] for o in opt["keep_series"] if o in cols}
@@ -95,7 +96,7 @@ def _summary(bc, k, r, grid, steady, opt):
     return row
 
 
-def _period(t, y):
+def period_of(t, y):
     """Mean spacing of upward crossings of the mean (NaN if fewer than two)."""
     z = y - y.mean()
     up = np.nonzero((z[:-1] < 0) & (z[1:] >= 0))[0]
@@ -130,7 +131,7 @@ def envelope(circuit, sweep, grid=None, outputs=None, t_end=1000.0, dt=0.1, wind
             # the operating points of the whole batch at once (vectorised), here rather than
             # in each chunk; the start: plus the kick on the states no law holds
             X0, opv, errors = member_operating_points(bc)
-            held = _law_states(bc)
+            held = law_states(bc)
             free = [j for j in range(bc.nx) if j not in held]
             X0[:, free] += kick * bc.state_scales[free]
             before.update({idx[j]: {"error": e} for j, e in enumerate(errors) if e is not None})
@@ -210,7 +211,7 @@ def plot_result(res, path, select=None, title=None):
     outs = [k[4:-1] for k in res.keys() if k.startswith("min(")]
     output = next((o for o in (select or []) if o in outs), outs[0])
     sweep_param, grid = res.index[0], res.index[1:]
-    from ..grid import members
+    from ..labels import members
     ok = np.array([not e for e in res["error"]], bool)
     fig, ax = plt.subplots(figsize=(8, 5))
     for g, (lab, mask) in enumerate(members(res, grid)):

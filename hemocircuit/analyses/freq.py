@@ -33,7 +33,8 @@ from ..derived import derived_units
 from ..io import pyplot, save_figure
 from ..progress import advance
 from ..provenance import clock, stamp
-from ..results import Result, label_value
+from ..labels import label_value
+from ..results import Result
 
 SAMPLES = 64  # per period
 #: the compiled integrator of the forced runs: variable-order BDF.  Against a roadrunner rtol

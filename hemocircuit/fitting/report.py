@@ -76,7 +76,7 @@ def problem_space_to_p(problem, u):
 
 
 def _version():
-    from .. import __version__
+    from ..version import __version__
     return __version__
 
 

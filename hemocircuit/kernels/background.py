@@ -105,7 +105,7 @@ def start(system, circuit, x0, t0: float, rtol: float) -> bool:
 def _build(job: Path) -> int:
     """The builder (in its own process): the transient run the foreground would make, for
     BUILD_RUN seconds, so that numba compiles and caches the same specialisations."""
-    from ..analyses.transient import _simulate_compiled
+    from ..analyses.compiled_run import simulate_compiled
     from .system import CompiledSystem
 
     with open(job, "rb") as fh:
@@ -120,7 +120,7 @@ def _build(job: Path) -> int:
     started = time.perf_counter()
     print(f"{time.strftime('%Y-%m-%d %H:%M:%S')} building {Path(system.mod.__file__).stem}", flush=True)
     try:
-        _simulate_compiled(system, c, spec["x0"], spec["t0"], spec["t0"] + BUILD_RUN, None, [], spec["rtol"],
+        simulate_compiled(system, c, spec["x0"], spec["t0"], spec["t0"] + BUILD_RUN, None, [], spec["rtol"],
                            None, np.inf, None)
         # and the outputs' nodal solve, which a long run's outputs use (its few rows here do not)
         system.nodal_outputs(np.full(1, spec["t0"]), np.asarray(spec["x0"], dtype=float)[None], system.params(c))

@@ -99,7 +99,7 @@ def _ref(key, expr, slot, loads):
         kind, index = slot(ref)
         if kind not in _KINDS:
             raise ValueError(f"slot({key}) gave kind {kind!r}; expected 'param' or 'obs'")
-        loads[key] = ("load", _KINDS[kind], int(index), float(expr.si[expr._key[key]]))
+        loads[key] = ("load", _KINDS[kind], int(index), float(expr.si_factor(key)))
     return loads[key]
 
 

@@ -28,6 +28,7 @@ later than WAIT_S, the integrator compiles what is missing itself, as without it
 """
 from __future__ import annotations
 
+import glob
 import os
 import pickle
 import subprocess
@@ -116,11 +117,15 @@ def before_integrator(system):
 def in_cache(dispatcher) -> bool:
     """True when numba's on-disk cache holds some compilation of ``dispatcher`` (its index
     file exists; numba keeps one per function).  True as well when that cannot be told (another
-    numba's internals): then no helper starts, as before there was one."""
+    numba's internals): then no helper starts, as before there was one.  The index is
+    ``MODULE.QUALNAME-DISAMBIGUATOR.pyXY.nbi`` in the cache's folder (numba.core.caching)."""
     try:
-        return Path(dispatcher._cache._cache_file._index_path).exists()
+        folder = Path(dispatcher._cache.cache_path)
+        py = dispatcher.py_func
     except AttributeError:
         return True
+    stem = f"{Path(py.__code__.co_filename).stem}.{py.__qualname__.replace('<locals>', '')}-"
+    return any(folder.glob(glob.escape(stem) + "*.nbi"))
 
 
 def helper_signatures(mod, lay, nx, n_params):

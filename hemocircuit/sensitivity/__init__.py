@@ -23,10 +23,10 @@ def prepare(spec, objective):
     from .. import limits
     from ..errors import FitSpecError
     from .space import resolve
-    from .spec import _check_runs
+    from .spec import check_runs
 
     space = resolve(spec, objective)
-    runs = _check_runs(spec.method, space.k, spec.file)
+    runs = check_runs(spec.method, space.k, spec.file)
     if runs * len(objective.labels) > limits.limit("SENS_VALUES"):
         raise FitSpecError(f"{runs:,} model evaluations x {len(objective.labels):,} output components = "
                            f"{runs * len(objective.labels):,} values, more than allowed "

@@ -169,12 +169,12 @@ def parse_spec(data, file=None, overrides=None) -> Spec:
     if len(set(tied)) < len(tied):
         raise err(f"a parameter is tied twice ({shown(sorted({p for p in tied if tied.count(p) > 1}))})", "ties")
     if params:
-        _check_runs(method, len(params), file, given)
+        check_runs(method, len(params), file, given)
     description = data.get("description", "")
     return Spec(params, method, output, ties, seed, description if isinstance(description, str) else "", file)
 
 
-def _check_runs(method, k, file, given=()):
+def check_runs(method, k, file, given=()):
     """The model evaluations the method will make for k parameters, within SENS_RUNS."""
     name = method["name"]
     runs = {"constellation": lambda: method["n"] * (k + 1), "dynamic": lambda: method["n"] * (k + 1),

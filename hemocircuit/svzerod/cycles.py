@@ -180,32 +180,3 @@ def default_quantities(circuit, orbit_columns):
     qm = {k: abs(float(np.mean(orbit_columns[k]))) for k in Q}
     big = max(qm.values(), default=0.0)
     return P + [k for k in Q if qm[k] > 1e-6 * big and qm[k] > 0]
-
-
-def forced_periodic_report(circuit, x_start, period, quantities=None, N=101, tol=DEFAULT_TOL, rtol=1e-9,
-                           max_cycles=500):
-    """The periodic steady state by shooting from ``x_start`` with the circuit's period, its
-    Floquet multipliers, and how many cycles cycle-by-cycle integration from the same start
-    needs to meet their criterion (measured, and predicted from the dominant multiplier).
-    Returns the PeriodicOrbit; the cycle figures are added to ``metadata['measures']``.
-
-    Anderson-accelerated shooting (``shoot(method='anderson')``), the multipliers from one
-    monodromy at its orbit: on their pulsatile models it converges where Newton shooting
-    wanders or diverges (closedLoopHeart_singleVessel: 7 periods to 7.7e-9 against Newton's 25
-    iterations stopping at 5.8e-8; piecewise_Chamber_and_Valve 3.0e-7 against 3.2e2 after 25)."""
-    from ..analyses.periodic import shoot
-
-    orb = shoot(circuit, x_start, period, forced=True, rtol=rtol, method="anderson")
-    if quantities is None:
-        quantities = default_quantities(circuit, orb.columns)
-    mu = orb.nontrivial_multipliers
-    mu_dom = complex(mu[np.argmax(np.abs(mu))]) if len(mu) else 0.0
-    n, errs = cycles_to_criterion(circuit, x_start, period, quantities, N=N, tol=tol, max_cycles=max_cycles)
-    first = float(errs[0]) if len(errs) else None
-    orb.metadata["measures"].update({
-        "dominant_multiplier": abs(mu_dom), "cycle_tolerance": tol,
-        "cycles_measured": n, "cycle_errors": [float(e) for e in errs],
-        "cycles_predicted": predicted_cycles(mu_dom, tol, first),
-        "cycles_log_tol_over_log_mu": predicted_cycles(mu_dom, tol),
-        "cycle_quantities": list(quantities)})
-    return orb

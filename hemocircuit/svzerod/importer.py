@@ -1053,10 +1053,10 @@ class _Importer:
 def _read(path_or_cfg):
     if isinstance(path_or_cfg, dict):
         return path_or_cfg, None
-    from ..netlist import read_json_file
+    from ..inputs import read_json
 
     path = str(path_or_cfg)
-    return read_json_file(path, "svZeroDSolver model"), path
+    return read_json(path, "svZeroDSolver model file"), path
 
 
 def import_svzerod(path_or_cfg, units: str | None = None, name=None, source=None) -> SvzModel:
@@ -1144,17 +1144,3 @@ def write_netlist(netlist: dict, out_path: str):
     dumper = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
     return atomic_write(out_path, yaml.dump(netlist, Dumper=dumper, sort_keys=False, default_flow_style=None,
                                             width=120, allow_unicode=False))
-
-
-def load_svzerod(path, units: str | None = None, mean: bool = False):
-    """The assembled Circuit of an svZeroDSolver JSON model (through a temporary netlist file,
-    so it is exactly what ``import-svzerod`` writes).  ``mean``: time series at their means."""
-    import tempfile
-
-    from ..circuit import load
-
-    model = import_svzerod(path, units)
-    with tempfile.TemporaryDirectory(prefix="hemocircuit_svz_") as d:
-        out = os.path.join(d, model.netlist["name"] + ".yaml")
-        write_netlist(model.mean_netlist if mean else model.netlist, out)
-        return load(out)

@@ -283,13 +283,6 @@ def _circuits(model, sets=None):
     return c, cm
 
 
-def their_initial(model, circuit):
-    """Their initial_condition as {ID.STATE: value} for the states ``circuit`` has (the
-    importer's index reduction removes a capacitor under a PRESSURE or an inductor in series
-    with a FLOW: the source fixes those)."""
-    return {k: v for k, v in model.initial.items() if k in circuit.state_names}
-
-
 def start_state(model, circuit, start="operating-point", sets=None, mean_circuit=None):
     """The state their run starts from, for ``circuit`` (the model's, maybe with ``sets``):
     'operating-point' (the default: the true steady state of the circuit with the time series
@@ -303,6 +296,8 @@ def start_state(model, circuit, start="operating-point", sets=None, mean_circuit
     if start not in ("operating-point", "their-steady"):
         raise HemocircuitError(f"start {start!r}: choose 'operating-point' or 'their-steady'")
     if model.closed or not model.sim.get("steady_initial", True):
+        from .steady_initial import their_initial
+
         return apply_ic(circuit, np.zeros(circuit.nx), their_initial(model, circuit))
     cm = mean_circuit if mean_circuit is not None else _circuits(model, sets)[1]
     if start == "their-steady":
@@ -316,11 +311,11 @@ def simulate_svzerod(model, sets=None, rtol=None, start="operating-point", cfg=N
     """(circuit, result) of a run with their semantics: t = 0 .. n T on their step grid, from
     :func:`start_state` ``start``.  ``sets``: {ID.PARAM: value} changed in the circuit and in
     its time-averaged variant (``--set``).  ``rtol``: the integrator's, by default the
-    conformance runner's for the model (conformance.run_tolerances).  With ``use_cycle_to_cycle_error``,
+    conformance runner's for the model (tolerances.run_tolerances).  With ``use_cycle_to_cycle_error``,
     no RCR and ``cfg`` (their configuration, for their vessel caps) the run goes on one cycle
     at a time until their criterion holds (:func:`their_extra_cycles`)."""
     from ..analyses.transient import TransientResult, simulate
-    from .conformance import run_tolerances
+    from .tolerances import run_tolerances
 
     c, cm = _circuits(model, sets)
     model = their_cycles(model, c)  # a copy: the caller's model keeps its settings

@@ -115,6 +115,13 @@ def gen_alpha_steps(c, x0, h, n_steps, rho=0.5, t0=0.0, max_iter=30, tol=1e-11):
     return x
 
 
+def their_initial(model, circuit):
+    """Their initial_condition as {ID.STATE: value} for the states ``circuit`` has (the
+    importer's index reduction removes a capacitor under a PRESSURE or an inductor in series
+    with a FLOW: the source fixes those)."""
+    return {k: v for k, v in model.initial.items() if k in circuit.state_names}
+
+
 def their_steady_initial(model, mean_circuit):
     """The state their steady_initial procedure gives for an imported ``model``
     (:class:`~hemocircuit.svzerod.importer.SvzModel`), on ``mean_circuit`` (the circuit of
@@ -122,7 +129,6 @@ def their_steady_initial(model, mean_circuit):
     simulation_parameters."""
     from ..ic import apply_ic
     from ..registry import get_type
-    from .output import their_initial
 
     cm = mean_circuit
     if model.closed:
