@@ -16,7 +16,7 @@ import numpy as np
 
 from hemocircuit.component import Observable, Option, Param, State, Storage
 
-from .svzerod._common import Block, branch, jit as _jit, kernel_method, open_branches
+from .common import Block, branch, jit as _jit, kernel_method, open_branches
 
 
 # --- the equations (hemocircuit.kernels contract) -------------------------------------------

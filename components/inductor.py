@@ -8,7 +8,7 @@ import numpy as np
 
 from hemocircuit.component import Observable, Param, State
 
-from .svzerod._common import Block, imposed_flow, jit, kernel_method, short
+from .common import Block, imposed_flow, jit, kernel_method, short
 
 
 # p = [L], state [q], local unknowns [P_a, P_b]; observable (state-only): q

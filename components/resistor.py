@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from hemocircuit.component import Component, Param
 
-from .svzerod._common import conductance, jit, kernel_method
+from .common import conductance, jit, kernel_method
 
 
 @jit

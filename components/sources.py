@@ -13,7 +13,7 @@ import numpy as np
 from hemocircuit.component import Component, Drive, Param
 from hemocircuit.netlist import GROUND
 
-from .svzerod._common import branch, imposed_flow, jit as _jit, kernel_method
+from .common import branch, imposed_flow, jit as _jit, kernel_method
 
 
 #: a source's input is its value; its built-in sine term has the parameters below

@@ -27,7 +27,7 @@ import numpy as np
 from hemocircuit.component import Component, Observable, Option, Param, State
 from hemocircuit.units import M3_PER_ML
 
-from .svzerod._common import branch, jit as _jit, kernel_method, per_element
+from .common import branch, jit as _jit, kernel_method, per_element
 
 _READINGS = ("consistent", "thesis")
 #: smallest pool volume used as a divisor [m^3] (a collapsed compliance reports V = 0)

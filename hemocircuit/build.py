@@ -14,7 +14,7 @@ from . import limits
 from .errors import NetlistError, did_you_mean, excerpt
 from .expressions import Expression, Reference, constant_reference, is_expression
 from .netlist import Netlist
-from .registry import component_types
+from .registry import component_types, get_type
 from .units import UnitError, parse_quantity
 from .waveforms import Constant, parse_waveform
 from .names import split_path
@@ -77,9 +77,9 @@ def _option_value(cls, name, raw, where):
 
 def parse_element(spec, netlist_file=None) -> ElementData:
     where = {"file": spec.file or netlist_file, "element": spec.id}
-    types = component_types()
-    cls = types.get(spec.type)
+    cls = get_type(spec.type) if isinstance(spec.type, str) else None
     if cls is None:
+        types = component_types()
         raise NetlistError(f"unknown component type {excerpt(spec.type, 40)}{did_you_mean(spec.type, types)}; "
                            f"known types: {sorted(types)}", **where)
     if len(spec.nodes) != len(cls.terminals):

@@ -1,4 +1,4 @@
-"""The circuit graph (networkx) and the topology pass that runs before any solve.
+"""The circuit graph and the topology pass that runs before any solve.
 
 Checks, each with an error naming the file, element and node:
   - an element whose terminals are all the same node;
@@ -9,12 +9,13 @@ Checks, each with an error naming the file, element and node:
 and finds the conservation laws: groups of nodes joined to the rest of the circuit only
 through volume stores (compliances), like the intracranial node of the thesis's ICP variant,
 whose total stored volume is fixed and must be given by a ``constraints:`` entry.
+
+Connectivity is a disjoint-set forest (:class:`_Components`), not networkx: importing networkx
+costs ~0.2 s, half the budget of a whole ``op`` run, for three connected-component searches.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
-
-import networkx as nx
 
 from .errors import TopologyError
 from .netlist import GROUND
@@ -38,15 +39,72 @@ def local_node_map(elem, comp):
     return m
 
 
-def circuit_graph(elements, comps):
-    """MultiGraph of global nodes; edges carry element id and role."""
-    g = nx.MultiGraph()
-    for elem, comp in zip(elements, comps):
-        m = local_node_map(elem, comp)
-        g.add_nodes_from(m.values())
-        for a, b, role in comp.edges():
-            g.add_edge(m[a], m[b], element=elem.id, role=role, short=comp.dc_short())
-    return g
+class _Components:
+    """Connected components of a growing undirected graph (union-find with path halving).
+    ``groups()`` lists them in the order of their first node, as networkx's
+    connected_components does."""
+
+    def __init__(self, nodes=()):
+        self.parent = {}
+        for n in nodes:
+            self.add(n)
+
+    def add(self, n):
+        self.parent.setdefault(n, n)
+
+    def find(self, n):
+        parent = self.parent
+        while parent[n] != n:
+            parent[n] = parent[parent[n]]
+            n = parent[n]
+        return n
+
+    def union(self, a, b):
+        self.add(a)
+        self.add(b)
+        ra, rb = self.find(a), self.find(b)
+        if ra != rb:
+            self.parent[rb] = ra
+
+    def joined(self, a, b):
+        return a in self.parent and b in self.parent and self.find(a) == self.find(b)
+
+    def groups(self):
+        out = {}
+        for n in self.parent:
+            out.setdefault(self.find(n), set()).add(n)
+        return list(out.values())
+
+
+class _Edges:
+    """The circuit's edges (element id, role, short at DC) by node, in the order they were added."""
+
+    def __init__(self, elements, comps):
+        self.adj = {}  # node -> {neighbour: [edge data]}, both in insertion order
+        for elem, comp in zip(elements, comps):
+            m = local_node_map(elem, comp)
+            for n in m.values():
+                self.adj.setdefault(n, {})
+            for a, b, role in comp.edges():
+                d = {"element": elem.id, "role": role, "short": comp.dc_short()}
+                self.adj[m[a]].setdefault(m[b], []).append(d)
+                if m[a] != m[b]:
+                    self.adj[m[b]].setdefault(m[a], []).append(d)
+
+    def __iter__(self):
+        """(a, b, data) once per edge, node by node (the order networkx's MultiGraph.edges gives)."""
+        seen = set()
+        for n, nbrs in self.adj.items():
+            for nbr, ds in nbrs.items():
+                if nbr not in seen:
+                    for d in ds:
+                        yield n, nbr, d
+            seen.add(n)
+
+    def element_at(self, node):
+        for ds in self.adj[node].values():
+            return ds[0]["element"]
+        return None
 
 
 def check_topology(elements, comps, file=None):
@@ -66,29 +124,32 @@ def check_topology(elements, comps, file=None):
         if node != GROUND and len(ids) == 1:
             raise TopologyError("the node is touched by only one element terminal (dangling)",
                                 file=_file_of(elements, ids[0]) or file, element=ids[0], node=node)
-    g = circuit_graph(elements, comps)
-    if GROUND not in g:
+    g = _Edges(elements, comps)
+    if GROUND not in g.adj:
         first = elements[0] if elements else None
         raise TopologyError(f"no element connects to '{GROUND}': the circuit has no pressure reference",
                             file=(first.file if first else None) or file, element=first.id if first else None,
                             node=first.nodes[0] if first and first.nodes else None)
-    for comp_nodes in nx.connected_components(g):
+    edges = list(g)
+    whole = _Components(g.adj)
+    for a, b, _ in edges:
+        whole.union(a, b)
+    for comp_nodes in whole.groups():
         if GROUND not in comp_nodes:
             node = sorted(comp_nodes)[0]
-            eid = _element_at(g, node)
+            eid = g.element_at(node)
             raise TopologyError(f"this sub-network {sorted(comp_nodes)} has no path to '{GROUND}' "
                                 "(no pressure reference)", file=_file_of(elements, eid) or file, element=eid, node=node)
     # a loop of pressure-defining elements over-determines pressures (singular MNA); with
     # inductors in it (a short at DC, as SPICE counts them) there is no steady state
-    pg = nx.Graph()
+    pg, tree = _Components(), {}  # the pressure-defining forest so far, and its edges by node
     shorts = set()
-    for a, b, d in sorted(g.edges(data=True), key=lambda e: bool(e[2].get("short"))):
+    for a, b, d in sorted(edges, key=lambda e: bool(e[2].get("short"))):
         if d["role"] == "pressure" or d.get("short"):
             if d.get("short"):
                 shorts.add(d["element"])
-            if pg.has_edge(a, b) or (a in pg and b in pg and nx.has_path(pg, a, b)):
-                path = nx.shortest_path(pg, a, b) if (a in pg and b in pg and nx.has_path(pg, a, b)) else [a, b]
-                loop = [pg.edges[u, v]["element"] for u, v in zip(path, path[1:])] + [d["element"]]
+            if pg.joined(a, b):
+                loop = _tree_path(tree, a, b) + [d["element"]]
                 if any(e in shorts for e in loop):
                     msg = (f"a loop of pressure-defining elements and inductors {loop}: an inductor is a short "
                            "circuit at steady state, so the loop's pressures over-determine each other and "
@@ -97,37 +158,62 @@ def check_topology(elements, comps, file=None):
                     msg = (f"a loop made only of pressure-defining elements {loop}: their pressures "
                            "over-determine each other")
                 raise TopologyError(msg, file=_file_of(elements, d["element"]) or file, element=d["element"], node=a)
-            pg.add_edge(a, b, element=d["element"])
+            pg.union(a, b)
+            tree.setdefault(a, {})[b] = d["element"]
+            tree.setdefault(b, {})[a] = d["element"]
     # nodes reached only through flow-defining elements have no defined pressure
-    ng = nx.Graph()
-    ng.add_nodes_from(g.nodes)
-    ng.add_edges_from((a, b) for a, b, d in g.edges(data=True) if d["role"] != "flow")
-    for comp_nodes in nx.connected_components(ng):
+    ng = _Components(g.adj)
+    for a, b, d in edges:
+        if d["role"] != "flow":
+            ng.union(a, b)
+    for comp_nodes in ng.groups():
         if GROUND not in comp_nodes:
             node = sorted(comp_nodes)[0]
-            eid = _element_at(g, node)
+            eid = g.element_at(node)
             raise TopologyError(f"node(s) {sorted(comp_nodes)} are reached only through flow-defining elements "
                                 "(inductors, flow sources): their pressure is undefined",
                                 file=_file_of(elements, eid) or file, element=eid, node=node)
     return conservation_laws(elements, comps)
 
 
+def _tree_path(tree, a, b):
+    """The elements on the path from a to b in a forest ({node: {neighbour: element}}; a and b
+    joined), in order from a."""
+    if a == b:
+        return []
+    back, frontier = {a: None}, [a]
+    while b not in back:
+        nxt = []
+        for n in frontier:
+            for m in tree.get(n, {}):
+                if m not in back:
+                    back[m] = n
+                    nxt.append(m)
+        frontier = nxt
+    path, n = [], b
+    while back[n] is not None:
+        path.append(tree[n][back[n]])
+        n = back[n]
+    return path[::-1]
+
+
 def conservation_laws(elements, comps):
     """Groups of nodes connected to the rest only through volume stores."""
-    g = nx.Graph()
+    g = _Components()
     store_edges = []
     for elem, comp in zip(elements, comps):
         m = local_node_map(elem, comp)
-        g.add_nodes_from(m.values())
+        for n in m.values():
+            g.add(n)
         stored = {(s.plus, s.minus) for s in comp.storages()}
         for a, b, role in comp.edges():
             if (a, b) not in stored and (b, a) not in stored:
-                g.add_edge(m[a], m[b])
+                g.union(m[a], m[b])
         for i, s in enumerate(comp.storages()):
             store_edges.append((elem.id, i, m[s.plus], m[s.minus]))
             # a store's own internal node is joined to its element (arteriole midpoint)
     laws = []
-    for group in nx.connected_components(g):
+    for group in g.groups():
         if GROUND in group:
             continue
         terms = []
@@ -142,12 +228,6 @@ def conservation_laws(elements, comps):
         if terms:
             laws.append(ConservationLaw(frozenset(group), terms))
     return laws
-
-
-def _element_at(g, node):
-    for _, _, d in g.edges(node, data=True):
-        return d["element"]
-    return None
 
 
 def _file_of(elements, eid):

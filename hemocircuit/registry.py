@@ -10,10 +10,11 @@ from __future__ import annotations
 import functools
 import importlib
 import inspect
+import os
 import pkgutil
+import re
 import warnings
 from collections.abc import Mapping
-from importlib import metadata
 from types import MappingProxyType
 
 from .component import Component
@@ -49,6 +50,8 @@ def component_types() -> dict[str, type[Component]]:
         module = importlib.import_module(info.name)
         for cls in _classes_in(module):
             add(cls, info.name)
+    from importlib import metadata  # (22 ms: only when every type is looked for)
+
     for ep in metadata.entry_points(group=ENTRY_POINT_GROUP):
         obj = ep.load()
         classes = [obj] if inspect.isclass(obj) else list(_classes_in(obj))
@@ -73,7 +76,48 @@ def _say_if_legacy(cls, entry):
 
 
 def get_type(name: str) -> type[Component] | None:
+    """The Component subclass of type ``name`` (None if there is none).  A built-in type is
+    imported alone, found through :func:`_builtin_index` (a netlist of four types does not
+    import the 20 svZeroDSolver blocks: ~60 ms of an ``op`` run); anything else, or a name
+    the index cannot settle, goes through the full registry (:func:`component_types`)."""
+    if component_types.cache_info().currsize == 0:
+        module = _builtin_index().get(name)
+        if module is not None:
+            from .kernels.freshness import ensure_fresh
+
+            ensure_fresh()  # as component_types: before any kernel is loaded
+            found = [cls for cls in _classes_in(importlib.import_module(module)) if cls.type_name == name]
+            if len(found) == 1:
+                return found[0]
     return component_types().get(name)
+
+
+_TYPE_NAME = re.compile(r"""^[ \t]+type_name\s*=\s*["']([^"']+)["']""", re.MULTILINE)
+
+
+@functools.lru_cache(maxsize=1)
+def _builtin_index() -> dict[str, str]:
+    """{type name: the module of ``hemocircuit.components`` to import for it} read from the
+    sources (``type_name = "..."`` in a class body), without importing them; a name written in
+    two modules is left out (the full registry then reports it)."""
+    from . import components as pkg
+
+    index, twice = {}, set()
+    for info in pkgutil.iter_modules(pkg.__path__, pkg.__name__ + "."):
+        folder = os.path.join(pkg.__path__[0], info.name.rsplit(".", 1)[1])
+        files = ([os.path.join(d, f) for d, _, fs in os.walk(folder) for f in fs if f.endswith(".py")]
+                 if info.ispkg else [folder + ".py"])
+        for path in files:
+            try:
+                with open(path, encoding="utf-8") as fh:
+                    names = _TYPE_NAME.findall(fh.read())
+            except OSError:
+                continue
+            for n in names:
+                if index.get(n, info.name) != info.name:
+                    twice.add(n)
+                index[n] = info.name
+    return {n: m for n, m in index.items() if n not in twice}
 
 
 @functools.lru_cache(maxsize=1)

@@ -20,7 +20,7 @@ import math
 from hemocircuit.kernels.jit import equation, njit
 from hemocircuit.units import M3_PER_ML, PA_PER_MMHG
 
-from ..svzerod._common import conductance
+from ..common import conductance
 
 from .equations import (C_IN, CA_FLOOR, DP0, ETA, F1, F2, FRICTION_FLOOR, GAMMA_WB, K3, K4, K7, K_CA1, K_CA2,
                         K_CGMP, L0, L_VES, LAMBDA_OPT, LN10, LN_95, MAX_EXP, MU_B, N_CA1, N_CA2, N_CGMP, N_VES,

@@ -27,7 +27,7 @@ import numpy as np
 
 from hemocircuit.component import Param
 
-from ._common import jit
+from ..common import jit
 
 KINDS = ("half_cosine", "piecewise_cosine", "two_hill", "wrapping_cosine", "fourier")
 
@@ -66,9 +66,12 @@ _FT_B = np.ascontiguousarray(FT_ELAST[:, 1])
 
 
 def _fourier_scan(n=10000):
-    """(min, max - min) of the series over their n-point scan of one cycle (phase k/n)."""
-    ph = 2.0 * np.pi * np.arange(n)[:, None] * np.arange(25)[None, :] / n
-    f = np.cos(ph) @ _FT_A - np.sin(ph) @ _FT_B
+    """(min, max - min) of the series over their n-point scan of one cycle (phase k/n):
+    sum_j A_j cos(2 pi j k/n) - B_j sin(2 pi j k/n) = Re(n ifft(A + iB)) (an FFT, not the
+    n x 25 cosines: 3 ms instead of 20 at import)."""
+    c = np.zeros(n, complex)
+    c[:_FT_A.size] = _FT_A + 1j * _FT_B
+    f = (np.fft.ifft(c) * n).real
     return float(f.min()), float(f.max() - f.min())
 
 

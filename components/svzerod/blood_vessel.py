@@ -21,7 +21,7 @@ import numpy as np
 from hemocircuit.component import Component, Observable, Option, Param, State, Storage
 from hemocircuit.kernels import Kernel
 
-from ._common import (branch, C_UNIT, flow_observables, imposed_flow, jit, L_UNIT, R_UNIT, S_UNIT, stenosis_drop,
+from ..common import (branch, C_UNIT, flow_observables, imposed_flow, jit, L_UNIT, R_UNIT, S_UNIT, stenosis_drop,
                       stenosis_linearised)
 
 PARAMS = {

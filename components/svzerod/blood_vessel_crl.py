@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._common import branch, imposed_flow, jit, stenosis_drop, stenosis_linearised
+from ..common import branch, imposed_flow, jit, stenosis_drop, stenosis_linearised
 from .blood_vessel import BloodVessel, Vessel, dc_conductance, dc_series, vessel_derivs, vessel_report, vessel_stamp
 
 

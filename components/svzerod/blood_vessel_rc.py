@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from hemocircuit.component import Param, State
 
-from ._common import Block, C_UNIT, flow_observables, jit, kernel_method, R_UNIT
+from ..common import Block, C_UNIT, flow_observables, jit, kernel_method, R_UNIT
 
 
 # --- the equations: p = [Rpd, Cp]; state [X]; local unknowns [P_in, P_out, P_ref, q]

@@ -21,7 +21,7 @@ import numpy as np
 
 from hemocircuit.component import Observable, Option, Param, State, Storage
 
-from ._common import Block, branch, E_UNIT, flow_observables, imposed_flow, jit, kernel_method, L_UNIT, open_branches, per_element
+from ..common import Block, branch, E_UNIT, flow_observables, imposed_flow, jit, kernel_method, L_UNIT, open_branches, per_element
 from .activation import KINDS, Activated, act_parameters, activation
 
 OWN_PARAMS = {"Emax": Param(E_UNIT, lower=0.0, doc="maximum elastance"),

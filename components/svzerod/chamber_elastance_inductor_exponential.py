@@ -20,7 +20,7 @@ import numpy as np
 
 from hemocircuit.component import Param
 
-from ._common import E_UNIT, jit, kernel_method, per_element
+from ..common import E_UNIT, jit, kernel_method, per_element
 from .activation import act_parameters, activation
 from .chamber_elastance_inductor import (OWN_PARAMS, ChamberElastanceInductor, cei_derivs, cei_observe, cei_report,
                                          chamber_stamp)

@@ -27,7 +27,7 @@ import numpy as np
 
 from hemocircuit.component import Observable, Param, State, Storage
 
-from ._common import Block, branch, flow_observables, imposed_flow, jit, kernel_method
+from ..common import Block, branch, flow_observables, imposed_flow, jit, kernel_method
 
 PARAMS = {"rho": ("mmHg*s**2/cm**2", True, "wall density"), "thick0": ("cm", True, "wall thickness d0"),
       "radius0": ("cm", True, "reference radius r0"), "W1": ("mmHg", False, "material constant W1"),

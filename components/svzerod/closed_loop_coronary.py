@@ -26,7 +26,7 @@ import numpy as np
 
 from hemocircuit.component import Observable, Param, State, Storage
 
-from ._common import batch_shape, Block, branch, C_UNIT, conductance, E_UNIT, flow_observables, jit, kernel_method, open_branches, per_element, R_UNIT
+from ..common import batch_shape, Block, branch, C_UNIT, conductance, E_UNIT, flow_observables, jit, kernel_method, open_branches, per_element, R_UNIT
 from .activation import fourier_raw
 from .closed_loop_heart_pulmonary import ventricle_pressure
 

@@ -37,7 +37,7 @@ import numpy as np
 from hemocircuit.component import Observable, Param, State, Storage
 from hemocircuit.derivatives import FD_REL
 
-from ._common import batch_shape, Block, branch, C_UNIT, E_UNIT, flow_observables, jit, kernel_method, L_UNIT, R_UNIT
+from ..common import batch_shape, Block, branch, C_UNIT, E_UNIT, flow_observables, jit, kernel_method, L_UNIT, R_UNIT
 from .activation import activation_breakpoints, fourier_raw, wrapping_cosine
 from .chamber_elastance_inductor_exponential import atrium_pressure, atrium_slope
 

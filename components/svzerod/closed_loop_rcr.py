@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from hemocircuit.component import Observable, Param, State, Storage
 
-from ._common import Block, branch, C_UNIT, conductance, flow_observables, jit, kernel_method, open_branches, R_UNIT
+from ..common import Block, branch, C_UNIT, conductance, flow_observables, jit, kernel_method, open_branches, R_UNIT
 
 
 # --- the equations: p = [Rp, C, Rd]; state [V]; local unknowns [P_in, P_out, P_ref, P_c, q_p, q_c]

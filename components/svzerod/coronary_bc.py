@@ -17,7 +17,7 @@ import numpy as np
 
 from hemocircuit.component import Observable, Param, State
 
-from ._common import Block, branch, C_UNIT, jit, kernel_method, R_UNIT
+from ..common import Block, branch, C_UNIT, jit, kernel_method, R_UNIT
 
 
 # --- the equations: p = [Ra1, Ra2, Rv1, Ca, Cc, Pim, P_v] (Pim with its waveform added);

@@ -23,7 +23,7 @@ import numpy as np
 
 from hemocircuit.component import Observable, Param
 
-from ._common import jit, kernel_method, R_UNIT
+from ..common import jit, kernel_method, R_UNIT
 from .activation import periodic_breakpoints
 from .coronary_bc import CoronaryBC, coronary_balance, coronary_stamp
 

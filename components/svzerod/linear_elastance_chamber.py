@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from hemocircuit.component import Observable, Option, Param, State, Storage
 
-from ._common import Block, branch, E_UNIT, flow_observables, jit, kernel_method, open_branches, per_element
+from ..common import Block, branch, E_UNIT, flow_observables, jit, kernel_method, open_branches, per_element
 from .activation import KINDS, Activated, act_parameters, activation
 
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from hemocircuit.component import Observable, Param
 
-from ._common import Block, check_rmin_rmax, conductance, jit, kernel_method, R_UNIT
+from ..common import Block, check_rmin_rmax, conductance, jit, kernel_method, R_UNIT
 
 
 # --- the equations: p = [Rmin, Rmax]; local unknowns [P_in, P_out]

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from hemocircuit.component import Observable, Param, State
 
-from ._common import Block, branch, C_UNIT, jit, kernel_method, R_UNIT
+from ..common import Block, branch, C_UNIT, jit, kernel_method, R_UNIT
 
 
 # --- the equations: p = [Rp, C, Rd, Pd] (Pd with its waveform added); state [V]; local unknowns [P_node, P_ref, Q_in]

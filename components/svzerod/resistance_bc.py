@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from hemocircuit.component import Observable, Param
 
-from ._common import Block, conductance, jit, kernel_method, R_UNIT
+from ..common import Block, conductance, jit, kernel_method, R_UNIT
 
 
 # --- the equations: p = [R, Pd] (Pd with its waveform added); local unknowns [P_node, P_ref]

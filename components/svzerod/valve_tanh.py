@@ -19,7 +19,7 @@ import math
 
 from hemocircuit.component import Observable, Param
 
-from ._common import Block, branch, check_rmin_rmax, jit, kernel_method, R_UNIT
+from ..common import Block, branch, check_rmin_rmax, jit, kernel_method, R_UNIT
 
 
 # --- the equations: p = [Rmin, Rmax, steepness]; local unknowns [P_in, P_out, Q]

@@ -1,4 +1,6 @@
-"""Shared pieces of the svZeroDSolver blocks (components/svzerod/).
+"""Shared pieces of the component types: the Block base, the nodal stamps every type builds on
+(a conductance, a branch row, an imposed flow, a short), kernel declarations, and the
+stenosis branch of the svZeroDSolver vessels (components/svzerod/).
 
 Their vessels carry a flow-dependent stenosis resistance: pressure drop (R + S|q|) q
 (svZeroDSolver src/model/BloodVessel.cpp, "stenosis_resistance = stenosis_coeff * fabs(q_in)").
