@@ -81,12 +81,15 @@ class Batch:
         self.iopt = comp.kernel_options()
         self.S = S
 
-    def members(self):
+    def members(self, *outs):
+        """(p, x, u, t, out rows...) of every element call, element by element: rows taken by
+        iterating the arrays (C speed: ~1 us a call less than indexing, 10 001 rows x 6 groups
+        of a transient's outputs took 0.3 s)."""
         U, given = self.U, self.u_given
-        for b in range(self.B):
-            t = float(self.T[b])
-            for e in range(self.E):
-                yield b, e, self.P[b, e], self.X[b, e], (U[b, e] if given else U[0, 0]), t
+        T = self.T.tolist()
+        for e in range(self.E):
+            us = U[:, e] if given else [U[0, 0]] * self.B
+            yield from zip(self.P[:, e], self.X[:, e], us, T, *(o[:, e] for o in outs))
 
 
 def kernel_of(comp):
@@ -109,8 +112,8 @@ def stamp(comp, p, x, u, t, src=None):
     b = np.zeros((bt.B, bt.E, L))
     run = _runner(k.stamp, bt.B * bt.E)
     with np.errstate(all="ignore"):
-        for i, e, pe, xe, ue, te in bt.members():
-            _call(k.stamp, run, (pe, xe, ue, te, bt.iopt, A[i, e], b[i, e]))
+        for pe, xe, ue, te, Ae, be in bt.members(A, b):
+            _call(k.stamp, run, (pe, xe, ue, te, bt.iopt, Ae, be))
     return A, b
 
 
@@ -123,8 +126,8 @@ def derivatives(comp, p, x, u, t, src=None):
     dx = np.zeros((bt.B, bt.E, bt.S))
     run = _runner(k.derivs, bt.B * bt.E)
     with np.errstate(all="ignore"):
-        for i, e, pe, xe, ue, te in bt.members():
-            _call(k.derivs, run, (pe, xe, ue, te, bt.iopt, dx[i, e]))
+        for pe, xe, ue, te, dxe in bt.members(dx):
+            _call(k.derivs, run, (pe, xe, ue, te, bt.iopt, dxe))
     return dx
 
 
@@ -143,7 +146,6 @@ def observe(comp, p, x, u, t, src=None):
     fn = k.report if full else k.observe
     run = _runner(fn, bt.B * bt.E)
     with np.errstate(all="ignore"):
-        for i, e, pe, xe, ue, te in bt.members():
-            args = (pe, xe, ue, te, bt.iopt, out[i, e]) if full else (pe, xe, bt.iopt, out[i, e])
-            _call(fn, run, args)
+        for pe, xe, ue, te, oe in bt.members(out):
+            _call(fn, run, (pe, xe, ue, te, bt.iopt, oe) if full else (pe, xe, bt.iopt, oe))
     return {n: out[..., j] for j, n in enumerate(names)}

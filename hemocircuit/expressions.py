@@ -18,7 +18,7 @@ import numpy as np
 
 from . import limits
 from .errors import NetlistError, excerpt
-from .units import Q_, parse_with_unit, si_factor
+from .units import Q_, memo, parse_with_unit, si_factor
 
 _FUNCS = {"exp": np.exp, "log": np.log, "sqrt": np.sqrt}
 _ALLOWED = (ast.Expression, ast.BinOp, ast.UnaryOp, ast.Constant, ast.Name, ast.Attribute, ast.Load, ast.Call,
@@ -114,14 +114,12 @@ class Expression:
             self._source = ast.unparse(renamed)  # kept so the compiled code can be rebuilt after pickling
             code = compile(self._source, "<expr>", "eval")
         self._code = code
-        # dimension check and output factor, evaluated once with pint
-        env = {"pi": np.pi, **_FUNCS}
-        for name, ref in self._named().items():
-            env[name] = ref.pint if ref.kind == "constant" else Q_(1.0, ref.unit)
+        # dimension check and output factor, evaluated once with pint (and remembered: units.memo)
         try:
-            sample = eval(code, {"__builtins__": {}}, env)
-            sample = sample if hasattr(sample, "to") else Q_(sample, "dimensionless")
-            sample.to(target_unit)
+            memo("expression_checked", [self._source, target_unit,
+                                        [[k, r.kind, r.unit, r.constant, r.base_unit]
+                                         for k, r in sorted(self._named().items())]],
+                 lambda: self._check(code, target_unit))
         except Exception as exc:
             raise NetlistError(f"expression {excerpt(self.text)} does not give a quantity in {target_unit}: {exc}",
                                **where) from None
@@ -138,6 +136,16 @@ class Expression:
     def __setstate__(self, state):
         self.__dict__.update(state)
         self._code = compile(self._source, "<expr>", "eval")
+
+    def _check(self, code, target_unit):
+        """Evaluate the expression on pint quantities; raises unless it gives ``target_unit``."""
+        env = {"pi": np.pi, **_FUNCS}
+        for name, ref in self._named().items():
+            env[name] = ref.pint if ref.kind == "constant" else Q_(1.0, ref.unit)
+        sample = eval(code, {"__builtins__": {}}, env)
+        sample = sample if hasattr(sample, "to") else Q_(sample, "dimensionless")
+        sample.to(target_unit)
+        return True
 
     def si_factor(self, key):
         """The factor from reference ``key``'s unit to SI, as the expression applies it."""
@@ -191,10 +199,15 @@ class _Rename(ast.NodeTransformer):
 
 def constant_reference(name, raw, where) -> Reference:
     """A netlist-level parameter used in an expression: a constant, stored in SI."""
-    try:
+    def read():
         q = parse_with_unit(raw)
         base = q.to_base_units()
-        ref = Reference(None, name, str(q.units), "constant", float(base.magnitude), str(base.units))
+        return str(q.units), float(base.magnitude), str(base.units)
+
+    try:
+        key = raw if isinstance(raw, str) else None  # numbers are read by pint every time
+        unit, si, base_unit = memo("constant_reference", key, read) if key is not None else read()
+        ref = Reference(None, name, unit, "constant", si, base_unit)
     except Exception as exc:
         raise NetlistError(f"parameter {name}: {exc}", **where) from None
     return ref

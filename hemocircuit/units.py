@@ -100,11 +100,12 @@ def _target(unit: str):
 
 
 _CONVERTED: dict = {}  # (text, unit) -> magnitude: netlists repeat the same values many times
+_MEMO: dict = {}  # (kind, key as JSON) -> a JSON value: other results of pint (memo())
 
 
 class _DiskCache:
-    """Conversions pint made in earlier runs ((text, unit) -> magnitude), kept in the user's
-    cache folder per pint version, so that a warm run of a netlist needs no pint at all (its
+    """Conversions pint made in earlier runs ((text, unit) -> magnitude) and other results of
+    pint (:func:`memo`), kept in the user's cache folder per pint version, so that a warm run of a netlist needs no pint at all (its
     import and registry cost ~0.6 s).  Only successful string conversions are stored; errors
     always go through pint again.  The file is replaced atomically at exit when it grew."""
 
@@ -133,9 +134,11 @@ class _DiskCache:
             rules = hashlib.sha256(Path(__file__).read_bytes()).hexdigest()[:12]  # our parsing rules
             folder = Path(os.environ.get("HEMOCIRCUIT_CACHE_DIR") or Path.home() / ".cache" / "hemocircuit")
             self.path = folder / f"units-pint-{version}-{rules}.json"
-            rows = json.loads(self.path.read_text()) if self.path.exists() else []
-            for text, unit, value in rows:  # text None: the factor of a bare number to ``unit``
+            data = json.loads(self.path.read_text()) if self.path.exists() else {}
+            for text, unit, value in data.get("converted", []):  # text None: a bare number's factor
                 _CONVERTED.setdefault((text, unit), float(value))
+            for kind, key, value in data.get("memo", []):
+                _MEMO.setdefault((kind, key), value)
         except (OSError, ValueError, TypeError, AttributeError):  # (no pint found: find_spec gives None)
             self.path = None  # no cache: every conversion goes through pint
 
@@ -149,7 +152,8 @@ class _DiskCache:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             tmp = self.path.with_suffix(f".{os.getpid()}.tmp")
             rows = [[t, u, v] for (t, u), v in list(_CONVERTED.items())[:20000]]
-            tmp.write_text(json.dumps(rows))
+            memo = [[kind, key, v] for (kind, key), v in list(_MEMO.items())[:20000]]
+            tmp.write_text(json.dumps({"converted": rows, "memo": memo}))
             os.replace(tmp, self.path)
         except OSError:
             pass
@@ -249,7 +253,26 @@ def conversion_factor(from_unit: str, to_unit: str) -> float:
 
 def si_factor(unit: str) -> float:
     """Factor from ``unit`` to coherent SI base units."""
-    return float(Q_(1, unit).to_base_units().magnitude)
+    return memo("si_factor", unit, lambda: float(Q_(1, unit).to_base_units().magnitude))
+
+
+def memo(kind: str, key, compute):
+    """``compute()`` (a JSON value: numbers, strings, lists), remembered under (kind, key) here
+    and in the disk cache of earlier runs, so that a warm run needs no pint (its import alone
+    is ~0.5 s).  ``key`` must be JSON (it is stored as its JSON text); what raises is never
+    remembered."""
+    import json
+
+    if not _DISK.loaded:
+        _DISK.load()
+    k = (kind, json.dumps(key))
+    if k not in _MEMO:
+        value = compute()
+        if len(_MEMO) > 65536:
+            _MEMO.clear()
+        _MEMO[k] = json.loads(json.dumps(value))  # as a later run reads it back (tuples as lists)
+        _DISK.dirty = True
+    return _MEMO[k]
 
 
 def check_unit(unit: str) -> None:

@@ -37,6 +37,9 @@ def loaded_after(args):
 
 @pytest.fixture(scope="module")
 def op_modules():
+    """The modules of a warm ``op payne06`` (a first run fills the units cache, which a new
+    checkout or an edited units.py starts empty: that run reads its values with pint)."""
+    loaded_after(["op", PAYNE06])
     res = loaded_after(["op", PAYNE06])
     assert res["status"] in (0, None)
     return set(res["modules"])
@@ -78,3 +81,22 @@ def test_a_large_circuit_takes_the_sparse_path(tmp_path):
     res = loaded_after(["op", str(path)])
     assert res["status"] in (0, None)
     assert "scipy.sparse" in res["modules"] and "hemocircuit.sparse" in res["modules"]
+
+
+def test_a_warm_run_with_expressions_needs_no_pint(tmp_path, monkeypatch):
+    """units.memo keeps what pint computed (conversions, a constant's SI value, an expression's
+    dimension check) in the cache folder: the second run of a netlist with an expression
+    (inertia.yaml: L = rho_b * art.L / (pi * art.r**2 * art.n)) imports no pint (~0.5 s), and
+    gives the same operating point.  The first run, with an empty cache, does import it."""
+    monkeypatch.setenv("HEMOCIRCUIT_CACHE_DIR", str(tmp_path))
+    net = str(ROOT / "netlists" / "inertia.yaml")
+    code = ("import io, json, sys, contextlib\n"
+            "from hemocircuit.cli import main\n"
+            "out = io.StringIO()\n"
+            "with contextlib.redirect_stdout(out):\n"
+            f"    main(['op', {net!r}])\n"
+            "print(json.dumps({'pint': 'pint' in sys.modules, 'out': out.getvalue()}))\n")
+    runs = [json.loads(subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300,
+                                      check=True).stdout.strip().splitlines()[-1]) for _ in range(2)]
+    assert runs[0]["pint"] and not runs[1]["pint"]
+    assert runs[0]["out"] == runs[1]["out"] and "Lb" in runs[1]["out"]

@@ -12,7 +12,6 @@ from __future__ import annotations
 import sys
 
 import numpy as np
-from scipy.integrate import solve_ivp
 
 from .. import plausibility
 from ..errors import Interrupted, SolverError
@@ -270,6 +269,8 @@ def _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step
         def rhs(t, x):  # the bar follows the integrator's time
             pbar.update_to(t - t0)
             return c.rhs(t, x)
+
+        from scipy.integrate import solve_ivp  # (0.8 s of imports: only the scipy path needs it)
 
         try:
             sol = solve_ivp(rhs, (t_a, t_b), x_a, method=method, t_eval=tpts, rtol=rtol, atol=atol_v,
