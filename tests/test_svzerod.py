@@ -102,11 +102,11 @@ def test_every_supported_block_has_a_component_and_a_missing_one_is_named(tmp_pa
     (Component.svzerod_blocks): every block type it supports has exactly one; a block no
     component declares is an error naming the element and the block type."""
     from hemocircuit import registry
-    from hemocircuit.svzerod import importer as imp
+    from hemocircuit.svzerod import model as svz
 
     types = registry.svzerod_block_types()
-    supported = (imp.SUPPORTED_VESSELS + imp.SUPPORTED_VALVES + imp.SUPPORTED_CHAMBERS + imp.SUPPORTED_BC
-                 + imp.SUPPORTED_CLOSED_LOOP)
+    supported = (svz.SUPPORTED_VESSELS + svz.SUPPORTED_VALVES + svz.SUPPORTED_CHAMBERS + svz.SUPPORTED_BC
+                 + svz.SUPPORTED_CLOSED_LOOP)
     assert sorted(set(supported) - set(types)) == []
     assert types["BloodVessel"] == "blood_vessel" and types["ClosedLoopCoronaryRight"] == "closed_loop_coronary"
     # a plug-in subclass of a source implements no block by inheriting (no "implemented twice")

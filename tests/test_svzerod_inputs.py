@@ -354,14 +354,14 @@ def test_the_importer_is_linear_in_the_models_size():
 def test_the_mean_netlist_is_the_steady_import():
     """The time-averaged netlist (their steady_initial's model) is built from the import's own
     elements; it equals a second import with every series at its mean (what it used to be)."""
-    from hemocircuit.svzerod.importer import _Importer, guess_units
+    from hemocircuit.svzerod.importer import Importer, guess_units
 
     cases = [os.path.join(SHARED, "cases", f) for f in sorted(os.listdir(os.path.join(SHARED, "cases")))] \
         if os.path.isdir(os.path.join(SHARED, "cases")) else []
     for case in cases + [chain(5), _model()]:
         cfg = inputs.read_json(case) if isinstance(case, str) else case
         m = import_svzerod(cfg)
-        steady = _Importer(cfg, None, guess_units(cfg))
+        steady = Importer(cfg, None, guess_units(cfg))
         steady.run(steady=True)
         assert m.mean_netlist["elements"] == steady.elements, case
         assert m.mean_netlist.get("derived") == (steady.derived or None), case

@@ -32,7 +32,8 @@ import numpy as np
 
 from .. import inputs
 from ..errors import HemocircuitError, NetlistError, did_you_mean, excerpt
-from .importer import _as_float, _show, import_svzerod, write_netlist
+from .importer import import_svzerod, write_netlist
+from .model import as_float, show
 from .tolerances import keeps_its_start, run_tolerances, tolerances
 
 @dataclass
@@ -84,23 +85,23 @@ def parse_result(d, path=None):
                             "flow_out, pressure_in, pressure_out)", file=None if path is None else str(path))
 
     if not isinstance(d, dict):
-        raise bad(f"a JSON object is expected, got {_show(d)}")
+        raise bad(f"a JSON object is expected, got {show(d)}")
     cols = ("y",) if "y" in d else RESULT_COLUMNS
     for key in ("name", "time") + cols:
         if not isinstance(d.get(key), dict):
-            raise bad(f"'{key}' " + ("is missing" if key not in d else f"must map rows to values, got {_show(d[key])}"))
+            raise bad(f"'{key}' " + ("is missing" if key not in d else f"must map rows to values, got {show(d[key])}"))
     def numbered(r):
         try:
             return int(r)
         except (TypeError, ValueError):
-            raise bad(f"the rows of 'name' must be numbered (\"0\", \"1\", ...), got {_show(r)}") from None
+            raise bad(f"the rows of 'name' must be numbered (\"0\", \"1\", ...), got {show(r)}") from None
 
     rows = sorted(d["name"], key=numbered)
     names = []
     for r in rows:
         n = d["name"][r]
         if not isinstance(n, str):
-            raise bad(f"name of row {excerpt(str(r), 20)[1:-1]} must be a variable or block name, got {_show(n)}")
+            raise bad(f"name of row {excerpt(str(r), 20)[1:-1]} must be a variable or block name, got {show(n)}")
         names.append(n)
 
     def column(key, allow_null=False):
@@ -113,10 +114,10 @@ def parse_result(d, path=None):
             if v is None and allow_null:
                 out[i] = np.nan  # their output_mean_only rows: time null
                 continue
-            f = _as_float(v)
+            f = as_float(v)
             if f is None:
                 raise bad(f"'{key}' of row {excerpt(str(r), 20)[1:-1]} ({excerpt(names[i], 40)}) must be a finite "
-                          f"number, got {_show(v)}")
+                          f"number, got {show(v)}")
             out[i] = f
         return out
 
@@ -406,7 +407,7 @@ def run_folder(folder, against="converged", cases=None, timed_runs=1, rtol=None)
     if cases:
         unknown = [c for c in dict.fromkeys(cases) if c not in known]
         if unknown:
-            raise NetlistError(f"--case {_show(unknown[0])}: no such case in {os.path.join(folder, 'cases')}"
+            raise NetlistError(f"--case {show(unknown[0])}: no such case in {os.path.join(folder, 'cases')}"
                                f"{did_you_mean(unknown[0], known)}; the cases are: {', '.join(known)}")
         known = [k for k in known if k in cases]
     return [run_case(os.path.join(folder, "cases", k + ".json"), against, timed_runs, rtol) for k in known]

@@ -38,21 +38,13 @@ import os
 import numpy as np
 
 from ..errors import HemocircuitError
-from .importer import HEART, HEART_IN, HEART_OUT, _ident, check_points
+from .model import HEART, HEART_IN, HEART_OUT, check_points, ident, read_model
 
 #: their blocks written by to_vessel_csv (a dynamic_cast list in csv_writer.cpp)
 VESSEL_OUTPUT_TYPES = ("BloodVessel", "BloodVesselCRL", "PiecewiseValve", "LinearElastanceChamber", "ChamberSphere")
 VESSEL_COLUMNS = ("flow_in", "flow_out", "pressure_in", "pressure_out")
 #: internal variables of the heart block (ClosedLoopHeartPulmonary.cpp setup_dofs), kind of each
 HEART_VARIABLES = ("V_RA", "Q_RA", "P_RV", "V_RV", "Q_RV", "P_pul", "P_LA", "V_LA", "Q_LA", "P_LV", "V_LV", "Q_LV")
-
-
-def _read_config(path_or_cfg):
-    if isinstance(path_or_cfg, dict):
-        return path_or_cfg
-    from ..inputs import read_json
-
-    return read_json(path_or_cfg, "svZeroDSolver model file")
 
 
 def connections(cfg):
@@ -92,7 +84,7 @@ def internal_variables(cfg):
     valves, chambers).  ``offset``: 'start' when theirs is relative to its value at t = 0."""
     out = []
     for b in cfg.get("boundary_conditions") or []:
-        name, typ, eid = b["bc_name"], b.get("bc_type"), _ident(b["bc_name"], None)
+        name, typ, eid = b["bc_name"], b.get("bc_type"), ident(b["bc_name"])
         if typ == "RCR":  # WindkesselBC.cpp: pressure_c
             out.append((f"pressure_c:{name}", f"{eid}.P_c", "P", None))
         elif typ == "ClosedLoopRCR":  # ClosedLoopRCRBC.cpp: P_c
@@ -104,10 +96,10 @@ def internal_variables(cfg):
             out += [(f"{v}:{HEART}", f"{HEART}.{v}", v[0], None) for v in HEART_VARIABLES]
     for b in cfg.get("valves") or []:
         if b.get("type") == "ValveTanh":
-            out.append((f"valve_status:{b['name']}", f"{_ident(b['name'], None)}.status", "1", None))
+            out.append((f"valve_status:{b['name']}", f"{ident(b['name'])}.status", "1", None))
     for b in cfg.get("chambers") or []:
         if b.get("type") in ("ChamberElastanceInductor", "LinearElastanceChamber"):
-            out.append((f"Vc:{b['name']}", f"V({_ident(b['name'], None)})", "V", None))
+            out.append((f"Vc:{b['name']}", f"V({ident(b['name'])})", "V", None))
     return out
 
 
@@ -426,7 +418,7 @@ def svzerod_output(model_path, out_path, rtol=None, start="operating-point", uni
     layout to ``out_path``.  Returns (the model with the cycles the run made, circuit, result)."""
     from .importer import import_svzerod
 
-    cfg = _read_config(model_path)  # read once, under the input policy
+    cfg, _ = read_model(model_path)  # read once, under the input policy
     model = import_svzerod(cfg, units=units, name=os.path.splitext(os.path.basename(str(model_path)))[0],
                            source=str(model_path))
     c, res = simulate_svzerod(model, sets=sets, rtol=rtol, start=start, cfg=cfg)

@@ -124,7 +124,7 @@ def their_initial(model, circuit):
 
 def their_steady_initial(model, mean_circuit):
     """The state their steady_initial procedure gives for an imported ``model``
-    (:class:`~hemocircuit.svzerod.importer.SvzModel`), on ``mean_circuit`` (the circuit of
+    (:class:`~hemocircuit.svzerod.model.SvzModel`), on ``mean_circuit`` (the circuit of
     ``model.mean_netlist``).  Their cardiac period T, ``rho_infty`` from their
     simulation_parameters."""
     from ..ic import apply_ic
