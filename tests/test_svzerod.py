@@ -213,7 +213,6 @@ def test_activation_breakpoints_cover_every_kink(kind, values):
 
 def test_piecewise_valve_steady_flow(tmp_path):
     """Forward: Q = P/(Rmin + R_bc); a backward pressure sees Rmax (PiecewiseValve.cpp)."""
-    mmHg = 1333.22387415
     for P, Rv in ((1000.0, 10.0), (-1000.0, 1e4)):
         cfg = {"simulation_parameters": SIM,
                "vessels": [{"vessel_name": "v", "vessel_id": 0, "zero_d_element_type": "BloodVessel",
