@@ -224,7 +224,7 @@ def build_parser(command=None):
         sp.add_argument("--allow-path", action="append", metavar="DIR",
                         help="let the netlist read files (extends, tables) in DIR too; by default only its "
                              "project folder and the bundled netlists (repeatable)")
-        # no choices= here: the importer checks the name against its UNIT_SYSTEMS (importing it
+        # no choices= here: the importer checks the name against svzerod.model.UNIT_SYSTEMS (importing it
         # for --help would cost start-up time)
         sp.add_argument("--svzerod-units", metavar="SYSTEM",
                         help="for an svZeroDSolver JSON model: the unit system of its numbers, cgs (default, "

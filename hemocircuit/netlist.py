@@ -380,7 +380,7 @@ def load_netlist(path: str, allow_paths=None, svzerod_units=None) -> Netlist:
 
     Files named inside (``extends``, table ``file:``) must lie in the allowed folders (see
     :mod:`hemocircuit.access`); ``allow_paths`` adds folders.  ``svzerod_units``: the unit
-    system of an svZeroDSolver JSON model's numbers (hemocircuit.svzerod.importer.UNIT_SYSTEMS;
+    system of an svZeroDSolver JSON model's numbers (hemocircuit.svzerod.model.UNIT_SYSTEMS;
     an error for a hemocircuit netlist)."""
     path = inputs.check_path(path, "netlist file")
     access = Access.for_netlist(path, allow_paths)
