@@ -28,7 +28,7 @@ JacWork = namedtuple("JacWork", (
 ))
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, internal=True)
 def make_jac_work(lay):
     """The scratch arrays of local_jacobian_into (JacWork)."""
     (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st) = lay
@@ -55,7 +55,7 @@ def make_jac_work(lay):
                    Jxs=np.zeros((max(nx, 1), Sm)), Jx=np.zeros((Sm, Sm)), Ju=np.zeros((Sm, Lm)))
 
 
-@njit(cache=True, nogil=True, _nrt=False)
+@njit(cache=True, nogil=True, internal=True, _nrt=False)
 def local_jacobian_into(t, x, P, lay, work, jw, scales, J, xt, analytic):
     """State Jacobian J (nx, nx) at (t, x) from element-local differences composed through the
     nodal solve (as svZeroDSolver composes its blocks' derivatives), without a whole
@@ -77,7 +77,8 @@ def local_jacobian_into(t, x, P, lay, work, jw, scales, J, xt, analytic):
     u, Al, bl, ul, pl, xl, il, dl, A0, b0 = (work.u, work.Al, work.bl, work.ul, work.pl, work.xl, work.il, work.dl,
                                              work.A0, work.b0)
     E = et.shape[0]
-    Pe = effective_params(t, x, P, lay, work)
+    effective_params(t, x, P, lay, work)
+    Pe = work.Pe
     for i in range(Pb.shape[0]):
         Pb[i] = Pe[i]
     # the full nodal system at x (as solve_nodes, without condensation); local stamps kept
@@ -158,7 +159,8 @@ def local_jacobian_into(t, x, P, lay, work, jw, scales, J, xt, analytic):
             hj = xt[j] - x[j]
             Pt = Pb
             if observed:  # expressions read e0's observables: parameters at the moved state
-                Pt = effective_params(t, xt, P, lay, work)
+                effective_params(t, xt, P, lay, work)
+                Pt = work.Pe
             for i in range(n + 1):
                 col[i] = 0.0
             for i in range(nx):

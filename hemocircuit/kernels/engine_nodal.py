@@ -118,9 +118,14 @@ def make_work(lay):
 
 
 # inline="always" (numba IR inlining) on the small helpers called inside the per-evaluation
-# loops: passing the layout and work tuples to a separate function costs a reference count per
-# member (~1 us per evaluation in all).  Not on rhs_into: inlining it at its six call sites
-# quadruples the compile time (25 s -> 100 s) for 14 % speed.
+# loops: a call from a function compiled with reference counting costs one per array member of
+# the layout and work tuples (~1 us per evaluation in all).  Not on rhs_into: inlining it at its
+# six call sites quadruples the compile time (25 s -> 100 s) for 14 % speed.  Nor on
+# effective_params and stamp_element, called from several places in the nodal solve and the
+# Jacobian: each inlined copy was typed and lowered again (local_jacobian_into held two of each);
+# as functions of their own, compiled without reference counting as all their callers, they are
+# compiled once and LLVM inlines them where it pays (the same machine speed, the first compile
+# 8 s less CPU on the project's machine).
 @njit(cache=True, nogil=True, inline="always")
 def load_element(e, x, Pe, ep, ex, eo, io, pl, xl, il):
     """Copy element e's parameters, states and options into the scratch buffers.  (Arrays, not
@@ -133,7 +138,7 @@ def load_element(e, x, Pe, ep, ex, eo, io, pl, xl, il):
         il[i - eo[e]] = io[i]
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, internal=True, _nrt=False)
 def effective_params(t, x, P, lay, work):
     """Parameters with waveforms added and expressions evaluated (into work.Pe)."""
     (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st) = lay
@@ -151,10 +156,9 @@ def effective_params(t, x, P, lay, work):
                 O[i] = ol[i - eb[e]]
         for k in range(xs.shape[0]):
             Pe[xs[k]] = eval_expr_with(xcode, xc[k], xconst, xk[k], Pe, O, work.expr_stack)
-    return Pe
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, internal=True, _nrt=False)
 def stamp_element(e, t, x, Pe, et, L, ep, ex, eu, ui, eo, io, u, Al, bl, ul, pl, xl, il):
     """Element e's local stamp into the scratch Al, bl (at the current iterate u).  Arrays, not
     the layout and work tuples: passing a tuple costs a reference count per member."""
@@ -174,7 +178,8 @@ def prepare_static(t, x, P, lay, work):
     """A0 = the constant matrix stamps, b0 = the static elements' right-hand sides, for the
     parameters P (call again whenever P changes)."""
     (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st) = lay
-    Pe = effective_params(t, x, P, lay, work)
+    effective_params(t, x, P, lay, work)
+    Pe = work.Pe
     A0, b0, u, Al, bl, ul, pl, xl, il = work.A0, work.b0, work.u, work.Al, work.bl, work.ul, work.pl, work.xl, work.il
     A0[:, :] = 0.0
     b0[:] = 0.0
@@ -385,7 +390,8 @@ def rhs_into(t, x, P, lay, work, dx):
     no derivatives, a third of an evaluation; the same compiled function, so no second
     compilation of the inlined nodal solve)."""
     (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st) = lay
-    Pe = effective_params(t, x, P, lay, work)
+    effective_params(t, x, P, lay, work)
+    Pe = work.Pe
     if not solve_nodes(t, x, Pe, lay, work):
         for i in range(dx.shape[0]):
             dx[i] = np.nan
