@@ -1,30 +1,30 @@
 """Compile part of a new engine in a second process while the first compiles the rest.
 
 A first compilation of an engine is one numba compilation of the integrator, which types and
-lowers every function it calls, one after the other, on one core (docs/performance.md,
-session 11: 34 s for the vasomotion engine on one core, of which the element-local Jacobian
-``local_jacobian_into`` 7.8 s, the nodal solve and right-hand side ~10 s, the integrator's own
-body ~9 s).
-Numba caches each function on its own: when the integrator reaches a callee that is already
-in the cache for the same argument types, it loads it instead of compiling it.  So
-:func:`start` launches ``python -m hemocircuit.kernels.prebuild`` (the job on its stdin), and
-the two processes split the first compile, each compiling what the other does not need first:
+lowers every function it calls, one after the other, on one core.  Numba caches each function
+on its own: when the integrator reaches a callee that is already in the cache for the same
+argument types, it loads it instead of compiling it.  So :func:`start` launches ``python -m
+hemocircuit.kernels.prebuild`` (the job on its stdin), and the two processes split the callees,
+each compiling what the other does not need first:
 
 * the helper: ``elem_derivs_jac`` and ``elem_derivs`` (the kernels only the Jacobian and the
   right-hand side call), then ``local_jacobian_into``, which by then loads the nodal solve's
-  element kernels from this process's cache, then ``make_jac_work`` and the Rosenbrock
-  integrator's small callees (``hermite_root``, ``hermite``, ``stage_dense`` of kernels.dense,
-  ``finish_member`` of kernels.runs: shared by every engine, so often in the cache already);
-  all by signature (:func:`helper_signatures`), the scratch buffers (named tuples) typed from
-  the Python twins of the makers;
+  element kernels from this process's cache, then the Jacobian's scratch maker
+  ``make_jac_work``, the Rosenbrock integrator's small callees (``hermite_root``, ``hermite``,
+  ``stage_dense`` of kernels.dense, ``finish_member`` of kernels.runs: shared by every engine,
+  so often in the cache already) and the evaluation's scratch maker ``make_work``; all by
+  signature (:func:`helper_signatures`), the scratch buffers (named tuples) typed from the
+  Python twins of the makers;
 * this process (:func:`before_integrator`): ``prepare_static`` (the element kernels of the
-  nodal solve), ``rhs_into`` (loading ``elem_derivs`` from the helper's cache) and
-  ``make_work``; then it waits for the helper's part before compiling the integrator itself.
+  nodal solve, the effective parameters, the condensation) and ``rhs_into`` (loading
+  ``elem_derivs`` from the helper's cache); then it waits for the helper's part before
+  compiling the integrator itself, whose own body and final link are the one part that cannot
+  be split (docs/performance.md, "Start-up and first compile", has the figures).
 
-Both parts take about 9 s of the vasomotion engine's ~30 s (docs/performance.md, session 12:
-the first run 21.4 -> 19.4 s).  The helper goes on with ``nodal_outputs`` (the outputs of a
-long run), which this process reaches only after the integration.  If the helper fails or is
-later than WAIT_S, the integrator compiles what is missing itself, as without it.
+The helper then goes on with ``nodal_outputs`` (the outputs of a long run, which this process
+reaches only after the integration) at a lower priority, so that on a busy machine it does not
+slow the integrator's compile.  If the helper fails or is later than WAIT_S, the integrator
+compiles what is missing itself, as without it.
 """
 from __future__ import annotations
 
@@ -82,8 +82,9 @@ def before_integrator(system):
     """Just before the first call of a compiled integrator in this process, when :func:`start`
     launched a helper for its engine: compile the nodal solve and the right-hand side here
     (``prepare_static`` and ``rhs_into``, by the signatures the integrators call them with),
-    then wait while the helper is running until its ``local_jacobian_into`` is in numba's cache
-    (at most WAIT_S), so that the integrator loads it instead of compiling it a second time.
+    then wait while the helper is running until its ``local_jacobian_into`` and scratch makers
+    are in numba's cache (at most WAIT_S), so that the integrator loads them instead of
+    compiling them a second time.
     Without this the integrator reaches the Jacobian in its own typing order (make_work,
     prepare_static, rhs_into, local_jacobian_into) and compiled it itself whenever the helper was
     seconds late (docs/performance.md, session 11).  Once per engine module and process."""
@@ -103,12 +104,10 @@ def before_integrator(system):
         sig_w = (t, vx, numba.typeof(P), lay, numba.typeof(work))
         mod.prepare_static.compile(sig_w)
         mod.rhs_into.compile(sig_w + (vx,))
-        # the integrators' scratch maker (the helper types the Jacobian's from the Python twin
-        # and compiles make_jac_work after it): here, while the helper still runs
-        mod.make_work.compile((lay,))
     except Exception:  # noqa: BLE001 - only a head start: the integrator compiles what is missing
         pass
-    helpers = (mod.local_jacobian_into, mod.make_jac_work)  # the helper's part, in its order
+    # the helper's part the integrator reaches first, in the helper's order
+    helpers = (mod.local_jacobian_into, mod.make_jac_work, mod.make_work)
     end = time.monotonic() + WAIT_S
     while proc.poll() is None and not all(in_cache(f) for f in helpers) and time.monotonic() < end:
         time.sleep(0.05)
@@ -169,13 +168,19 @@ def _run() -> int:
     loader.loader.exec_module(mod)
     # first the element kernels only the Jacobian and the right-hand side call, while the first
     # process compiles the ones the nodal solve calls (prepare_static), which the Jacobian then
-    # loads from the cache instead of compiling them at the same time; no make_work or
-    # make_jac_work before the Jacobian (1.6 s): the first process compiles make_work while it
-    # waits, this one make_jac_work last
+    # loads from the cache instead of compiling them at the same time; the scratch makers after
+    # the Jacobian (the first process compiles prepare_static and rhs_into meanwhile, the
+    # longer part)
     for fn, sig in helper_signatures(mod, spec["lay"], spec["nx"], spec["nP"]):
         fn.compile(sig)
+    mod.make_work.compile((numba.typeof(spec["lay"]),))  # the last the first process waits for
     # then the outputs' nodal solve (CompiledSystem.nodal_outputs, with its argument types),
-    # which this process's run reaches only after the integration
+    # which the first process's run reaches only after the integration: at a lower priority,
+    # so that on a busy machine it leaves the core to the integrator's compile
+    try:
+        os.nice(10)
+    except OSError:
+        pass
     v, m, P2 = numba.typeof(np.empty(1)), numba.typeof(np.empty((1, 1))), np.empty((1, spec["nP"]))
     P2.setflags(write=False)
     mod.nodal_outputs.compile((v, m, numba.typeof(P2), numba.typeof(spec["lay"]), m, m))
