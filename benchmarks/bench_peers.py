@@ -147,9 +147,9 @@ def rel(a, b):
 def period(t, y):
     """Mean interval between upward crossings of the mean, NaN if < 2 (hemocircuit's envelope
     definition, which the peers README uses too)."""
-    from hemocircuit.analyses.envelope import _period
+    from hemocircuit.analyses.envelope import period_of
 
-    return _period(t, y)
+    return period_of(t, y)
 
 
 def on_grid(t, dt, t0=0.0):

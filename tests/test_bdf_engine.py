@@ -129,7 +129,7 @@ def test_batch_members_independent():
 def test_vasomotion_cycle_within_1e3_of_the_reference():
     """Issue 8's accuracy criterion on the 1000 s vasomotion run at rtol 1e-6: r min, r max,
     mean r, period and mean bed flow over the last 300 s within 1e-3 of the reference cycle."""
-    from hemocircuit.analyses.envelope import _period
+    from hemocircuit.analyses.envelope import period_of as _period
 
     c = hc.load(os.path.join(NETLISTS, "vasomotion.yaml"))
     x0 = operating_point(c).x.copy()
