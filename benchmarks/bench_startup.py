@@ -2,6 +2,7 @@
 
     python benchmarks/bench_startup.py                 # all three rows, 5 runs each (median)
     python benchmarks/bench_startup.py --runs 3 --only first-tran
+    python benchmarks/bench_startup.py --breakdown     # the first compile's CPU, by function
 
 Rows:
   help        ``hemocircuit --help``
@@ -20,6 +21,12 @@ Rows:
 Each run is a child process; wall time from a monotonic clock, CPU time (user + system) from
 the operating system's accounting of the child (``resource.getrusage(RUSAGE_CHILDREN)``), so
 CPU figures stay meaningful on a busy machine.  Medians are printed.
+
+``--breakdown``: where the first compile's CPU goes, in one child process without the second
+(``HEMOCIRCUIT_PREBUILD=0``, empty caches): the first ``tran`` of the row's netlist, each numba
+function's own compile CPU (numba's event API, ``numba.core.event``: its callees' compiles
+subtracted), numba's passes summed over the functions, and LLVM's share (function passes,
+final-module optimisation, machine code: numba's code libraries timed).
 """
 from __future__ import annotations
 
@@ -72,11 +79,86 @@ def run_once(args, env):
     return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime), ready
 
 
+BREAKDOWN = r"""
+import os, sys, time
+import numpy as np
+from numba.core import codegen, event
+own, passes, llvm, stack = {}, {}, {}, []
+
+class Listener(event.Listener):
+    def on_start(self, ev):
+        name = ev.data["dispatcher"].py_func.__qualname__ if ev.kind == "numba:compile" else ev.data["name"]
+        stack.append([ev.kind, name, time.process_time(), 0.0])
+
+    def on_end(self, ev):
+        kind, name, t0, inner = stack.pop()
+        spent = time.process_time() - t0
+        if stack:
+            stack[-1][3] += spent
+        if kind == "numba:compile":
+            own[name] = own.get(name, 0.0) + spent - inner
+        else:
+            fn = next(s[1] for s in reversed(stack) if s[0] == "numba:compile")
+            own[fn] = own.get(fn, 0.0) + spent - inner
+            key = name.split(" [")[0]
+            passes[key] = passes.get(key, 0.0) + spent - inner
+
+
+def timed(name):
+    orig = getattr(codegen.CPUCodeLibrary, name)
+
+    def run(self, *a, **k):
+        t0 = time.process_time()
+        try:
+            return orig(self, *a, **k)
+        finally:
+            llvm[name] = llvm.get(name, 0.0) + time.process_time() - t0
+    setattr(codegen.CPUCodeLibrary, name, run)
+
+
+for name in ("_optimize_functions", "_optimize_final_module", "_finalize_final_module"):
+    timed(name)
+event.register("numba:compile", Listener())
+event.register("numba:run_pass", Listener())
+import hemocircuit as hc
+from hemocircuit.analyses.transient import simulate
+c = hc.load(sys.argv[1])
+t0 = time.process_time()
+simulate(c, t_end=10.0, progress=False, compile="wait")
+total = time.process_time() - t0
+print(f"first tran, one process: {total:.1f} s CPU, {len(own)} functions compiled")
+print("LLVM: function passes {:.1f} s, final-module optimisation {:.1f} s, machine code {:.1f} s".format(
+    *(llvm.get(k, 0.0) for k in ("_optimize_functions", "_optimize_final_module", "_finalize_final_module"))))
+print("passes: " + ", ".join(f"{k} {v:.1f}" for k, v in sorted(passes.items(), key=lambda kv: -kv[1])[:8]))
+print("functions (own compile CPU):")
+top = sorted(own.items(), key=lambda kv: -kv[1])
+for name, v in top[:14]:
+    print(f"  {name:32s} {v:6.2f} s")
+print(f"  the other {len(top) - 14:3d}                   {sum(v for _, v in top[14:]):6.2f} s")
+"""
+
+
+def breakdown(row) -> int:
+    """Where a first compile's CPU goes (see the module docstring), one child process."""
+    args, _ = ROWS[row]
+    tmp = tempfile.mkdtemp(prefix="hc-startup-")
+    env = {**os.environ, "HEMOCIRCUIT_CACHE_DIR": os.path.join(tmp, "hc"), "NUMBA_CACHE_DIR": os.path.join(tmp, "numba"),
+           "HEMOCIRCUIT_PREBUILD": "0"}
+    try:
+        return subprocess.run([sys.executable, "-c", BREAKDOWN, args[1]], env=env, cwd=ROOT).returncode
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--only", action="append", choices=ROWS, help="row to run (repeatable; default all)")
     ap.add_argument("--runs", type=int, default=5, help="runs per row (median; default 5)")
+    ap.add_argument("--breakdown", action="store_true",
+                    help="where the first compile's CPU goes (first-tran-wait's netlist, one process)")
     a = ap.parse_args()
+    if a.breakdown:
+        return breakdown("first-tran-wait")
     for name in a.only or ROWS:
         args, cold = ROWS[name]
         env = dict(os.environ)
