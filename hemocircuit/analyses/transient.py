@@ -91,7 +91,7 @@ def simulate(circuit, t_end, dt=None, t0=0.0, x0=None, protocol=None, method="BD
     progress: a bar of the simulated time on stderr (default: :mod:`hemocircuit.progress`'s
         setting, on for the command line unless --quiet).
     compile: with engine 'auto', what a run does when the compiled engine of the circuit's
-        component types is not built yet (its first run; building takes 20-45 s):
+        component types is not built yet (its first run; building takes about 45-55 s on 2 cores):
         'wait' compiles it first; 'background' starts the build in another process
         (:mod:`hemocircuit.kernels.background`), integrates on the scipy path meanwhile and
         continues on the compiled engine from the first piece after the build is ready
@@ -185,7 +185,7 @@ def _say_compiling():
     if not _told:
         _told.append(True)
         from ..kernels.codegen import cache_dir
-        print(f"hemocircuit: compiling the engine for these component types (their first run; about 15-30 s, "
+        print(f"hemocircuit: compiling the engine for these component types (their first run; about 45 s on 2 cores, "
               f"cached in {cache_dir()} for every later run)", file=sys.stderr, flush=True)
 
 
@@ -243,7 +243,7 @@ def _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step
                 handover = _Handover(system, t0, t_end)  # the scipy path below, until the build is ready
                 if wanted(progress):
                     print("hemocircuit: the compiled engine for these component types is being built in the "
-                          "background (first run, about 20-45 s); integrating on the scipy path meanwhile",
+                          "background (first run, about 45-55 s on 2 cores); integrating on the scipy path meanwhile",
                           file=sys.stderr)
             else:
                 with bar(t_end - t0, "tran (simulated time)", unit="s", progress=progress) as pbar:
