@@ -100,3 +100,21 @@ def test_a_warm_run_with_expressions_needs_no_pint(tmp_path, monkeypatch):
                                       check=True).stdout.strip().splitlines()[-1]) for _ in range(2)]
     assert runs[0]["pint"] and not runs[1]["pint"]
     assert runs[0]["out"] == runs[1]["out"] and "Lb" in runs[1]["out"]
+
+
+def test_each_builtin_type_alone_is_the_registry_s_class():
+    """registry.get_type's fast path (a built-in type imported alone through the index read
+    from the sources) gives, for every built-in type, the class the full registry finds, and
+    the index names every built-in type.  In a fresh interpreter: the fast path only runs
+    before the full registry is built."""
+    code = ("import json\n"
+            "from hemocircuit import registry\n"
+            "fast = {n: (lambda c: c and c.__module__ + '.' + c.__qualname__)(registry.get_type(n))\n"
+            "        for n in registry._builtin_index()}\n"
+            "full = {n: c.__module__ + '.' + c.__qualname__ for n, c in registry.component_types().items()}\n"
+            "print(json.dumps([fast, full]))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=True)
+    fast, full = json.loads(out.stdout.strip().splitlines()[-1])
+    assert len(fast) >= 25 and fast == {n: full[n] for n in fast}
+    builtin = {n for n, path in full.items() if path.startswith("hemocircuit.components.")}
+    assert builtin <= set(fast)  # (a plug-in, e.g. the documented one, may be installed too)
