@@ -298,6 +298,13 @@ def copy_nodal(As, Ss, bs, A, Sw, b, schur, nv, n):
 
 
 @njit(cache=True, nogil=True, inline="always")
+def zero_start(u, n):
+    """The nodal unknowns' start after a failed solve (and for linear systems): zeros."""
+    for i in range(n + 1):
+        u[i] = 0.0
+
+
+@njit(cache=True, nogil=True, inline="always")
 def solve_nodes(t, x, Pe, lay, work):
     """Node pressures and branch flows u (n+1,; u[n] = 0 is ground) for states x: the MNA
     system A0 + (varying stamps) and b0 + (non-static right-hand sides), solved densely
@@ -318,13 +325,22 @@ def solve_nodes(t, x, Pe, lay, work):
     schur = work.condensed[0] == 1
     nc = work.nc[0]
     nv = work.nv[0]
-    if nonlin == 0:
-        for i in range(n + 1):
-            u[i] = 0.0
-    for it in range(NEWTON_MAXIT):
+    # Newton starts from the last solution (u, warm) and, if that does not converge, once more
+    # from zero; a solve that fails leaves zeros, not its last iterate.  A warm start left far
+    # away (a rejected stage's state) or not finite (a failed solve; prepare_static's stamps
+    # read u too) made every later solve fail, and the step size shrink to nothing (the
+    # decomposed heart: "step size too small")
+    restart = nonlin == 0
+    for it in range(2 * NEWTON_MAXIT):
+        if it == NEWTON_MAXIT:
+            restart = True
+        if restart:
+            zero_start(u, n)
+            restart = False
+        first = it == 0 or it == NEWTON_MAXIT
         # the system's base: A0, b0 at the first iterate, then A1, b1 (the base plus the
         # iterate-independent stamps, kept from the first)
-        if it == 0:
+        if first:
             copy_nodal(A0, S0, b0, A, Sw, b, schur, nv, n)
         else:
             copy_nodal(A1, Sw1, b1, A, Sw, b, schur, nv, n)
@@ -332,7 +348,7 @@ def solve_nodes(t, x, Pe, lay, work):
         # phase 1: those nonlinear in the pressures (st 2).  One stamp call site: each inlined
         # copy of the kernels' stamps costs compile time
         for ph in range(2):
-            if ph == 0 and it > 0:
+            if ph == 0 and not first:
                 continue
             for e in range(et.shape[0]):
                 if st[e] != 2 * ph:
@@ -352,7 +368,10 @@ def solve_nodes(t, x, Pe, lay, work):
                     acc -= Avc[a, i] * y[i]
                 rv[a] = acc
             if not lu_factor(Sw, piv, nv):
-                return False
+                if nonlin == 0 or it >= NEWTON_MAXIT:
+                    break
+                restart = True  # singular at this iterate: from zero
+                continue
             lu_apply(Sw, piv, rv, nv)
             for a in range(nv):
                 un[order[nc + a]] = rv[a]
@@ -363,7 +382,10 @@ def solve_nodes(t, x, Pe, lay, work):
                 un[order[i]] = acc
         else:
             if not lu_factor(A, piv, n):
-                return False
+                if nonlin == 0 or it >= NEWTON_MAXIT:
+                    break
+                restart = True  # singular at this iterate: from zero
+                continue
             for i in range(n):
                 un[i] = b[i]
             lu_apply(A, piv, un, n)
@@ -373,13 +395,21 @@ def solve_nodes(t, x, Pe, lay, work):
                 u[i] = un[i]
             return True
         change = 0.0
+        finite = True
         for i in range(n + 1):
             d = abs(un[i] - u[i]) / (1.0 + abs(un[i]))
             if d > change:
                 change = d
+            if not np.isfinite(un[i]):  # (a NaN's d is never > change)
+                finite = False
             u[i] = un[i]
-        if change < NEWTON_TOL:
+        if not finite:  # diverged: from zero now, or give up
+            if it >= NEWTON_MAXIT:
+                break
+            restart = True
+        elif change < NEWTON_TOL:
             return True
+    zero_start(u, n)
     return False
 
 
