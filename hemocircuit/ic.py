@@ -4,7 +4,9 @@ A transient starts from the operating point; ``ic`` replaces some of its states,
 ``{'Cv.V': '20 mL', 'art.Ca': '1e-7 M'}`` (``hemocircuit tran --ic Cv.V=20mL``).  A value is
 a quantity string with a unit, or a plain number taken in the state's declared unit.  The
 other states keep their operating-point values; nothing is re-solved, so the start may be
-off any conservation law the circuit has (that is the point of an initial condition).
+off any conservation law the circuit has (that is the point of an initial condition).  An
+``ic`` that names every state is the whole start: no operating point is computed (an imported
+svZeroDSolver closed loop starts from their initial_condition, as their runs do).
 """
 from __future__ import annotations
 
@@ -27,6 +29,11 @@ def state_index(circuit, name: str) -> int:
     hint = f"did you mean {', '.join(close)}?" if close else f"states: {', '.join(circuit.state_names)}"
     raise NetlistError(f"initial condition: no state '{name}'; {hint}", file=circuit.file,
                        element=split_path(name)[0] if split_path(name)[0] in circuit.elements else None)
+
+
+def names_every_state(circuit, ic: dict | None) -> bool:
+    """True if ``ic`` gives a value to every state of ``circuit`` (then it is the whole start)."""
+    return bool(ic) and circuit.nx > 0 and len({state_index(circuit, str(k)) for k in ic}) == circuit.nx
 
 
 def apply_ic(circuit, x, ic: dict | None) -> np.ndarray:

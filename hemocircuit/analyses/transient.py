@@ -218,11 +218,15 @@ def _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step
             if not background.ready(system) and progress is not False:
                 _say_compiling()
             prebuild.start(system)
-    x = operating_point(c, t=t0).x if x0 is None else np.asarray(x0, dtype=float).copy()
-    # the netlist's starting perturbation (from the operating point only), --ic state by state over it
+    from ..ic import apply_ic, names_every_state
+    # the netlist's starting perturbation (from the operating point only), --ic state by state
+    # over it; an ic naming every state is the whole start (no operating point)
     ic = {**(c.netlist.ic if x0 is None else {}), **(ic or {})}
+    if x0 is not None:
+        x = np.asarray(x0, dtype=float).copy()
+    else:
+        x = np.zeros(c.nx) if names_every_state(c, ic) else operating_point(c, t=t0).x
     if ic:
-        from ..ic import apply_ic
         x = apply_ic(c, x, ic)
     events = sorted([(ev.at, ev) for ev in (protocol.events if protocol else []) if t0 < ev.at < t_end],
                     key=lambda e: e[0])

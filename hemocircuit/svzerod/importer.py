@@ -413,8 +413,11 @@ def import_svzerod(path_or_cfg, units: str | None = None, name=None, source=None
     netlist = {**header, "elements": imp.elements}
     if imp.derived:
         netlist["derived"] = imp.derived
-    if imp.closed:  # the conserved blood volume is that of their initial condition
+    if imp.closed:  # the conserved blood volume is that of their initial condition ...
         netlist["constraints"] = [{"node": imp.law_node, "volume": fmt(imp.store_volume, imp.u["V"])}]
+        # ... and a run starts there, as theirs (the time-averaged loop's operating point has no
+        # pump: every valve at zero flow, on its kink, where a PiecewiseValve's Newton cycles)
+        netlist["ic"] = dict(imp.initial)
     mean_netlist = {**header, "name": header["name"] + "_mean", "elements": imp.mean_elements()}
     if imp.derived:
         mean_netlist["derived"] = {k: dict(v) for k, v in imp.derived.items()}
