@@ -95,8 +95,15 @@ def compute_tran(args, sets):
     dt = float(quantity_to(args.dt, "s")) if args.dt else None
     ic = assignments(args.ic, "--ic", "ID.STATE=VALUE", "Cv.V=20mL")
     max_step = float(quantity_to(args.max_step, "s")) if args.max_step else np.inf
+    x0 = None
+    if getattr(args, "periodic_start", False):  # the orbit's state at phase 0; --ic applies to the shooting's start
+        from .analyses.transient import periodic_start
+        x0, orb = periodic_start(c, ic)
+        ic = None
+        print(f"periodic start: the orbit of period {orb.period:g} s by shooting ({orb.iterations} periods, "
+              f"residual {orb.residual:.2g})", file=sys.stderr)
     return c.simulate(t_end, dt=dt, protocol=events_only(proto), integrator=args.integrator, rtol=args.rtol,
-                      atol=args.atol, max_step=max_step, ic=ic, compile=args.compile)
+                      atol=args.atol, max_step=max_step, ic=ic, x0=x0, compile=args.compile)
 
 
 def cmd_tran(args):
@@ -262,6 +269,9 @@ def build_parser(command=None):
     sp.add_argument("--atol", type=float,
                     help="absolute tolerance per unit of each state's scale (default rtol * 1e-3)")
     sp.add_argument("--max-step", help="largest step (e.g. 0.1 s; default: no limit)")
+    sp.add_argument("--periodic-start", action="store_true",
+                    help="start on the periodic steady state of the netlist's own period (its periodic waveforms, "
+                         "a heart's beat), found by shooting from the usual start, instead of the operating point")
     sp.add_argument("--ic", action="append", metavar="ID.STATE=VALUE",
                     help="start with this state overridden (units allowed, e.g. Cv.V=20mL, art.Ca=1e-7M); "
                          "the others at the operating point; repeatable")

@@ -189,6 +189,38 @@ def _say_compiling():
               f"cached in {cache_dir()} for every later run)", file=sys.stderr, flush=True)
 
 
+def start_state(c, t0=0.0, x0=None, ic=None):
+    """The state a run of ``c`` starts from at t0: ``x0``, or the operating point, with the
+    netlist's ic (from the operating point only) and then ``ic`` state by state over it; an ic
+    naming every state is the whole start (no operating point is computed)."""
+    from ..ic import apply_ic, names_every_state
+    from .op import operating_point
+
+    ic = {**(c.netlist.ic if x0 is None else {}), **(ic or {})}
+    if x0 is not None:
+        x = np.asarray(x0, dtype=float).copy()
+    else:
+        x = np.zeros(c.nx) if names_every_state(c, ic) else operating_point(c, t=t0).x
+    return apply_ic(c, x, ic) if ic else x
+
+
+def periodic_start(c, ic=None, rtol=1e-9):
+    """(state, orbit): the periodic steady state of ``c``'s own period (its periodic waveforms
+    and chambers; svzerod.cycles.time_period) at phase 0, by Anderson-accelerated shooting from
+    :func:`start_state`, for a run that starts on it (``tran --periodic-start``).  A SolverError
+    when the shooting does not converge."""
+    from ..svzerod.cycles import time_period
+    from .periodic import shoot
+
+    T = time_period(c)
+    orb = shoot(c, start_state(c, 0.0, None, ic), T, forced=True, rtol=rtol, method="anderson", multipliers=False)
+    if not orb.converged:
+        raise SolverError(f"--periodic-start: the shooting for the periodic state (period {T:g} s) did not "
+                          f"converge in {orb.iterations} periods (residual {orb.residual:.3g}); start from the "
+                          "operating point and run longer instead, or see 'hemocircuit periodic --forced'")
+    return orb.x0, orb
+
+
 def _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step, first_step, engine, ic,
               progress=None, compile="wait", output_from=None, compiled_method=None):
     from ..progress import bar, wanted
@@ -218,16 +250,7 @@ def _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step
             if not background.ready(system) and progress is not False:
                 _say_compiling()
             prebuild.start(system)
-    from ..ic import apply_ic, names_every_state
-    # the netlist's starting perturbation (from the operating point only), --ic state by state
-    # over it; an ic naming every state is the whole start (no operating point)
-    ic = {**(c.netlist.ic if x0 is None else {}), **(ic or {})}
-    if x0 is not None:
-        x = np.asarray(x0, dtype=float).copy()
-    else:
-        x = np.zeros(c.nx) if names_every_state(c, ic) else operating_point(c, t=t0).x
-    if ic:
-        x = apply_ic(c, x, ic)
+    x = start_state(c, t0, x0, ic)
     events = sorted([(ev.at, ev) for ev in (protocol.events if protocol else []) if t0 < ev.at < t_end],
                     key=lambda e: e[0])
     limits = c.hard_limits()
