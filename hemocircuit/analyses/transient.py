@@ -224,7 +224,6 @@ def periodic_start(c, ic=None, rtol=1e-9):
 def _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step, first_step, engine, ic,
               progress=None, compile="wait", output_from=None, compiled_method=None):
     from ..progress import bar, wanted
-    from .op import operating_point
 
     c = circuit
     handover = None
