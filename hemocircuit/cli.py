@@ -97,7 +97,7 @@ def compute_tran(args, sets):
     max_step = float(quantity_to(args.max_step, "s")) if args.max_step else np.inf
     x0 = None
     if getattr(args, "periodic_start", False):  # the orbit's state at phase 0; --ic applies to the shooting's start
-        from .analyses.transient import periodic_start
+        from .analyses.periodic import periodic_start
         x0, orb = periodic_start(c, ic)
         ic = None
         print(f"periodic start: the orbit of period {orb.period:g} s by shooting ({orb.iterations} periods, "

@@ -251,6 +251,24 @@ def _orbit(c, x0, T, M, converged, it, res_norm, forced, n_laws, started, settin
     return stamp(orb, "periodic", c, settings, started)
 
 
+def periodic_start(c, ic=None, rtol=1e-9):
+    """(state, orbit): the periodic steady state of ``c``'s own period (its periodic waveforms
+    and chambers; svzerod.cycles.time_period) at phase 0, by Anderson-accelerated shooting from
+    :func:`start_state`, for a run that starts on it (``tran --periodic-start``).  A SolverError
+    when the shooting does not converge."""
+    from ..errors import SolverError
+    from ..svzerod.cycles import time_period
+    from .transient import start_state
+
+    T = time_period(c)
+    orb = shoot(c, start_state(c, 0.0, None, ic), T, forced=True, rtol=rtol, method="anderson", multipliers=False)
+    if not orb.converged:
+        raise SolverError(f"--periodic-start: the shooting for the periodic state (period {T:g} s) did not "
+                          f"converge in {orb.iterations} periods (residual {orb.residual:.3g}); start from the "
+                          "operating point and run longer instead, or see 'hemocircuit periodic --forced'")
+    return orb.x0, orb
+
+
 def guess_from_run(circuit, output=None, t_settle=400.0, dt=0.05, kick=1e-3, rtol=1e-6):
     """(x on an upward mean crossing of ``output``, period estimate) from a settling run
     (a single run: the scipy LSODA transient is the faster integrator for one member).

@@ -204,23 +204,6 @@ def start_state(c, t0=0.0, x0=None, ic=None):
     return apply_ic(c, x, ic) if ic else x
 
 
-def periodic_start(c, ic=None, rtol=1e-9):
-    """(state, orbit): the periodic steady state of ``c``'s own period (its periodic waveforms
-    and chambers; svzerod.cycles.time_period) at phase 0, by Anderson-accelerated shooting from
-    :func:`start_state`, for a run that starts on it (``tran --periodic-start``).  A SolverError
-    when the shooting does not converge."""
-    from ..svzerod.cycles import time_period
-    from .periodic import shoot
-
-    T = time_period(c)
-    orb = shoot(c, start_state(c, 0.0, None, ic), T, forced=True, rtol=rtol, method="anderson", multipliers=False)
-    if not orb.converged:
-        raise SolverError(f"--periodic-start: the shooting for the periodic state (period {T:g} s) did not "
-                          f"converge in {orb.iterations} periods (residual {orb.residual:.3g}); start from the "
-                          "operating point and run longer instead, or see 'hemocircuit periodic --forced'")
-    return orb.x0, orb
-
-
 def _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step, first_step, engine, ic,
               progress=None, compile="wait", output_from=None, compiled_method=None):
     from ..progress import bar, wanted
