@@ -175,3 +175,37 @@ def test_chamber_sphere_loop_with_piecewise_valves_runs_thirty_beats(tmp_path):
     last = t >= 29.0
     assert np.ptp(_col(r, "P(ventricle__outlet_valve)")[last]) > 100.0
     assert _col(r, "Q(outlet_valve)")[last].max() > 100.0
+
+
+@pytest.mark.parametrize("factor", [1.0, 1e4])
+def test_stenosis_at_ten_thousand_times_runs_on_its_closed_form(tmp_path, factor):
+    """Their pulsatileFlow_CStenosis_steadyPressure with the stenosis coefficient S at 1x and 1e4x
+    (their issue #237: Newton diverging at large coefficients) runs three periods through tran.
+    The vessel's capacitor sits under the PRESSURE outlet, so the circuit has no state (the
+    compiled integrator stopped with 'step size too small' at t = 0 on a stateless circuit);
+    every row is then the closed form P_in - P_out = S |Q| Q with Q the inflow."""
+    import json
+
+    from hemocircuit.cli import main
+    from hemocircuit.results import Result
+    from hemocircuit.units import parse_quantity
+
+    path = os.path.join(SHARED, "cases", "pulsatileFlow_CStenosis_steadyPressure.json")
+    if not os.path.isfile(path):
+        pytest.skip("svZeroDSolver test cases not present")
+    with open(path) as fh:
+        m = json.load(fh)
+    vals = m["vessels"][0]["zero_d_element_values"]
+    vals["stenosis_coefficient"] *= factor
+    model = tmp_path / "stenosis.json"
+    model.write_text(json.dumps(m))
+    out = tmp_path / "stenosis.csv"
+    T = 6.283185307  # their inflow table's period, s
+    assert main(["tran", str(model), "--t-end", str(3 * T), "--dt", "0.01", "--out", str(out), "--quiet"]) == 0
+    r = Result.load(out)
+    assert _col(r, "time")[-1] == pytest.approx(3 * T)
+    S = parse_quantity(f"{vals['stenosis_coefficient']} dyn*s**2/cm**8", "mmHg*s**2/mL**2")
+    q = _col(r, "Q(INFLOW)")
+    dp = _col(r, "P(INFLOW__branch0_seg0)") - _col(r, "P(branch0_seg0__OUT)")
+    assert np.ptp(q) > 0.5
+    np.testing.assert_allclose(dp, S * np.abs(q) * q, rtol=1e-9, atol=1e-12 * factor)

@@ -135,6 +135,10 @@ class CompiledSystem:
         # otherwise be writable copies whose integrator compiles rhs_into, prepare_static and
         # local_jacobian_into again instead of using the helper's and before_integrator's
         P.setflags(write=False)
+        if X0.shape[1] == 0:  # no states (e.g. every capacitor under an ideal source): nothing to integrate
+            stats = np.zeros((B, len(runs.STATS)))
+            stats[:, runs.STATS.index("t")] = t_out[:, -1]
+            return np.zeros((B, t_out.shape[1], 0)), stats
         atol_v = (rtol * 1e-3 if atol is None else atol) * self.scales
         hmax = np.ascontiguousarray(np.broadcast_to(np.asarray(hmax, dtype=float), (B,)))
         method = method or tableaus.DEFAULT
