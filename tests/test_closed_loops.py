@@ -209,3 +209,24 @@ def test_stenosis_at_ten_thousand_times_runs_on_its_closed_form(tmp_path, factor
     dp = _col(r, "P(INFLOW__branch0_seg0)") - _col(r, "P(branch0_seg0__OUT)")
     assert np.ptp(q) > 0.5
     np.testing.assert_allclose(dp, S * np.abs(q) * q, rtol=1e-9, atol=1e-12 * factor)
+
+
+def test_a_failure_names_the_fastest_state_and_its_element(heart):
+    """Failures say which element: the compiled run's error names the state changing fastest
+    against its size where the step size collapsed, with its element and type.  On the
+    decomposed heart with the left ventricle's outflow set to -50 mL/s against a closed aortic
+    valve (Rmax 1000 mmHg s/mL, L 1.1e-4 mmHg s^2/mL: d/dt ~ 4.5e8 mL/s^2), that is LV.Q_out."""
+    from hemocircuit.analyses.compiled_run import fastest_state
+
+    cs = CompiledSystem.of(heart)
+    P = cs.params(heart)[0]
+    x = cs.integrate(np.array([0.0, 0.1]), np.array([float(v) for v in _their_start(heart)]), P)[0][-1]
+    x[heart.state_names.index("LV.Q_out")] = -50.0
+    text = fastest_state(cs, heart, P, 0.1, x)
+    assert "LV.Q_out (LV, type chamber_elastance_inductor)" in text
+    assert "d/dt = 4." in text and "e+08 mL/s^2" in text
+
+
+def _their_start(c):
+    from hemocircuit.analyses.transient import start_state
+    return start_state(c)

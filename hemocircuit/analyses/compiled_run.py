@@ -219,6 +219,29 @@ def _range(system, c, P, tpts, x, rtol, atol, h0, max_step, stats, ts, xs, segs,
         segs.append(c)
         if st["status"] < 0:
             bad = X[good][-1] if good.any() else x
-            raise SolverError(f"compiled integrator failed: {st['message']}", time=st["t"],
-                              state=c.state_dict(bad), partial=collect(c, ts, xs, segs))
+            t_bad = float(tpts[good][-1]) if good.any() else float(tpts[0])
+            raise SolverError(f"compiled integrator failed: {st['message']}{fastest_state(system, c, P, t_bad, bad)}",
+                              time=st["t"], state=c.state_dict(bad), partial=collect(c, ts, xs, segs))
         return X[-1].copy(), used
+
+
+def fastest_state(system, c, P, t, x):
+    """'; fastest there: ...' naming the state whose derivative is largest against its size
+    (|dx/dt| / max(|x|, its scale)) at (t, x) and its element's type: where a run's step size
+    collapses that is usually the element at fault (a closed valve's flow, an arteriole's
+    collapsing stretch).  Empty when the right-hand side cannot be evaluated there."""
+    try:
+        f = np.asarray(system.rhs(t, x, P), dtype=float)
+    except Exception:  # noqa: BLE001 - a diagnosis must never hide the failure it explains
+        return ""
+    if f.size == 0 or not np.all(np.isfinite(f)):
+        return ""
+    rate = np.abs(f) / np.maximum(np.abs(x), np.asarray(c.state_scales, dtype=float))
+    k = int(np.argmax(rate))
+    name, unit = c.state_names[k], c.state_units[k]
+    eid = name.rsplit(".", 1)[0]
+    type_name = getattr(getattr(c.elements.get(eid), "cls", None), "type_name", None)
+    kind = f", type {type_name}" if type_name else ""
+    per_s = "1/s" if unit in ("dimensionless", "1", "") else f"{unit}^2" if unit.endswith("/s") else f"{unit}/s"
+    shown = "" if unit in ("dimensionless", "1", "") else f" {unit}"
+    return f"; fastest there (t = {t:g} s): {name} ({eid}{kind}) = {x[k]:.6g}{shown}, d/dt = {f[k]:.3g} {per_s}"
