@@ -256,7 +256,6 @@ def periodic_start(c, ic=None, rtol=1e-9):
     and chambers; svzerod.cycles.time_period) at phase 0, by Anderson-accelerated shooting from
     :func:`start_state`, for a run that starts on it (``tran --periodic-start``).  A SolverError
     when the shooting does not converge."""
-    from ..errors import SolverError
     from ..svzerod.cycles import time_period
     from .transient import start_state
 
