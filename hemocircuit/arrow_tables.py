@@ -14,18 +14,25 @@ same numbers); only the notation differs from Python's ``repr`` (``2.5e-7`` and 
 from __future__ import annotations
 
 import io
+import os
 import re
 
 import numpy as np
 
 _SPECIAL = re.compile(r'[,"\n\r]')
+#: rows below which a table is written in one block (threads cost more than they save)
+_BLOCK_ROWS = 2000
 
 
-def rows_text(columns, cell) -> str:
-    """The table body (no header) of equally long 1-D ``columns``, one ``\\n``-terminated line
-    per row.  ``cell(v)``: the text of a value that is not a number (flags, text, None)."""
+def write_rows(fh, columns, cell):
+    """Write the table body (no header) of equally long 1-D ``columns`` to the binary file
+    ``fh``, one ``\\n``-terminated line per row.  ``cell(v)``: the text of a value that is not a
+    number (flags, text, None).
+
+    pyarrow's writer releases the GIL, so blocks of rows are formatted on every core at once
+    and written in order as they finish (formatting the floats is most of a long run's write)."""
     if not columns or not len(columns[0]):
-        return ""
+        return
     import pyarrow as pa
     import pyarrow.csv as pacsv
 
@@ -35,9 +42,28 @@ def rows_text(columns, cell) -> str:
     # one-column row survives); pyarrow's "needed" style would quote every text cell
     style = "needed" if any(not t or _SPECIAL.search(t) for t in texts) else "none"
     table = pa.Table.from_arrays(arrays, names=[f"c{i}" for i in range(len(columns))])
+    n = table.num_rows
+    block = max(_BLOCK_ROWS, -(-n // (2 * (os.cpu_count() or 1))))
+    options = pacsv.WriteOptions(include_header=False, quoting_style=style, batch_size=block)
+
+    def text(start):
+        out = io.BytesIO()
+        pacsv.write_csv(table.slice(start, block), out, options)
+        return out.getvalue()
+
+    if n <= block:
+        fh.write(text(0))
+        return
+    from concurrent.futures import ThreadPoolExecutor
+    with ThreadPoolExecutor(max_workers=os.cpu_count() or 1) as pool:
+        for part in pool.map(text, range(0, n, block)):
+            fh.write(part)
+
+
+def rows_text(columns, cell) -> str:
+    """The table body of :func:`write_rows` as text."""
     out = io.BytesIO()
-    pacsv.write_csv(table, out, pacsv.WriteOptions(include_header=False, quoting_style=style,
-                                                      batch_size=max(1024, len(columns[0]))))
+    write_rows(out, columns, cell)
     return out.getvalue().decode()
 
 

@@ -252,8 +252,9 @@ class Result:
 
     def to_csv(self, path):
         """Metadata as ``# key: value`` lines, then the table (header ``name [unit]``).  Atomic."""
-        from .arrow_tables import rows_text
-        from .io import atomic_write
+        from .arrow_tables import write_rows
+        from .errors import HemocircuitError
+        from .io import atomic_file
         md = self._file_metadata()
         buf = _io.StringIO()
         buf.write(f"# index: {json.dumps(self.index)}\n")
@@ -265,8 +266,12 @@ class Result:
                 buf.write(f"# {key}: {_json_line(value)}\n")
         names = list(self.data)
         buf.write(",".join(_csv_quote(self.label(n)) for n in names) + "\n")
-        buf.write(rows_text([self.data[n] for n in names], _cell))
-        atomic_write(path, buf.getvalue())
+        try:
+            with atomic_file(path, "wb") as fh:
+                fh.write(buf.getvalue().encode())
+                write_rows(fh, [self.data[n] for n in names], _cell)
+        except OSError as exc:
+            raise HemocircuitError(f"cannot write {path}: {exc.strerror or exc}") from None
         return str(path)
 
     def to_npz(self, path):
