@@ -18,10 +18,15 @@ from __future__ import annotations
 import numpy as np
 
 from .kernels.jit import LazyDispatcher
+from .kernels.loops import loop
 
 #: element calls from which a batch runs the compiled functions (numba's dispatch costs ~2 us a
 #: call, a Python call of the arteriole's equations ~40 us; the compile is loaded from the cache)
 COMPILED_CALLS = 256
+
+#: element calls from which a group runs in one compiled loop (kernels.loops; a loop's own
+#: compile is ~0.1 s, loaded from numba's cache after the first run)
+LOOP_CALLS = 64
 
 _PYTHON_REFUSES = (OverflowError, ZeroDivisionError, ValueError)
 
@@ -46,21 +51,29 @@ def _call(fn, run, args):
         return fn.dispatcher(*args)
 
 
+def _contiguous(a, shape):
+    """``a`` broadcast to ``shape`` as a C-contiguous array (``a`` itself when it is one)."""
+    if a.shape == shape and a.flags.c_contiguous:
+        return a
+    return np.ascontiguousarray(np.broadcast_to(a, shape))
+
+
 class Batch:
     """The (B, E) element arguments of one group, laid out for the kernel functions."""
 
     def __init__(self, comp, p, x, u=None, t=0.0, src=None):
-        names = list(comp.parameters)
+        names = comp.parameters
         x = np.asarray(x, dtype=float)
-        shapes = [np.shape(p[n]) for n in names] + [x.shape[:2]]
+        shapes = {np.shape(p[n]) for n in names}
+        shapes.add(x.shape[:2])
         if u is not None:
-            shapes.append(np.shape(u)[:2])
+            shapes.add(np.shape(u)[:2])
         if src is not None:
-            shapes.append(np.shape(src))
+            shapes.add(np.shape(src))
         tt = np.asarray(t, dtype=float)
         if tt.ndim:
-            shapes.append((tt.reshape(-1).shape[0], 1))
-        B, E = np.broadcast_shapes(*shapes)
+            shapes.add((tt.size, 1))
+        B, E = shapes.pop() if len(shapes) == 1 else np.broadcast_shapes(*shapes)
         self.B, self.E = B, E
         P = np.empty((B, E, max(len(names), 1)))
         for j, n in enumerate(names):
@@ -68,16 +81,15 @@ class Batch:
         if src is not None:
             # a waveform's value adds to the parameter it is given on (Component.waveform_params:
             # one per element), as the engine does before it calls the kernel
-            P[:, :, names.index(comp.waveform_params[0])] += src
+            P[:, :, list(names).index(comp.waveform_params[0])] += src
         self.P = P
         S = len(comp.states())
-        self.X = np.ascontiguousarray(np.broadcast_to(x, (B, E, S)))
+        self.X = _contiguous(x, (B, E, S))
         self.L = len(comp.local_nodes) + len(comp.branches())
         # no local unknowns (elements affine in the pressures): one zero row serves every call
-        self.U = (np.zeros((1, 1, self.L)) if u is None
-                  else np.ascontiguousarray(np.broadcast_to(np.asarray(u, dtype=float), (B, E, self.L))))
+        self.U = np.zeros((1, 1, self.L)) if u is None else _contiguous(np.asarray(u, dtype=float), (B, E, self.L))
         self.u_given = u is not None
-        self.T = np.broadcast_to(tt.reshape(-1), (B,)) if tt.ndim else np.full(B, float(tt))
+        self.T = _contiguous(tt.reshape(-1), (B,)) if tt.ndim else np.full(B, float(tt))
         self.iopt = comp.kernel_options()
         self.S = S
 
@@ -110,6 +122,9 @@ def stamp(comp, p, x, u, t, src=None):
     L = bt.L
     A = np.zeros((bt.B, bt.E, L, L))
     b = np.zeros((bt.B, bt.E, L))
+    if bt.B * bt.E >= LOOP_CALLS:
+        loop(k.stamp, "stamp")(bt.P, bt.X, bt.U, bt.T, bt.iopt, A, b)
+        return A, b
     run = _runner(k.stamp, bt.B * bt.E)
     with np.errstate(all="ignore"):
         for pe, xe, ue, te, Ae, be in bt.members(A, b):
@@ -124,6 +139,9 @@ def derivatives(comp, p, x, u, t, src=None):
     k = kernel_of(comp)
     bt = Batch(comp, p, x, u, t, src)
     dx = np.zeros((bt.B, bt.E, bt.S))
+    if bt.B * bt.E >= LOOP_CALLS:
+        loop(k.derivs, "one")(bt.P, bt.X, bt.U, bt.T, bt.iopt, dx)
+        return dx
     run = _runner(k.derivs, bt.B * bt.E)
     with np.errstate(all="ignore"):
         for pe, xe, ue, te, dxe in bt.members(dx):
@@ -144,6 +162,12 @@ def observe(comp, p, x, u, t, src=None):
     bt = Batch(comp, p, x, u, t, src)
     out = np.zeros((bt.B, bt.E, len(names)))
     fn = k.report if full else k.observe
+    if bt.B * bt.E >= LOOP_CALLS:
+        if full:
+            loop(fn, "one")(bt.P, bt.X, bt.U, bt.T, bt.iopt, out)
+        else:
+            loop(fn, "observe")(bt.P, bt.X, bt.iopt, out)
+        return {n: out[..., j] for j, n in enumerate(names)}
     run = _runner(fn, bt.B * bt.E)
     with np.errstate(all="ignore"):
         for pe, xe, ue, te, oe in bt.members(out):

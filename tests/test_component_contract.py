@@ -534,3 +534,44 @@ def test_every_type_is_sampled(netlist_samples):
         assert samples_of(cls, netlist_samples), name
         assert math.isfinite(sum(default_params(cls, cls.options and option_combinations(cls)[0] or {},
                                                 netlist_samples).values())), name
+
+
+#: parameters that make a type's linearisation vary across 0-100 mmHg (the sample's valve is
+#: fully open or shut there, with a constant slope)
+_SMOOTH = {"valve_tanh": {"Rmin": np.array([[0.5]]), "Rmax": np.array([[50.0]]), "steepness": np.array([[0.1]])}}
+
+
+@pytest.mark.parametrize("name", ["arteriole", "log_compliance", "resistor", "valve_tanh", "chamber_sphere"])
+def test_a_group_in_one_compiled_loop_equals_its_elements_one_by_one(name, netlist_samples, monkeypatch):
+    """From LOOP_CALLS element calls on, a group's stamp, derivatives and observables run as one
+    compiled loop over its (member, element) pairs (hemocircuit.kernels.loops): the same
+    numbers, element by element, as the kernel functions called one element at a time, with
+    per-element parameters, states and local unknowns (the samples repeated and perturbed, node
+    pressures drawn from 0-100 mmHg), and at per-member times."""
+    from hemocircuit import elementwise
+    cls = TYPES[name]
+    rng = np.random.default_rng(zlib.crc32(name.encode()))
+    comp, p, x, u = samples_of(cls, netlist_samples)[-1]
+    B, E = 3, elementwise.LOOP_CALLS  # B x E calls: above the threshold
+    f = 1.0 + 0.02 * rng.uniform(-1.0, 1.0, (B, E))
+    p = {**p, **_SMOOTH.get(name, {})}
+    pb = {n: np.broadcast_to(np.asarray(p[n])[:, :1], (1, E)) * f[:1] for n in comp.parameters}
+    xb = np.broadcast_to(x[:1, :1], (B, E, x.shape[-1])) * f[..., None]
+    ub = np.broadcast_to(u[:1, :1], (B, E, u.shape[-1])) * f[..., None]
+    K = len(comp.local_nodes)
+    ub[..., :K] = rng.uniform(0.0, 100.0, (B, E, K))  # node pressures either way round (valves open and shut)
+    t = np.array([[0.0], [0.7], [1.37]])
+    with np.errstate(all="ignore"):
+        looped = (elementwise.stamp(comp, pb, xb, ub, t), elementwise.derivatives(comp, pb, xb, ub, t),
+                  elementwise.observe(comp, pb, xb, ub, t), elementwise.observe(comp, pb, xb, None, t))
+        monkeypatch.setattr(elementwise, "LOOP_CALLS", 10 ** 9)
+        single = (elementwise.stamp(comp, pb, xb, ub, t), elementwise.derivatives(comp, pb, xb, ub, t),
+                  elementwise.observe(comp, pb, xb, ub, t), elementwise.observe(comp, pb, xb, None, t))
+    for (a1, b1), (a2, b2) in [(looped[0], single[0])]:
+        _close(a1, a2, f"{name}: A"), _close(b1, b2, f"{name}: b")
+    _close(looped[1], single[1], f"{name}: dx/dt")
+    for got, ref in zip(looped[2:], single[2:]):
+        assert got.keys() == ref.keys()
+        for key in ref:
+            _close(got[key], ref[key], f"{name}: observable {key}")
+    assert np.ptp(looped[0][0]) > 0 or np.ptp(looped[0][1]) > 0  # the elements differ: a real batch
