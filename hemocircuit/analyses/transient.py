@@ -143,7 +143,9 @@ def simulate(circuit, t_end, dt=None, t0=0.0, x0=None, protocol=None, method="BD
     if isinstance(protocol, str):
         protocol = Protocol.load(protocol, circuit)
     if x0 is None and not ic and not circuit.netlist.ic and not (protocol is not None and protocol.events):
-        unstable = _unstable_start(protocol.apply_initial(circuit) if protocol is not None else circuit, t0)
+        # the run started on the operating point: its first row (when written) is that state
+        start = res.x[0] if res.n_rows and res.t[0] == t0 else None
+        unstable = _unstable_start(protocol.apply_initial(circuit) if protocol is not None else circuit, t0, start)
         if unstable:
             res.metadata.setdefault("warnings", []).append(unstable)
     return stamp(res, "tran", circuit, settings, started)
@@ -154,17 +156,18 @@ def simulate(circuit, t_end, dt=None, t0=0.0, x0=None, protocol=None, method="BD
 UNSTABLE_CHECK_STATES = 300
 
 
-def _unstable_start(c, t0):
-    """A warning when a run starting unperturbed on the operating point starts on an unstable
-    equilibrium: without a perturbation it stays there up to round-off (a flat line where a
-    limit cycle was expected).  None otherwise, and for circuits above UNSTABLE_CHECK_STATES."""
+def _unstable_start(c, t0, x=None):
+    """A warning when a run starting unperturbed on the operating point (``x``, when the run
+    has it; computed otherwise) starts on an unstable equilibrium: without a perturbation it
+    stays there up to round-off (a flat line where a limit cycle was expected).  None
+    otherwise, and for circuits above UNSTABLE_CHECK_STATES."""
     from .op import operating_point
     from .stability import eigenvalues
 
     if not 0 < c.nx <= UNSTABLE_CHECK_STATES:
         return None
     try:
-        lam = eigenvalues(c, operating_point(c, t=t0).x, t=t0)
+        lam = eigenvalues(c, operating_point(c, t=t0).x if x is None else x, t=t0)
     except (SolverError, np.linalg.LinAlgError):
         return None
     lam = lam[np.isfinite(lam)]
