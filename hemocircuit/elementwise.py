@@ -3,12 +3,13 @@ one definition of each element's equations (its :class:`~hemocircuit.kernels.Ker
 
 The compiled engine runs a type's kernel functions inside numba; every other path (the
 operating point, linearisation, the outputs, the batched integrator, a component check) calls
-the same functions here, one element at a time over the (B, E) batch of the circuit's groups.
-Small batches run the functions as Python (no numba import, no compile: ``op`` and ``check``
-start at once); from :data:`COMPILED_CALLS` element calls on, or once numba has compiled a
-function anyway, the compiled function runs.  A call that Python refuses where numba's numpy
-error model gives inf or NaN (``math.exp`` overflowing, ``math.log(0)``) is run compiled, so
-both give the same number.
+the same functions here over the (B, E) batch of a circuit's group.  From :data:`LOOP_CALLS`
+element calls on, the group is one call of a compiled loop over its elements
+(:mod:`hemocircuit.kernels.loops`).  Smaller batches call the functions element by element, as
+Python (no numba import, no compile: ``op`` and ``check`` start at once) or compiled once numba
+has compiled the function anyway.  A call that Python refuses where numba's numpy error model
+gives inf or NaN (``math.exp`` overflowing, ``math.log(0)``) is run compiled, so both give the
+same number.
 
 Shapes as :mod:`hemocircuit.component`: ``p`` {name: (1 or B, E)}, ``x`` (B, E, S), ``u``
 (B, E, L) or None, ``t`` a float or (B, 1) times, ``src`` (B, E) waveform values or None.
@@ -20,25 +21,21 @@ import numpy as np
 from .kernels.jit import LazyDispatcher
 from .kernels.loops import loop
 
-#: element calls from which a batch runs the compiled functions (numba's dispatch costs ~2 us a
-#: call, a Python call of the arteriole's equations ~40 us; the compile is loaded from the cache)
-COMPILED_CALLS = 256
-
-#: element calls from which a group runs in one compiled loop (kernels.loops; a loop's own
-#: compile is ~0.1 s, loaded from numba's cache after the first run)
+#: element calls from which a group runs in one compiled loop (kernels.loops: ~0.01 us of
+#: overhead an element against ~5 us for a call from Python, ~40 us for the arteriole's
+#: equations run as Python; the loop's compile, ~0.1-0.5 s, is loaded from numba's cache after
+#: the first run, ~50 ms)
 LOOP_CALLS = 64
 
 _PYTHON_REFUSES = (OverflowError, ZeroDivisionError, ValueError)
 
 
-def _runner(fn, calls: int):
-    """The callable to use for ``calls`` element calls of kernel function ``fn`` (see the module
-    docstring): a lazy dispatcher (hemocircuit.kernels.jit) runs as Python until compiled."""
+def _runner(fn):
+    """The callable for element-by-element calls of kernel function ``fn``: a lazy dispatcher
+    (hemocircuit.kernels.jit) runs as Python until numba has compiled it anyway."""
     if not isinstance(fn, LazyDispatcher):  # a plain numba dispatcher, or a plain Python function
         return fn
-    if calls >= COMPILED_CALLS or fn.compiled:
-        return fn.dispatcher
-    return fn.py_func
+    return fn.dispatcher if fn.compiled else fn.py_func
 
 
 def _call(fn, run, args):
@@ -125,7 +122,7 @@ def stamp(comp, p, x, u, t, src=None):
     if bt.B * bt.E >= LOOP_CALLS:
         loop(k.stamp, "stamp")(bt.P, bt.X, bt.U, bt.T, bt.iopt, A, b)
         return A, b
-    run = _runner(k.stamp, bt.B * bt.E)
+    run = _runner(k.stamp)
     with np.errstate(all="ignore"):
         for pe, xe, ue, te, Ae, be in bt.members(A, b):
             _call(k.stamp, run, (pe, xe, ue, te, bt.iopt, Ae, be))
@@ -142,7 +139,7 @@ def derivatives(comp, p, x, u, t, src=None):
     if bt.B * bt.E >= LOOP_CALLS:
         loop(k.derivs, "one")(bt.P, bt.X, bt.U, bt.T, bt.iopt, dx)
         return dx
-    run = _runner(k.derivs, bt.B * bt.E)
+    run = _runner(k.derivs)
     with np.errstate(all="ignore"):
         for pe, xe, ue, te, dxe in bt.members(dx):
             _call(k.derivs, run, (pe, xe, ue, te, bt.iopt, dxe))
@@ -168,7 +165,7 @@ def observe(comp, p, x, u, t, src=None):
         else:
             loop(fn, "observe")(bt.P, bt.X, bt.iopt, out)
         return {n: out[..., j] for j, n in enumerate(names)}
-    run = _runner(fn, bt.B * bt.E)
+    run = _runner(fn)
     with np.errstate(all="ignore"):
         for pe, xe, ue, te, oe in bt.members(out):
             _call(fn, run, (pe, xe, ue, te, bt.iopt, oe) if full else (pe, xe, bt.iopt, oe))

@@ -74,8 +74,8 @@ def collect(c_last, ts, xs, segs, t_from=None, grid=None):
             parts[-1][0], parts[-1][1] = parts[-1][0][:-1], parts[-1][1][:-1]
         parts.append([t, x, c])
     # the outputs once per run of segments of one circuit: one call of many rows runs the
-    # components' compiled functions (elementwise.COMPILED_CALLS), 51 calls of 200 rows ran
-    # them as Python (0.4 s of a 1000 s vasomotion run's 10 001 rows)
+    # components' functions in one compiled loop per group (elementwise.LOOP_CALLS); many
+    # short calls would each pay a call's fixed cost
     runs = []
     for t, x, c in parts:
         if runs and runs[-1][2] is c:
