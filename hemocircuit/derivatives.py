@@ -43,8 +43,12 @@ def fd_steps(X, scales, rel=FD_REL):
 
 
 def time_step(t):
-    """Forward-difference step in time [s] (scalar or array)."""
-    return FD_REL * np.maximum(np.abs(t), 1.0)
+    """Forward-difference step in time [s] (scalar or array): FD_REL seconds, as represented at
+    t.  Absolute, not relative to t: time has an arbitrary origin, and a step growing with t
+    (FD_REL |t| was 54 us at t = 544 s) straddles a heart valve's switching, whose df/dt then
+    stalls a Rosenbrock integrator (netlists/body/body.yaml at rtol 1e-6)."""
+    t = np.asarray(t, dtype=float)
+    return (t + FD_REL) - t
 
 
 def param_steps(p0, rel=CENTRAL_REL):

@@ -229,7 +229,8 @@ def jacobian_into(t, x, f0, P, lay, work, jw, scales, J, ft, xt, ftmp, autonomou
         nev = nx
     if autonomous:
         return nev
-    ht = FD_REL * max(abs(t), 1.0)
+    # FD_REL seconds as represented at t (derivatives.time_step: absolute, not relative to t)
+    ht = (t + FD_REL) - t
     if not rhs_into(t + ht, x, P, lay, work, ftmp):
         return -1
     for i in range(nx):
