@@ -15,8 +15,10 @@ component's int64 options, then the outputs (B, E, ...) the function fills eleme
 """
 from __future__ import annotations
 
-import hashlib
 import inspect
+from pathlib import Path
+
+from . import freshness
 
 #: (kernel function, kind) -> compiled loop
 _loops: dict = {}
@@ -34,10 +36,9 @@ def loop(fn, kind: str):
 def _salt(fn) -> int:
     """A number from the text of the file that defines ``fn`` (see the module docstring)."""
     try:
-        text = open(inspect.getsourcefile(getattr(fn, "py_func", fn)), "rb").read()
-    except (OSError, TypeError):
-        text = b""
-    return int(hashlib.sha256(text).hexdigest()[:12], 16)
+        return int(freshness.key([Path(inspect.getsourcefile(getattr(fn, "py_func", fn)))])[:12], 16)
+    except (OSError, TypeError):  # no source file (a function made at run time)
+        return 0
 
 
 def _make(fn, kind, salt):
