@@ -13,7 +13,7 @@ Writes to examples/out/body_autoregulation/: tfa.csv (a row per case and band), 
 tau_phase.csv, and tfa.png, cuff.png, tau_phase.png.
 
 Run:  python examples/body_autoregulation.py [--out-dir DIR]
-(about 10 minutes on 2 cores; HEMOCIRCUIT_EXAMPLES_QUICK=1: shorter runs and windows, two
+(about 4 minutes on 2 cores; HEMOCIRCUIT_EXAMPLES_QUICK=1: shorter runs and windows, two
 tau_Ca values; HEMOCIRCUIT_EXAMPLES_OUT=DIR: the default of --out-dir instead of examples/out/)
 """
 from __future__ import annotations
@@ -40,7 +40,7 @@ T_RUN = 50.0 if QUICK else 330.0        # s: SKIP, then the analysed record
 WINDOW = 20.0 if QUICK else 100.0       # s: Welch window (the white paper's 100 s; quick: 3 windows)
 RELEASE = 20.0 if QUICK else 60.0       # s: the cuff release (cuff_release.yaml: 60 s; quick: a variant)
 CUFF = (10.0, 15.0) if QUICK else (10.0, 30.0)  # baseline before, fit after the release [s]
-TAUS = (2.0, 20.0) if QUICK else (1.0, 3.0, 10.0, 30.0)     # art.tau_Ca [s]
+TAUS = (2.0, 20.0) if QUICK else (0.1, 0.3, 1.0, 3.0, 10.0)  # art.tau_Ca [s] (body.yaml: 0.1 s)
 P_IN, Q_OUT = "P(art)", "Q(left.Rla)"
 PASSIVE = {"left.art.passive": True, "right.art.passive": True}
 

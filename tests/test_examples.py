@@ -114,17 +114,20 @@ def test_steady_state_curves(tmp_path):
 
 def test_body_autoregulation(tmp_path):
     """Smoke mode: 50 s records, 20 s windows, a cuff release at 20 s.  What the clinic sees:
-    impaired (passive) arterioles lose the phase lead and gain flow per pressure, the ARI falls
-    to about 0, and a slower Ca (larger tau_Ca) lessens the LF phase lead."""
+    the intact model within healthy adults' ranges (docs/body.md: LF phase 30-60 deg, ARI 4-7;
+    with the thesis's arteriole dynamics it is 19 deg and 3.6), impaired (passive) arterioles
+    without the phase lead (LF phase near 0), with more flow per pressure and an ARI of about 0,
+    and a slower Ca (larger tau_Ca) lessening the LF phase lead."""
     run_example("body_autoregulation.py", tmp_path)
     out = tmp_path / "body_autoregulation"
     t = read_csv(out / "tfa.csv")
     lf = {case: t["phase_deg"][(t["case"] == case) & (t["band"] == "LF")][0] for case in ("intact", "impaired")}
     gain = {case: t["gain"][(t["case"] == case) & (t["band"] == "LF")][0] for case in ("intact", "impaired")}
-    assert lf["intact"] > lf["impaired"] + 5 and gain["impaired"] > 1.3 * gain["intact"]
+    assert 30.0 <= lf["intact"] <= 60.0 and abs(lf["impaired"]) < 15.0
+    assert gain["impaired"] > 1.3 * gain["intact"]
     a = read_csv(out / "ari.csv")
     ari = dict(zip(a["case"], a["ari"]))
-    assert ari["intact"] >= 2 and ari["impaired"] <= 1
+    assert 4.0 <= ari["intact"] <= 7.0 and ari["impaired"] <= 1
     tau = read_csv(out / "tau_phase.csv")
     assert tau["lf_phase_deg"][0] > tau["lf_phase_deg"][-1]  # tau_Ca 2 s leads more than 20 s
     assert_pngs(out, ["tfa.png", "cuff.png", "tau_phase.png"])
