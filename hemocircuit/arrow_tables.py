@@ -36,7 +36,8 @@ def write_rows(fh, columns, cell):
     and written in order as they finish (formatting the floats is most of a long run's write).
     On a real file each written block is handed to the disk (fdatasync, in a background thread)
     while later blocks are formatted, so the caller's closing fsync has little left to wait for:
-    10 001 rows x 36 columns 55 -> 47 ms with the fsync of :func:`hemocircuit.io.atomic_file`."""
+    10 001 rows x 36 columns 55-61 -> 49-56 ms with the fsync of :func:`hemocircuit.io.atomic_file`
+    (docs/performance.md, "Writing results")."""
     if not columns or not len(columns[0]):
         return
     import pyarrow as pa
