@@ -254,3 +254,24 @@ def test_a_beat_costs_the_same_late_in_a_run_as_early():
     scale = np.maximum(np.ptp(early.x, axis=0), c.state_scales)
     ends = slice(50, None, 50)
     assert np.max(np.abs(late.x[ends] - early.x[ends]) / scale) < 1e-4
+
+
+def test_a_closed_valve_on_the_scipy_path_stops_with_an_error_not_a_hang(tmp_path):
+    """solve_ivp cannot hold a state on its hard limit while the rate points outward: from the
+    operating point of body.yaml's heart (every valve closed, flows exactly 0) the tricuspid's
+    limit fired again at once after each restart, and a 50 ms run went on for hours.  It must
+    stop, name the limit and say how to run it, and keep the rows it has."""
+    import yaml
+
+    import hemocircuit as hc
+    from hemocircuit.analyses import transient
+
+    net = yaml.safe_load((ROOT / "netlists" / "body" / "body.yaml").read_text())
+    net = {"name": "heart_only", "elements": net["elements"], "constraints": [{"node": "vc", "volume": "500 mL"}]}
+    path = tmp_path / "heart_only.yaml"
+    path.write_text(yaml.safe_dump(net, sort_keys=False))
+    c = hc.load(str(path))
+    with pytest.raises(hc.SolverError, match=r"stalled at t = .*hard limit heart\.Q_\w+ >= 0.*compiled engine") as err:
+        c.simulate(0.05, engine="scipy", rtol=1e-6, dt=0.001)
+    assert err.value.time < transient.STALL_ADVANCE * transient.STALL_RESTARTS
+    assert err.value.partial is not None and err.value.partial.n_rows >= 1

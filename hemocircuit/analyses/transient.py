@@ -310,7 +310,8 @@ def _simulate(circuit, t_end, dt, t0, x0, protocol, method, rtol, atol, max_step
     bounds = [t0] + [e[0] for e in events] + [t_end]
     compiled = None
     try:
-        switch = _scipy_segments(c, x, bounds, events, limits, one_segment, ts, xs, segs, handover, t_grid)
+        switch = _scipy_segments(c, x, bounds, events, limits, one_segment, ts, xs, segs, handover, t_grid,
+                                 partial=_partial)
         if switch is not None:  # the background build is ready: the rest on the compiled engine
             k, t_s, x_s, c_k = switch
             compiled = simulate_compiled(c_k.system.compiled(), c_k, x_s, t_s, t_end, dt, events[k:], rtol, atol,
@@ -362,12 +363,24 @@ class _Handover:
         return background.ready(self.system)
 
 
-def _scipy_segments(c, x, bounds, events, limits, one_segment, ts, xs, segs, handover=None, t_grid=None):
+#: a run on the scipy path stops as stalled after this many pieces in a row that a hard limit
+#: ended within STALL_ADVANCE [s] of their start: solve_ivp cannot hold a state on its bound
+#: while its rate points outward (a closed valve's flow at 0: the integrator's iterates dip
+#: below, the limit fires again at once), and the restarts would go on for hours.  While the
+#: compiled engine builds in the background (a handover) the run waits for it instead
+STALL_RESTARTS = 200
+STALL_ADVANCE = 1e-6
+
+
+def _scipy_segments(c, x, bounds, events, limits, one_segment, ts, xs, segs, handover=None, t_grid=None,
+                    partial=None):
     """Integrate the protocol segments (solve_ivp), appending to ts, xs, segs.  With a
     ``handover`` (:class:`_Handover`), in pieces: returns (segment index, time, state,
-    circuit) where the compiled engine is to go on, or None when the scipy path finished."""
+    circuit) where the compiled engine is to go on, or None when the scipy path finished.
+    ``partial()``: the rows so far, kept with a stall's error."""
     import time
 
+    stuck = 0
     for k in range(len(bounds) - 1):
         t_a, t_b = bounds[k], bounds[k + 1]
         if k > 0:
@@ -392,6 +405,14 @@ def _scipy_segments(c, x, bounds, events, limits, one_segment, ts, xs, segs, han
                     x[idx] = bound
                     if reset is not None:
                         x[reset] = max(x[reset], 0.0)
+                    stuck = stuck + 1 if cur - (sol.t[0] if sol.t.size else cur) < STALL_ADVANCE else 0
+                    if stuck >= STALL_RESTARTS and handover is None:  # (a build under way takes over)
+                        raise SolverError(
+                            f"integration stalled at t = {cur:.6g} s: the hard limit {c.state_names[idx]} >= {bound:g} "
+                            f"was reached again at once after each of {STALL_RESTARTS} restarts (scipy's integrators "
+                            "cannot hold a state on its bound, e.g. a closed valve's flow); run on the compiled "
+                            "engine (--integrator rodas5p, simulate(integrator='rodas5p')), which holds it there",
+                            time=cur, state=c.state_dict(x), partial=partial() if partial else None)
                     ts.append(np.array([cur]))
                     xs.append(x[None, :])
                     segs.append(c)
