@@ -7,6 +7,71 @@
 
 
 @njit(cache=True, nogil=True)
+def held_on_bound(k, x, f, lim_i, lim_b, atol):
+    """Whether limited state k sits on its bound (to LIMIT_ON_BOUND x atol) without rising: held
+    there (a closed valve)."""
+    li = lim_i[k]
+    return x[li] <= lim_b[k] + LIMIT_ON_BOUND * atol[li] and f[li] <= 0.0
+
+
+@njit(cache=True, nogil=True)
+def release_fraction(t, hh, tlim, x, f, xn, P, lay, work, lim_i, lim_b, atol, xe, fe, xh, fh):
+    """Where in the step t -> t + hh a state held on its hard limit at t is released: the
+    earliest fraction of the step at which one of them, kept on its bound, has a positive
+    derivative (a closed valve whose pressure difference turns positive), located by bisection
+    on the cubic Hermite path of the other states from (x, f) to the step's proposal xn.
+    Returns (fraction, f evaluations): the upper end of the last bracket (just past the
+    release), or 2.0 when no held state is released in the step.
+
+    Why: the release is a kink of the solution (the flow starts with a zero slope), which the
+    error estimate of a step across it rejects, and the step-size controller alone creeps up
+    to it with steps down to 1e-7 s and ~25 extra steps per valve opening (the whole-body
+    model: four openings a beat, docs/performance.md).  A step that ends on the release
+    and the next that starts there are both smooth."""
+    nx = x.shape[0]
+    held = False
+    for k in range(lim_i.shape[0]):
+        if held_on_bound(k, x, f, lim_i, lim_b, atol):
+            held = True
+    if not held:
+        return 2.0, 0
+    for i in range(nx):
+        xe[i] = xn[i]
+    for k in range(lim_i.shape[0]):
+        if held_on_bound(k, x, f, lim_i, lim_b, atol):
+            xe[lim_i[k]] = lim_b[k]
+    nf = 1
+    if not rhs_into(min(t + hh, tlim), xe, P, lay, work, fe):
+        return 2.0, nf
+    released = False
+    for k in range(lim_i.shape[0]):
+        if held_on_bound(k, x, f, lim_i, lim_b, atol) and fe[lim_i[k]] > 0.0:
+            released = True
+    if not released:
+        return 2.0, nf
+    lo = 0.0
+    hi = 1.0
+    for _ in range(RELEASE_HALVINGS):
+        m = 0.5 * (lo + hi)
+        hermite(x, f, xe, fe, hh, m, xh)
+        for k in range(lim_i.shape[0]):
+            if held_on_bound(k, x, f, lim_i, lim_b, atol):
+                xh[lim_i[k]] = lim_b[k]
+        nf += 1
+        if not rhs_into(min(t + m * hh, tlim), xh, P, lay, work, fh):
+            return 2.0, nf
+        released = False
+        for k in range(lim_i.shape[0]):
+            if held_on_bound(k, x, f, lim_i, lim_b, atol) and fh[lim_i[k]] > 0.0:
+                released = True
+        if released:
+            hi = m
+        else:
+            lo = m
+    return hi, nf
+
+
+@njit(cache=True, nogil=True)
 def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, breaks_all, bjump_all, rtol, atol, h0,
                     hmax_all, max_steps, tab):
     """Integrate each member m from t_out[m, 0] to t_out[m, -1], writing its states at every t_out[m] into
@@ -19,7 +84,10 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
     Hard limits (lim_i, lim_b, lim_r): state lim_i[k] may not fall below lim_b[k]; at the
     crossing (located on the step's cubic Hermite interpolant) the state is put on the bound
     and state lim_r[k] (if >= 0) is reset to max(., 0); the next step starts from the size of
-    the step that hit the bound (tab.event_restart = 1), not from the shortened one.  Steps end exactly on
+    the step that hit the bound (tab.event_restart = 1), not from the shortened one.  The reverse,
+    a held state's release (a closed valve opening), is located in the step the error test
+    rejects and the step retried ending just past it (release_fraction; tab.land_releases = 1).
+    Steps end exactly on
     ``breaks`` (discontinuities of sources, sorted), where f is re-evaluated unless
     ``bjump[k]`` = 0: a slope-only kink (a pwl table's time), where the source's value and so
     f are continuous, the step ends but f(t-) serves as f(t+) (one evaluation less per kink);
@@ -51,6 +119,7 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
         ev_restart = tab.event_restart != 0
         soft_kinks = tab.soft_kinks != 0
         autonomous = tab.autonomous != 0  # no waveform or time-dependent element: df/dt = 0
+        land = tab.land_releases != 0  # a rejected step retried to end on a held state's release
         local_jac = tab.local_jacobian  # element-local Jacobian (local_jacobian_into) where it applies: 1 analytic parts, 2 FD
         # the classical coefficients: A, G (ns, ns), b, e, c, d, reuse (ns,); H (nd, ns) the
         # dense-output rows (nd 0: cubic Hermite)
@@ -79,6 +148,8 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
         xt = np.empty(nx)
         ftmp = np.empty(nx)
         xh = np.empty(nx)
+        xe = np.empty(nx)
+        fe = np.empty(nx)
         t = t_out[0]
         t_end = t_out[-1]
         for i in range(nx):
@@ -102,6 +173,7 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
             ib += 1
         nrej_run = 0
         err_prev = 1.0
+        landed = False  # the step tried ends on a held state's release (release_fraction)
         h_prev = 0.0  # the last accepted step (predictive controller; 0 before the first)
         while status == 0 and t < t_end and k_out < T:
             if nsteps >= max_steps:
@@ -305,9 +377,27 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
                     if jump:
                         age = JAC_REUSE
                 age += 1
+                if landed:
+                    age = JAC_REUSE
+                    landed = False
                 nrej_run = 0
             else:
                 nrej += 1
+                s_rel = 2.0
+                if land and np.isfinite(enorm) and lim_i.shape[0] > 0:
+                    s_rel, nf = release_fraction(t, hh, tlim, x, f, xn, P, lay, work, lim_i, lim_b, atol, xe, fe,
+                                                 xh, fr)
+                    nfev += nf
+                if s_rel < RELEASE_LAND_BELOW:
+                    # retry ending just past the release (no shrink rule, and growth stays
+                    # allowed after it: the step was rejected for the kink, not its size); the
+                    # Jacobian after it is new (the released state's row changes there)
+                    h = s_rel * hh
+                    landed = True
+                    if h < 1e-14 * max(1.0, abs(t)):
+                        status = -1
+                        break
+                    continue
                 if np.isfinite(enorm):
                     fac = 0.9 * enorm ** (-1.0 / q)
                     h = hh * min(cut_max, max(0.2, fac))

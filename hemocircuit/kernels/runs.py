@@ -13,6 +13,11 @@ from .jit import njit
 #: a state within this many times its atol above its hard limit counts as on it (held there,
 #: not located as a crossing): 1e-3 atol, far below any error the step control admits
 LIMIT_ON_BOUND = 1e-3
+#: a held state's release inside a rejected step (engine_rosenbrock.release_fraction) is located
+#: to 2^-RELEASE_HALVINGS of the step, and the step retried ending there when that is before
+#: RELEASE_LAND_BELOW of it (later: the ordinary step-size rule)
+RELEASE_HALVINGS = 12
+RELEASE_LAND_BELOW = 0.95
 
 #: the columns of a member's stats row, in order (CompiledSystem.integrate reads them by name)
 STATS = ("status", "t", "steps", "rejected", "nfev", "limit_events")

@@ -28,7 +28,8 @@ D_m = sum_s H_ms k_s; the others use the cubic Hermite interpolant of (x, f) at 
 
 Packed (what the engine reads, :class:`RosenbrockMethod`, by field name): the number of stages
 ns, gamma, q the order of the error estimate (step-size exponent 1/q), the options
-(jac_reuse, event_restart, soft_kinks, autonomous, local_jacobian, controller: :func:`packed`)
+(jac_reuse, event_restart, soft_kinks, autonomous, local_jacobian, controller, land_releases:
+:func:`packed`)
 and the coefficients A, G (ns, ns), b, e, c, d, reuse (ns,) -- reuse[s] = 1 when stage s
 evaluates f at the same point as stage s-1 (ROS4-type methods; the engine then skips the
 evaluation) -- and H (nd, ns), nd the number of dense-output rows (0: Hermite; at most 3).
@@ -46,7 +47,7 @@ import numpy as np
 #: C-contiguous float64 arrays
 RosenbrockMethod = namedtuple("RosenbrockMethod", (
     "stages", "gamma", "q", "jac_reuse", "event_restart", "soft_kinks", "autonomous", "local_jacobian",
-    "controller", "A", "G", "b", "e", "c", "d", "reuse", "H"))
+    "controller", "land_releases", "A", "G", "b", "e", "c", "d", "reuse", "H"))
 
 
 def _no_dense(ns):
@@ -217,7 +218,7 @@ def _method(name):
 
 
 def packed(name="rodas5p", jac_reuse=None, event_restart=1, soft_kinks=1, autonomous=0,
-           local_jacobian=1, controller=None) -> RosenbrockMethod:
+           local_jacobian=1, controller=None, land_releases=1) -> RosenbrockMethod:
     """The method as the engine reads it (see the module docstring).  ``autonomous``: the
     circuit has no waveform and no time-dependent element, so df/dt = 0 is not evaluated.
     ``local_jacobian``: the state Jacobian element by element, composed through the nodal
@@ -225,18 +226,20 @@ def packed(name="rodas5p", jac_reuse=None, event_restart=1, soft_kinks=1, autono
     partials where they have them (Kernel.derivs_jac), 2 by element-local differences only;
     0: one whole right-hand side differenced per state.  ``controller``: the step-size rule,
     ``"pi"``, ``"predictive"`` or ``"predictive-halving"`` (module docstring); default
-    CONTROLLER[name].  (Built once per set of arguments, its arrays read-only: packing costs
+    CONTROLLER[name].  ``land_releases``: a rejected step in which a state held on its hard
+    limit is released (a closed valve opening) is retried ending just past the release
+    (engine_rosenbrock.release_fraction); 0: the step size controller alone finds it.  (Built once per set of arguments, its arrays read-only: packing costs
     ~0.5 ms, a third of a short run's Python time.)"""
     jr = JAC_REUSE.get(name) if jac_reuse is None else int(jac_reuse)
     ctrl = CONTROLLER.get(name, "pi") if controller is None else controller
     if ctrl not in CONTROLLERS:
         raise ValueError(f"unknown step-size controller {ctrl!r}: choose one of {sorted(CONTROLLERS)}")
     return _packed(name, jr, int(event_restart), int(soft_kinks), int(autonomous), int(local_jacobian),
-                   CONTROLLERS[ctrl])
+                   CONTROLLERS[ctrl], int(land_releases))
 
 
 @functools.lru_cache(maxsize=64)
-def _packed(name, jr, event_restart, soft_kinks, autonomous, local_jacobian, controller):
+def _packed(name, jr, event_restart, soft_kinks, autonomous, local_jacobian, controller, land_releases):
     gamma, A, G, b, e, q, H = _method(name)
     ns = len(b)
     c = A.sum(axis=1)
@@ -252,5 +255,5 @@ def _packed(name, jr, event_restart, soft_kinks, autonomous, local_jacobian, con
         return a
 
     return RosenbrockMethod(int(ns), float(gamma), float(q), int(jr), event_restart, soft_kinks, autonomous,
-                            local_jacobian, int(controller), frozen(A), frozen(G), frozen(b), frozen(e), frozen(c),
+                            local_jacobian, int(controller), land_releases, frozen(A), frozen(G), frozen(b), frozen(e), frozen(c),
                             frozen(d), frozen(reuse), frozen(np.reshape(H, (-1, ns))))
