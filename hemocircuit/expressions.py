@@ -155,10 +155,12 @@ class Expression:
         return {self._key[k]: r for k, r in self.refs.items()}
 
     def _collect(self, node, resolve):
-        if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name):
-            key = f"{node.value.id}.{node.attr}"
+        dotted = dotted_reference(node)
+        if dotted is not None:
+            element, attr = dotted
+            key = f"{element}.{attr}"
             if key not in self.refs:
-                self.refs[key] = resolve(node.value.id, node.attr)
+                self.refs[key] = resolve(element, attr)
                 self._key[key] = f"_r{len(self._key)}"
             return
         if isinstance(node, ast.Attribute):
@@ -182,13 +184,28 @@ class Expression:
         return eval(self._code, {"__builtins__": {}}, env) * self.out_factor
 
 
+def dotted_reference(node):
+    """(element, name) of a reference ELEMENT.NAME, the element's id possibly dotted itself (a
+    subcircuit instance's element, ``left.art.tau_Ca``); None for anything else."""
+    parts = []
+    while isinstance(node, ast.Attribute):
+        parts.append(node.attr)
+        node = node.value
+    if not parts or not isinstance(node, ast.Name):
+        return None
+    parts.append(node.id)
+    parts.reverse()
+    return ".".join(parts[:-1]), parts[-1]
+
+
 class _Rename(ast.NodeTransformer):
     def __init__(self, key):
         self.key = key
 
     def visit_Attribute(self, node):
-        if isinstance(node.value, ast.Name):
-            return ast.copy_location(ast.Name(id=self.key[f"{node.value.id}.{node.attr}"], ctx=ast.Load()), node)
+        dotted = dotted_reference(node)
+        if dotted is not None:
+            return ast.copy_location(ast.Name(id=self.key[".".join(dotted)], ctx=ast.Load()), node)
         return node
 
     def visit_Name(self, node):

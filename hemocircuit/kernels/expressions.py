@@ -32,6 +32,8 @@ import ast
 import numba
 import numpy as np
 
+from ..expressions import dotted_reference
+
 OP_END, OP_CONST, OP_PARAM, OP_OBS = 0, 1, 2, 3
 OP_ADD, OP_SUB, OP_MUL, OP_DIV, OP_POW = 4, 5, 6, 7, 8
 OP_NEG, OP_EXP, OP_LOG, OP_SQRT = 9, 10, 11, 12
@@ -80,8 +82,8 @@ def _tree(node, expr, slot, loads):
         if not (isinstance(node.func, ast.Name) and node.func.id in _FUNCS) or len(node.args) != 1 or node.keywords:
             raise ValueError(f"expression {expr.text!r}: only exp(x), log(x), sqrt(x) may be called")
         return _fold(("un", _FUNCS[node.func.id], _tree(node.args[0], expr, slot, loads)))
-    if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name):
-        return _ref(f"{node.value.id}.{node.attr}", expr, slot, loads)
+    if dotted_reference(node) is not None:  # ELEMENT.NAME (a dotted instance element too)
+        return _ref(".".join(dotted_reference(node)), expr, slot, loads)
     if isinstance(node, ast.Name):
         if node.id == "pi":
             return ("const", np.pi)
