@@ -260,3 +260,23 @@ def test_second_order_small_zeta_rings(circuit):
     assert crossings(t, r_ring) >= 4
     assert crossings(t, r_damp) <= 2
     assert r_ring[-1] == pytest.approx(r_damp[-1], abs=0.05)      # same steady state
+
+
+def test_a_tone_waveform_moves_the_arteriole_to_the_shifted_equilibrium(tmp_path):
+    """art.pCa_shift as a waveform (a step from 0 to 0.1 at 5 s) on both paths, the compiled
+    engine and scipy: the arteriole ends where the operating point with the constant shift 0.1
+    is (more Ca, more tone: a narrower radius), and it starts on the unshifted one."""
+    iso = os.path.join(ROOT, "netlists", "isolated_arteriole.yaml")
+    net = tmp_path / "tone_step.yaml"
+    net.write_text(f"name: tone_step\nextends: {iso}\n"
+                   "change:\n  art: {pCa_shift: {steps: [[0 s, 0], [5 s, 0.1]]}}\n")
+    c = hc.load(str(net))
+    base = hc.load(iso)
+    r0 = float(base.operating_point()["art.r"])
+    r1 = float(base.with_values({"art.pCa_shift": 0.1}).operating_point()["art.r"])
+    assert r1 < 0.99 * r0
+    for engine in ("compiled", "scipy"):
+        res = c.simulate(400.0, dt=1.0, engine=engine)
+        assert res.stats["method"].endswith("(compiled)") == (engine == "compiled")
+        assert res["art.r"][0] == pytest.approx(r0, rel=1e-9)
+        assert res["art.r"][-1] == pytest.approx(r1, rel=1e-5), engine

@@ -82,6 +82,9 @@ class Arteriole(Component):
     }
     role = "conductive"
     constant_matrix = False
+    # a tone input (e.g. seeded noise for CO2 and neural fluctuations, docs/body.md): its
+    # waveform adds to the parameter's value
+    waveform_params = ("pCa_shift",)
 
     def defaults(self):
         return dict(PRESETS[self.opts["preset"]])
@@ -131,7 +134,9 @@ class Arteriole(Component):
         return (("Ca", equations.CA_FLOOR, "dCa"),) if self.opts["ca_order"] == 2 else ()
 
     def check(self, p):
-        return [(0, m) for m in check_params(p)]
+        # the framework checks that every parameter is given; an expression-valued one is
+        # absent here until evaluated
+        return [(0, m) for m in check_params(p, complete=False)]
 
     # --- the equations: kernel functions in compiled.py, from equations.py ------------------
     def kernel(self):

@@ -35,7 +35,7 @@ K3, K4, K7 = (_IDX[k] for k in ("K3", "K4", "K7"))
 K_CA1, N_CA1, K_CA2, N_CA2, K_CGMP, N_CGMP = (_IDX[k] for k in ("k_Ca1", "n_Ca1", "k_Ca2", "n_Ca2",
                                                                 "k_cGMP", "n_cGMP"))
 TAU_CA, OMEGA_N, ZETA = (_IDX[k] for k in ("tau_Ca", "omega_n", "zeta"))
-NO_SPEED, L_VES, N_VES = (_IDX[k] for k in ("no_speed", "L", "n"))
+NO_SPEED, L_VES, N_VES, PCA_SHIFT = (_IDX[k] for k in ("no_speed", "L", "n", "pCa_shift"))
 N_PARAMS = len(PARAMETERS)
 
 # --- constants ------------------------------------------------------------------------------
@@ -131,8 +131,9 @@ def wall_stress(P, r, p):
 
 @_eq
 def ca_bar(sigma, p):
-    """Equilibrium [Ca] [M] = 10**sigmoid(sigma) (eq ssCa)."""
-    return np.exp(LN10 * sigmoid_5_95(sigma, p[SIGMA_L], p[SIGMA_U], p[PCA_L], p[PCA_U]))
+    """Equilibrium [Ca] [M] = 10**(sigmoid(sigma) + pCa_shift) (eq ssCa; pCa_shift, 0 in the
+    thesis, is a tone input that moves log10[Ca] independently of the wall stress)."""
+    return np.exp(LN10 * (sigmoid_5_95(sigma, p[SIGMA_L], p[SIGMA_U], p[PCA_L], p[PCA_U]) + p[PCA_SHIFT]))
 
 
 # --- Ca dynamics (eqs dCadt, dCadt2) ----------------------------------------------------------

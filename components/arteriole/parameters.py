@@ -81,6 +81,9 @@ PARAMETERS: dict[str, ParamSpec] = {
     "no_speed": _P("dimensionless", 0.0, None, "common factor on h_w, r_dw, s_w, k_tau (sec. dynfitting)", True),
     "L": _P("m", 0.0, None, "vessel length (tabActiveFit)", True),
     "n": _P("dimensionless", 0.0, None, "number of identical vessels in parallel", True),
+    # --- beyond the thesis ------------------------------------------------------------------
+    "pCa_shift": _P("dimensionless", None, None, "added to eq ssCa's log10[Ca]: non-myogenic tone (CO2, neural, "
+                                                 "metabolic); not in the thesis (0); may be a waveform"),
 }
 
 #: the NO coefficients that ``no_speed`` scales together (eq dNOdt's four coefficients)
@@ -101,6 +104,7 @@ _KUO91 = {
     # Ca dynamics defaults: tau_Ca 1 s (tabTauCaVals), omega_n 1.5 rad/s, zeta 0.5 (tabOmegaZeta)
     "tau_Ca": 1.0, "omega_n": 1.5, "zeta": 0.5,
     "no_speed": 1.0, "L": 1e-3, "n": 1.0,
+    "pCa_shift": 0.0,  # not in the thesis: no tone input
 }
 _FALCONE91 = dict(_KUO91)
 _FALCONE91.update({
@@ -146,11 +150,13 @@ def effective(params: dict) -> dict:
     return out
 
 
-def check_params(params: dict) -> list[str]:
-    """Messages for values outside their physical bounds and inconsistent combinations."""
+def check_params(params: dict, complete: bool = True) -> list[str]:
+    """Messages for values outside their physical bounds and inconsistent combinations.
+    ``complete`` False: parameters not given are not an error (a netlist's expression-valued
+    ones, checked once evaluated), and the combinations they are part of are not checked."""
     msgs = []
     missing = set(PARAMETERS) - set(params)
-    if missing:
+    if missing and complete:
         msgs.append(f"missing parameter(s) {sorted(missing)}")
     for name, spec in PARAMETERS.items():
         if name not in params:
@@ -165,12 +171,11 @@ def check_params(params: dict) -> list[str]:
             lo = "" if spec.lower is None else f"{spec.lower:g} {'<' if spec.lower_open else '<='} "
             hi = "" if spec.upper is None else f" <= {spec.upper:g}"
             msgs.append(f"{name} = {v[bad].ravel()[:3]} violates {lo}{name}{hi} [{spec.unit}]")
-    if not missing:
-        p = params
-        for lo, hi in (("NO_L", "NO_U"), ("sigma_L", "sigma_U")):
-            if np.any(np.equal(p[lo], p[hi])):
-                msgs.append(f"{lo} == {hi}: the 5 %/95 % sigmoid is undefined")
-        # eq l2r: the ring of n_c relaxed cells must enclose a lumen (r(lambda = 1) > 0)
-        if np.any(np.asarray(p["l0"]) * p["n_c"] / np.pi <= p["t_w"]):
-            msgs.append("l0 n_c / pi <= t_w: radius at lambda = 1 is not positive")
+    p = params
+    for lo, hi in (("NO_L", "NO_U"), ("sigma_L", "sigma_U")):
+        if lo in p and hi in p and np.any(np.equal(p[lo], p[hi])):
+            msgs.append(f"{lo} == {hi}: the 5 %/95 % sigmoid is undefined")
+    # eq l2r: the ring of n_c relaxed cells must enclose a lumen (r(lambda = 1) > 0)
+    if {"l0", "n_c", "t_w"} <= set(p) and np.any(np.asarray(p["l0"]) * p["n_c"] / np.pi <= p["t_w"]):
+        msgs.append("l0 n_c / pi <= t_w: radius at lambda = 1 is not positive")
     return msgs

@@ -40,13 +40,16 @@ def _element(art, preset, ca_order, kinetics, passive, volume_flow, pim_referenc
 
 def _params(art, preset, rng, n):
     """Parameter dict of (1, n) arrays: the preset, each value x (1 + 2 % noise), no_speed
-    log-uniform 0.5..200 (1 for the first sample), C_in > 0 in some, short vessels in some."""
+    log-uniform 0.5..200 (1 for the first sample), C_in > 0 in some, short vessels in some,
+    pCa_shift uniform in +-0.1."""
     base = art.PRESETS[preset]
-    p = {k: np.full((1, n), float(v)) * (1.0 + 0.02 * rng.standard_normal((1, n))) for k, v in base.items()}
+    p = {k: np.full((1, n), float(v)) * (1.0 + 0.02 * rng.standard_normal((1, n))) for k, v in base.items()
+         if k != "pCa_shift"}
     p["no_speed"] = np.exp(rng.uniform(np.log(0.5), np.log(200.0), (1, n)))
     p["no_speed"][0, 0] = 1.0
     p["C_in"] = np.where(rng.random((1, n)) < 0.5, rng.uniform(0.0, 3e-8, (1, n)), 0.0)
     p["L"][0, :3] = rng.uniform(1e-4, 2e-4, 3)   # high flow per unit length: psi series branch
+    p["pCa_shift"] = rng.uniform(-0.1, 0.1, (1, n))  # drawn last: the other samples as before it existed
     return p
 
 

@@ -21,7 +21,7 @@ def test_units_parse_with_pint_and_have_si_dimensions(art):
         q = ureg.Quantity(1, spec.unit)
         if name in dims:
             assert q.check(dims[name]), name
-        assert spec.doc and ("tab" in spec.doc or "sec." in spec.doc or name == "n"), name
+        assert spec.doc and ("tab" in spec.doc or "sec." in spec.doc or name in ("n", "pCa_shift")), name
 
 
 def test_known_values(art):
@@ -49,3 +49,20 @@ def test_make_params_rejects_unknown(art):
     with pytest.raises(KeyError):
         art.make_params("nope")
     assert art.check_params(dict(art.make_params(), NO_U=780e-12)) != []
+
+
+def test_tone_shift_multiplies_the_equilibrium_calcium(art):
+    """pCa_shift (not in the thesis, 0 in both presets) adds to eq ssCa's log10[Ca]: the
+    equilibrium Ca at every wall stress is 10**shift times the thesis's, and the presets keep
+    the thesis's curve."""
+    from hemocircuit.components.arteriole import equations as eq
+
+    p = art.make_params("kuo91")
+    assert p["pCa_shift"] == 0.0 and art.PRESETS["falcone91"]["pCa_shift"] == 0.0
+    sigma = np.linspace(-2e4, 8e4, 11)
+    base = eq.ca_bar(sigma, eq.vector(p))
+    hand = 10.0 ** eq.sigmoid_5_95(sigma, p["sigma_L"], p["sigma_U"], p["pCa_L"], p["pCa_U"])
+    np.testing.assert_allclose(base, hand, rtol=1e-13)
+    for shift in (-0.1, 0.05, 0.3):
+        np.testing.assert_allclose(eq.ca_bar(sigma, eq.vector({**p, "pCa_shift": shift})), 10.0 ** shift * base,
+                                   rtol=1e-13)
