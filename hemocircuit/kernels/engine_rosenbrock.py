@@ -378,8 +378,12 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
                         age = JAC_REUSE
                 age += 1
                 if landed:
+                    # the released state's motion starts here (a valve's flow rising from 0
+                    # with its pressure difference): the step size of the smooth approach says
+                    # little about it; RELEASE_NEXT of it saves ~3 rejected steps an opening
                     age = JAC_REUSE
                     landed = False
+                    h = min(h, RELEASE_NEXT * hh)
                 nrej_run = 0
             else:
                 nrej += 1

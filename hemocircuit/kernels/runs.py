@@ -18,6 +18,8 @@ LIMIT_ON_BOUND = 1e-3
 #: RELEASE_LAND_BELOW of it (later: the ordinary step-size rule)
 RELEASE_HALVINGS = 12
 RELEASE_LAND_BELOW = 0.95
+#: the step after one that ends on a release is at most this fraction of it
+RELEASE_NEXT = 0.3
 
 #: the columns of a member's stats row, in order (CompiledSystem.integrate reads them by name)
 STATS = ("status", "t", "steps", "rejected", "nfev", "limit_events")
