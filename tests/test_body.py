@@ -70,3 +70,43 @@ def test_impaired_autoregulation_lets_flow_follow_pressure(runs):
     _, impaired = runs["body_impaired", 0.95]
     m = _last_beats(intact)
     assert np.mean(impaired["left.art.r"][m]) > np.mean(intact["left.art.r"][m])  # dilated without tone
+
+
+def test_spontaneous_tone_leaves_pressure_and_flow_coherent_only_where_autoregulation_lets_pressure_through():
+    """fluctuations.yaml: the arterial pressure fluctuates (the systemic resistance) and so does
+    each hemisphere's arteriolar tone (slow noise on art.pCa_shift, standing for CO2 and neural
+    influences).  TFA with the white paper's settings (330 s, the last 300 s, 100 s windows):
+    the intact beds high-pass the pressure, so at very low frequencies the tone dominates the
+    flow and the coherence is low (healthy adults: < 0.5, Zhang et al. 1998); at LF the pressure
+    gets through (coherence > 0.5) with the phase lead of docs/body.md.  Passive beds have no
+    tone to fluctuate (Ca = 0) and follow the pressure at every frequency (coherence ~1).
+    Without the tone noise the intact VLF coherence is 0.99."""
+    from hemocircuit.dca.series import uniform_series
+    from hemocircuit.dca.tfa import tfa
+
+    out = {}
+    for name in ("fluctuations", "fluctuations_impaired"):
+        r = hc.load(str(BODY / f"{name}.yaml")).simulate(330.0, dt=0.01)
+        keep = r.t >= 30.0  # the start from the operating point, left out
+        series = uniform_series(r.t[keep], r["P(art)"][keep], r["Q(left.Rla)"][keep], beats=True)
+        res, _ = tfa(series, window=100.0)
+        out[name] = {b: (res["phase"][k], res["coherence"][k]) for k, b in enumerate(res["band"])}
+    intact, passive = out["fluctuations"], out["fluctuations_impaired"]
+    assert intact["VLF"][1] < 0.5 < intact["LF"][1]
+    assert 30.0 <= intact["LF"][0] <= 60.0
+    assert passive["VLF"][1] > 0.9 and passive["LF"][1] > 0.9
+    assert abs(passive["LF"][0]) < 15.0
+
+
+def test_the_right_hemisphere_follows_the_left_arterioles_dynamics():
+    """body.yaml sets tau_Ca and f2 on left.art; right.art follows by expressions that name an
+    instance's element (``= left.art.tau_Ca``), so one --set or --grid value moves both
+    hemispheres, and setting the follower is refused with the reason."""
+    base = hc.load(str(BODY / "body.yaml"))
+    slow = base.with_values({"left.art.tau_Ca": "3 s", "left.art.f2": "0.5 N*s/m"})
+    runs = {name: c.simulate(6.0, dt=0.01) for name, c in (("base", base), ("slow", slow))}
+    for r in runs.values():
+        np.testing.assert_allclose(r["Q(right.Rla)"], r["Q(left.Rla)"], rtol=1e-8, atol=1e-9)
+    assert np.max(np.abs(runs["slow"]["Q(right.Rla)"] - runs["base"]["Q(right.Rla)"])) > 0.1
+    with pytest.raises(hc.NetlistError, match=r"right\.art.*follows an expression \(left\.art\.tau_Ca\); it cannot be set"):
+        base.with_values({"right.art.tau_Ca": "3 s"})
