@@ -13,7 +13,7 @@ Writes to examples/out/body_autoregulation/: tfa.csv (a row per case and band), 
 tau_phase.csv, and tfa.png, cuff.png, tau_phase.png.
 
 Run:  python examples/body_autoregulation.py [--out-dir DIR]
-(about 4 minutes on 2 cores; HEMOCIRCUIT_EXAMPLES_QUICK=1: shorter runs and windows, two
+(about 2-3 minutes on 2 cores; HEMOCIRCUIT_EXAMPLES_QUICK=1: shorter runs and windows, two
 tau_Ca values; HEMOCIRCUIT_EXAMPLES_OUT=DIR: the default of --out-dir instead of examples/out/)
 """
 from __future__ import annotations
