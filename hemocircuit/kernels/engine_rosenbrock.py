@@ -7,21 +7,24 @@
 
 
 @njit(cache=True, nogil=True)
-def held_on_bound(k, x, f, lim_i, lim_b, atol):
+def held_on_bound(k, x, f, lim_i, lim_b, lim_r, atol):
     """Whether limited state k sits on its bound (to LIMIT_ON_BOUND x atol) without rising: held
-    there (a closed valve)."""
+    there (a closed valve).  Not a limit with a reset state (lim_r >= 0: the second-order Ca
+    floor, whose rate dCa is a state reset to 0 on the bound and leaves it smoothly): its own
+    derivative is that state, 0 at once, and would count as held while already released."""
     li = lim_i[k]
-    return x[li] <= lim_b[k] + LIMIT_ON_BOUND * atol[li] and f[li] <= 0.0
+    return lim_r[k] < 0 and x[li] <= lim_b[k] + LIMIT_ON_BOUND * atol[li] and f[li] <= 0.0
 
 
 @njit(cache=True, nogil=True)
-def release_fraction(t, hh, tlim, x, f, xn, P, lay, work, lim_i, lim_b, atol, xe, fe, xh, fh):
+def release_fraction(t, hh, tlim, x, f, xn, P, lay, work, lim_i, lim_b, lim_r, atol, xe, fe, xh, fh):
     """Where in the step t -> t + hh a state held on its hard limit at t is released: the
     earliest fraction of the step at which one of them, kept on its bound, has a positive
     derivative (a closed valve whose pressure difference turns positive), located by bisection
     on the cubic Hermite path of the other states from (x, f) to the step's proposal xn.
     Returns (fraction, f evaluations): the upper end of the last bracket (just past the
-    release), or 2.0 when no held state is released in the step.
+    release), or 2.0 when no held state is released in the step or the release is at its start
+    (a bracket at the first halving's resolution: there is nothing to land on).
 
     Why: the release is a kink of the solution (the flow starts with a zero slope), which the
     error estimate of a step across it rejects, and the step-size controller alone creeps up
@@ -31,21 +34,21 @@ def release_fraction(t, hh, tlim, x, f, xn, P, lay, work, lim_i, lim_b, atol, xe
     nx = x.shape[0]
     held = False
     for k in range(lim_i.shape[0]):
-        if held_on_bound(k, x, f, lim_i, lim_b, atol):
+        if held_on_bound(k, x, f, lim_i, lim_b, lim_r, atol):
             held = True
     if not held:
         return 2.0, 0
     for i in range(nx):
         xe[i] = xn[i]
     for k in range(lim_i.shape[0]):
-        if held_on_bound(k, x, f, lim_i, lim_b, atol):
+        if held_on_bound(k, x, f, lim_i, lim_b, lim_r, atol):
             xe[lim_i[k]] = lim_b[k]
     nf = 1
     if not rhs_into(min(t + hh, tlim), xe, P, lay, work, fe):
         return 2.0, nf
     released = False
     for k in range(lim_i.shape[0]):
-        if held_on_bound(k, x, f, lim_i, lim_b, atol) and fe[lim_i[k]] > 0.0:
+        if held_on_bound(k, x, f, lim_i, lim_b, lim_r, atol) and fe[lim_i[k]] > 0.0:
             released = True
     if not released:
         return 2.0, nf
@@ -55,19 +58,21 @@ def release_fraction(t, hh, tlim, x, f, xn, P, lay, work, lim_i, lim_b, atol, xe
         m = 0.5 * (lo + hi)
         hermite(x, f, xe, fe, hh, m, xh)
         for k in range(lim_i.shape[0]):
-            if held_on_bound(k, x, f, lim_i, lim_b, atol):
+            if held_on_bound(k, x, f, lim_i, lim_b, lim_r, atol):
                 xh[lim_i[k]] = lim_b[k]
         nf += 1
         if not rhs_into(min(t + m * hh, tlim), xh, P, lay, work, fh):
             return 2.0, nf
         released = False
         for k in range(lim_i.shape[0]):
-            if held_on_bound(k, x, f, lim_i, lim_b, atol) and fh[lim_i[k]] > 0.0:
+            if held_on_bound(k, x, f, lim_i, lim_b, lim_r, atol) and fh[lim_i[k]] > 0.0:
                 released = True
         if released:
             hi = m
         else:
             lo = m
+    if lo == 0.0:
+        return 2.0, nf
     return hi, nf
 
 
@@ -213,6 +218,7 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
             if not lu_factor(W, piv, nx):
                 h = 0.25 * hh
                 age = JAC_REUSE
+                landed = False
                 nrej += 1
                 nsteps += 1
                 if h < 1e-14 * max(1.0, abs(t)):
@@ -383,14 +389,19 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
                     # little about it; RELEASE_NEXT of it saves ~3 rejected steps an opening
                     age = JAC_REUSE
                     landed = False
-                    h = min(h, RELEASE_NEXT * hh)
+                    if k_hit < 0:  # (a bound hit in the step restarts as such, above)
+                        h = min(h, RELEASE_NEXT * hh)
                 nrej_run = 0
             else:
                 nrej += 1
                 s_rel = 2.0
-                if land and np.isfinite(enorm) and lim_i.shape[0] > 0:
-                    s_rel, nf = release_fraction(t, hh, tlim, x, f, xn, P, lay, work, lim_i, lim_b, atol, xe, fe,
-                                                 xh, fr)
+                # one landing per approach: a landed retry that is rejected too is left to the
+                # step-size rule (its flag goes: the step that is accepted may end elsewhere)
+                retry = landed
+                landed = False
+                if land and not retry and np.isfinite(enorm) and lim_i.shape[0] > 0:
+                    s_rel, nf = release_fraction(t, hh, tlim, x, f, xn, P, lay, work, lim_i, lim_b, lim_r, atol,
+                                                 xe, fe, xh, fr)
                     nfev += nf
                 if s_rel < RELEASE_LAND_BELOW:
                     # retry ending just past the release (no shrink rule, and growth stays
