@@ -280,3 +280,20 @@ def test_a_tone_waveform_moves_the_arteriole_to_the_shifted_equilibrium(tmp_path
         assert res.stats["method"].endswith("(compiled)") == (engine == "compiled")
         assert res["art.r"][0] == pytest.approx(r0, rel=1e-9)
         assert res["art.r"][-1] == pytest.approx(r1, rel=1e-5), engine
+
+
+def test_the_operating_point_guess_sees_a_tone_waveform(tmp_path):
+    """The DC fixed point that starts Newton solves each arteriole's steady state with its
+    waveform's value added (pCa_shift = 0.2 as a table): the same start as the constant 0.2,
+    not the unshifted bed's (lambda 1.02 against 0.89 before)."""
+    from hemocircuit.analyses.op import dc_guess
+
+    iso = os.path.join(ROOT, "netlists", "isolated_arteriole.yaml")
+    net = tmp_path / "tone_table.yaml"
+    net.write_text(f"name: tone_table\nextends: {iso}\nchange:\n  art: {{pCa_shift: {{steps: [[0 s, 0.2]]}}}}\n")
+    wave = hc.load(str(net))
+    assert wave.parameters.waveform("art.pCa_shift") is not None
+    const = hc.load(iso).with_values({"art.pCa_shift": 0.2})
+    lam = [c.state_dict(dc_guess(c)[0])["art.lambda"] for c in (wave, const)]
+    assert lam[0] == pytest.approx(lam[1], rel=1e-9)
+    assert lam[1] < 0.95 * hc.load(iso).state_dict(dc_guess(hc.load(iso))[0])["art.lambda"]

@@ -516,3 +516,24 @@ def test_circuit_with_expressions_pickles(tmp_path):
     x = c.operating_point().x
     c2 = pickle.loads(pickle.dumps(c))
     assert np.array_equal(c2.rhs(0.0, x), c.rhs(0.0, x))
+
+
+def test_an_expression_reads_a_parameter_with_its_waveform_on_both_paths(tmp_path):
+    """Pb.value = Pa.value where Pa's value is a sine: the waveform adds to the parameter
+    before the expression reads it, on the scipy path as in the compiled engine, so P(b)
+    follows P(a) on both (the scipy path read the bare slot, 0, while the engine read the sine)."""
+    net = tmp_path / "follow.yaml"
+    net.write_text("name: follow\nelements:\n"
+                   "  - {id: Pa, type: pressure_source, nodes: [a, ground], value: {sine: {offset: 80 mmHg, "
+                   "amplitude: 10 mmHg, frequency: 0.5 Hz}}}\n"
+                   "  - {id: R1, type: resistor, nodes: [a, m], R: 1 mmHg*s/mL}\n"
+                   "  - {id: C1, type: compliance, nodes: [m, ground], C: 0.5 mL/mmHg}\n"
+                   "  - {id: Pb, type: pressure_source, nodes: [b, ground], value: \"= Pa.value\"}\n"
+                   "  - {id: R2, type: resistor, nodes: [b, ground], R: 1 mmHg*s/mL}\n")
+    c = hc.load(str(net))
+    t = np.arange(0.0, 3.0001, 0.1)
+    sine = 80.0 + 10.0 * np.sin(2 * np.pi * 0.5 * t)
+    for engine in ("scipy", "compiled"):
+        r = c.simulate(3.0, dt=0.1, engine=engine)
+        np.testing.assert_allclose(r["P(b)"], sine, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(r["Q(R2)"], sine, rtol=0, atol=1e-9)

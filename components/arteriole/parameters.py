@@ -153,7 +153,8 @@ def effective(params: dict) -> dict:
 def check_params(params: dict, complete: bool = True) -> list[str]:
     """Messages for values outside their physical bounds and inconsistent combinations.
     ``complete`` False: parameters not given are not an error (a netlist's expression-valued
-    ones, checked once evaluated), and the combinations they are part of are not checked."""
+    ones, whose values are checked against their bounds once evaluated), and the combinations
+    they are part of are not checked."""
     msgs = []
     missing = set(PARAMETERS) - set(params)
     if missing and complete:

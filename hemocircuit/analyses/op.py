@@ -275,6 +275,9 @@ def dc_guess(circuit, t=0.0, max_iter=200, tol=DC_GUESS_TOL, start=None):
         for g, p, (A_loc, b_loc, src) in zip(circuit.groups, plist_b, stamps):
             if g.S == 0:
                 continue
+            if src is not None:  # a waveform adds to its parameter (an arteriole's pCa_shift)
+                name = g.comp.waveform_params[0]
+                p = {**p, name: p[name] + src}
             ul = u[:, g.uidx]
             flows = np.einsum("beij,bej->bei", np.broadcast_to(A_loc, (B,) + A_loc.shape[1:]), ul) - b_loc
             new = g.comp.initial_states(p, ul, flows, X[:, g.sidx])

@@ -131,6 +131,13 @@ class System(Assembly, Jacobians, Outputs):
                     if ref.kind == "param":
                         og, oi = locate(ref.element)
                         vals[key] = plist[self.groups.index(og)][ref.name][:, oi]
+                        # a waveform's value adds to the parameter it is on before an expression
+                        # reads it (as the engine's effective_params does)
+                        own = [wf for wi, wname, wf in og.waves if wi == oi and wname == ref.name]
+                        if own:
+                            tt = np.asarray(t, dtype=float)
+                            vals[key] = vals[key] + sum(wf.sample(tt).reshape(-1) if tt.ndim else wf(float(tt))
+                                                        for wf in own)
                     elif ref.kind == "observable":
                         o, oi = obs[ref.element]
                         vals[key] = o[ref.name][:, oi]
