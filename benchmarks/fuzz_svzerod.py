@@ -323,8 +323,9 @@ def classify(output: str, status: str, token: str) -> list[str]:
 
 
 # ------------------------------------------------------------------------------ the runner ----
-def load_cases(folder=SHARED):
-    cases = os.path.join(folder, "cases")
+def load_cases(folder=None):
+    # SHARED read at call time: tests/test_svzerod_inputs.py points it elsewhere after import
+    cases = os.path.join(folder or SHARED, "cases")
     out = {}
     for f in sorted(os.listdir(cases)):
         if f.endswith(".json"):
