@@ -160,6 +160,10 @@ class CircuitStructure:
                 memo.pop(next(iter(memo)))
         return memo[key]
 
+    def recall(self, key, default=None):
+        """The memo of ``key`` if :meth:`cached` holds one, else ``default`` (nothing stored)."""
+        return self._memo.get(key, default)
+
     def steady(self) -> "CircuitStructure":
         """This structure with each component's ``steady_opts`` applied (for steady-state
         solves; same topology and numbering); itself when no component has any."""
