@@ -17,11 +17,21 @@ def held_on_bound(k, x, f, lim_i, lim_b, lim_r, atol):
 
 
 @njit(cache=True, nogil=True)
-def release_fraction(t, hh, tlim, x, f, xn, P, lay, work, lim_i, lim_b, lim_r, atol, xe, fe, xh, fh):
+def any_released(held, lim_i, fv):
+    """Whether a held state's derivative in fv is positive."""
+    for k in range(lim_i.shape[0]):
+        if held[k] and fv[lim_i[k]] > 0.0:
+            return True
+    return False
+
+
+@njit(cache=True, nogil=True)
+def release_fraction(t, hh, tlim, x, f, xn, P, lay, work, lim_i, lim_b, lim_r, atol, held, xe, fe, xh, fh):
     """Where in the step t -> t + hh a state held on its hard limit at t is released: the
     earliest fraction of the step at which one of them, kept on its bound, has a positive
     derivative (a closed valve whose pressure difference turns positive), located by bisection
     on the cubic Hermite path of the other states from (x, f) to the step's proposal xn.
+    ``held`` (one flag per limit): scratch.
     Returns (fraction, f evaluations): the upper end of the last bracket (just past the
     release), or 2.0 when no held state is released in the step or the release is at its start
     (a bracket at the first halving's resolution: there is nothing to land on).
@@ -32,25 +42,21 @@ def release_fraction(t, hh, tlim, x, f, xn, P, lay, work, lim_i, lim_b, lim_r, a
     model: four openings a beat, docs/performance.md).  A step that ends on the release
     and the next that starts there are both smooth."""
     nx = x.shape[0]
-    held = False
+    n_held = 0
     for k in range(lim_i.shape[0]):
-        if held_on_bound(k, x, f, lim_i, lim_b, lim_r, atol):
-            held = True
-    if not held:
+        held[k] = held_on_bound(k, x, f, lim_i, lim_b, lim_r, atol)
+        n_held += held[k]
+    if n_held == 0:
         return 2.0, 0
+    # the step's end and, below, each bisection point with every held state on its bound:
+    # released where one of them has a positive derivative there
     for i in range(nx):
         xe[i] = xn[i]
     for k in range(lim_i.shape[0]):
-        if held_on_bound(k, x, f, lim_i, lim_b, lim_r, atol):
+        if held[k]:
             xe[lim_i[k]] = lim_b[k]
     nf = 1
-    if not rhs_into(min(t + hh, tlim), xe, P, lay, work, fe):
-        return 2.0, nf
-    released = False
-    for k in range(lim_i.shape[0]):
-        if held_on_bound(k, x, f, lim_i, lim_b, lim_r, atol) and fe[lim_i[k]] > 0.0:
-            released = True
-    if not released:
+    if not rhs_into(min(t + hh, tlim), xe, P, lay, work, fe) or not any_released(held, lim_i, fe):
         return 2.0, nf
     lo = 0.0
     hi = 1.0
@@ -58,20 +64,16 @@ def release_fraction(t, hh, tlim, x, f, xn, P, lay, work, lim_i, lim_b, lim_r, a
         m = 0.5 * (lo + hi)
         hermite(x, f, xe, fe, hh, m, xh)
         for k in range(lim_i.shape[0]):
-            if held_on_bound(k, x, f, lim_i, lim_b, lim_r, atol):
+            if held[k]:
                 xh[lim_i[k]] = lim_b[k]
         nf += 1
         if not rhs_into(min(t + m * hh, tlim), xh, P, lay, work, fh):
             return 2.0, nf
-        released = False
-        for k in range(lim_i.shape[0]):
-            if held_on_bound(k, x, f, lim_i, lim_b, lim_r, atol) and fh[lim_i[k]] > 0.0:
-                released = True
-        if released:
+        if any_released(held, lim_i, fh):
             hi = m
         else:
             lo = m
-    if lo == 0.0:
+    if lo == 0.0:  # released at the step's start: nothing to land on
         return 2.0, nf
     return hi, nf
 
@@ -155,6 +157,7 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
         xh = np.empty(nx)
         xe = np.empty(nx)
         fe = np.empty(nx)
+        held_now = np.zeros(lim_i.shape[0], dtype=np.bool_)  # release_fraction's scratch
         t = t_out[0]
         t_end = t_out[-1]
         for i in range(nx):
@@ -401,7 +404,7 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
                 landed = False
                 if land and not retry and np.isfinite(enorm) and lim_i.shape[0] > 0:
                     s_rel, nf = release_fraction(t, hh, tlim, x, f, xn, P, lay, work, lim_i, lim_b, lim_r, atol,
-                                                 xe, fe, xh, fr)
+                                                 held_now, xe, fe, xh, fr)
                     nfev += nf
                 if s_rel < RELEASE_LAND_BELOW:
                     # retry ending just past the release (no shrink rule, and growth stays

@@ -228,8 +228,9 @@ def packed(name="rodas5p", jac_reuse=None, event_restart=1, soft_kinks=1, autono
     ``"pi"``, ``"predictive"`` or ``"predictive-halving"`` (module docstring); default
     CONTROLLER[name].  ``land_releases``: a rejected step in which a state held on its hard
     limit is released (a closed valve opening) is retried ending just past the release
-    (engine_rosenbrock.release_fraction); 0: the step size controller alone finds it.  (Built once per set of arguments, its arrays read-only: packing costs
-    ~0.5 ms, a third of a short run's Python time.)"""
+    (engine_rosenbrock.release_fraction); 0: the step-size controller alone finds it.  (Built
+    once per set of arguments, its arrays read-only: packing costs ~0.5 ms, a third of a short
+    run's Python time.)"""
     jr = JAC_REUSE.get(name) if jac_reuse is None else int(jac_reuse)
     ctrl = CONTROLLER.get(name, "pi") if controller is None else controller
     if ctrl not in CONTROLLERS:
@@ -255,5 +256,5 @@ def _packed(name, jr, event_restart, soft_kinks, autonomous, local_jacobian, con
         return a
 
     return RosenbrockMethod(int(ns), float(gamma), float(q), int(jr), event_restart, soft_kinks, autonomous,
-                            local_jacobian, int(controller), land_releases, frozen(A), frozen(G), frozen(b), frozen(e), frozen(c),
-                            frozen(d), frozen(reuse), frozen(np.reshape(H, (-1, ns))))
+                            local_jacobian, int(controller), land_releases, frozen(A), frozen(G), frozen(b),
+                            frozen(e), frozen(c), frozen(d), frozen(reuse), frozen(np.reshape(H, (-1, ns))))
