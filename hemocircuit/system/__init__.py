@@ -133,11 +133,8 @@ class System(Assembly, Jacobians, Outputs):
                         vals[key] = plist[self.groups.index(og)][ref.name][:, oi]
                         # a waveform's value adds to the parameter it is on before an expression
                         # reads it (as the engine's effective_params does)
-                        own = [wf for wi, wname, wf in og.waves if wi == oi and wname == ref.name]
-                        if own:
-                            tt = np.asarray(t, dtype=float)
-                            vals[key] = vals[key] + sum(wf.sample(tt).reshape(-1) if tt.ndim else wf(float(tt))
-                                                        for wf in own)
+                        if og.waves and ref.name in og.comp.waveform_params:
+                            vals[key] = vals[key] + og.source_values(t, Bx)[:, oi]
                     elif ref.kind == "observable":
                         o, oi = obs[ref.element]
                         vals[key] = o[ref.name][:, oi]
