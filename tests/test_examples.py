@@ -391,3 +391,28 @@ def test_quickstart_notebook(tmp_path, monkeypatch):
     assert l0 == pytest.approx(77.5e-6, rel=0.01)
     if ns is not None:
         assert ns["fr"].n_rows == 6 and ns["table"].shape == (3, 4)
+
+
+# ------------------------------------------------------------------ docs/body.md ----------
+def test_body_doc_commands(project):
+    """docs/body.md's commands, as written, in a scratch project (every output written): the
+    two long ones shortened (the 600 s run to 20 s; the 20-member tau_Ca grid to two members of
+    5 s).  What they print holds the page's physics: the intact beds lead the pressure at LF
+    (30-60 deg) and the cuff release gives an ARI of 4-7."""
+    text = (ROOT / "docs" / "body.md").read_text(encoding="utf-8")
+    commands = re.findall(r"^    (hemocircuit .*)$", text, flags=re.M)
+    assert len(commands) >= 9, commands
+    short = {"--t-end 600 --dt 0.01": "--t-end 20 --dt 0.01",
+             "--t-end 600 --dt 0.1 --grid left.art.tau_Ca=0.1:2.0:0.1s": "--t-end 5 --dt 0.1 --grid left.art.tau_Ca=0.1,2s"}
+    printed = {}
+    for line in commands:
+        for long, brief in short.items():
+            line = line.replace(long, brief)
+        argv = shlex.split(line)
+        printed[argv[1]] = run([hemocircuit_cli()] + argv[1:], project, cwd=project)
+    for out in ("body.csv", "body.png", "body.npz", "grid.npz", "low.csv", "fl.npz", "tfa.png", "cuff.npz"):
+        assert (project / out).stat().st_size > 0, out
+    lf = re.search(r"^\s*LF\s+(\S+)\s+(\S+)\s+(\S+)\s+(\S+)\s+(\S+)", printed["tfa"], flags=re.M)
+    assert 30.0 <= float(lf.group(5)) <= 60.0, printed["tfa"]
+    ari = float(re.search(r"ARI (\S+)", printed["ari"]).group(1))
+    assert 4.0 <= ari <= 7.0, printed["ari"]
