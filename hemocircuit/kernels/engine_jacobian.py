@@ -15,7 +15,7 @@ JacWork = namedtuple("JacWork", (
     "ub",          # (n+1,) the base unknowns u
     "rb",          # (nu,) the base local residuals (at the eu offsets)
     "M",           # (nx, n+1) dD/du
-    "col",         # (n+1,) one column dR/dx_j, then -du/dx_j
+    "col",         # (n+1,) one column dR/dx_j
     "Db",          # (nx,) the base derivatives
     "Ab",          # (nu, Lm) the elements' local matrices (at the eu offsets)
     "bb",          # (nu,) their local right-hand sides
@@ -25,6 +25,9 @@ JacWork = namedtuple("JacWork", (
     "Jxs",         # (nx, Sm) those partials d dx / d x_own (at the ex offsets)
     "Jx",          # (Sm, Sm) one element's d dx / d x (derivs_jac's Jx)
     "Ju",          # (Sm, Lm) one element's d dx / d u (derivs_jac's Ju)
+    "C",           # (n+1, nx) the columns dR/dx_j that move a stamp, side by side; then -du/dx_j
+    "cj",          # (nx,) int: the state j of each of those columns
+    "MC",          # (nx, nx) dD/du times them
 ))
 
 
@@ -52,7 +55,9 @@ def make_jac_work(lay):
                    ub=np.zeros(n + 1), rb=np.zeros(nu), M=np.zeros((max(nx, 1), n + 1)), col=np.zeros(n + 1),
                    Db=np.zeros(max(nx, 1)), Ab=np.zeros((nu, Lm)), bb=np.zeros(nu), has_expr=has_expr,
                    observed=observed, analytic=np.zeros(et.shape[0], dtype=np.int64),
-                   Jxs=np.zeros((max(nx, 1), Sm)), Jx=np.zeros((Sm, Sm)), Ju=np.zeros((Sm, Lm)))
+                   Jxs=np.zeros((max(nx, 1), Sm)), Jx=np.zeros((Sm, Sm)), Ju=np.zeros((Sm, Lm)),
+                   C=np.zeros((n + 1, max(nx, 1))), cj=np.zeros(max(nx, 1), dtype=np.int64),
+                   MC=np.zeros((max(nx, 1), max(nx, 1))))
 
 
 @njit(cache=True, nogil=True, internal=True, _nrt=False)
@@ -73,6 +78,7 @@ def local_jacobian_into(t, x, P, lay, work, jw, scales, J, xt, analytic):
     if nonlin != 0:
         return -1
     Pb, A, piv, ub, rb, M, col, Db, Ab, bb = jw.Pb, jw.A, jw.piv, jw.ub, jw.rb, jw.M, jw.col, jw.Db, jw.Ab, jw.bb
+    C, cj, MC = jw.C, jw.cj, jw.MC
     hasx, obs, an, Jxs, Jxl, Jul = jw.has_expr, jw.observed, jw.analytic, jw.Jxs, jw.Jx, jw.Ju
     u, Al, bl, ul, pl, xl, il, dl, A0, b0 = (work.u, work.Al, work.bl, work.ul, work.pl, work.xl, work.il, work.dl,
                                              work.A0, work.b0)
@@ -151,6 +157,7 @@ def local_jacobian_into(t, x, P, lay, work, jw, scales, J, xt, analytic):
             ul[k] = ub[g]
     for i in range(nx):
         xt[i] = x[i]
+    nm = 0  # columns of dR/dx kept in C (the states that move some stamp)
     for e0 in range(E):
         observed = obs[e0] == 1
         for j in range(ex[e0], ex[e0 + 1]):
@@ -191,14 +198,54 @@ def local_jacobian_into(t, x, P, lay, work, jw, scales, J, xt, analytic):
                     for i in range(S[e]):
                         J[ex[e] + i, j] += (dl[i] - Db[ex[e] + i]) / hj
             if moved:
-                lu_apply(A, piv, col, n)  # -du/dx_j
-                for i in range(nx):
-                    acc = J[i, j]
-                    for g in range(n):
-                        acc -= M[i, g] * col[g]
-                    J[i, j] = acc
+                for i in range(n):
+                    C[i, nm] = col[i]
+                cj[nm] = j
+                nm += 1
             xt[j] = x[j]
+    if nm > 0:
+        compose_columns(A, piv, C, M, MC, cj, J, n, nx, nm)
     return 0
+
+
+@njit(cache=True, nogil=True, inline="always")
+def compose_columns(A, piv, C, M, MC, cj, J, n, nx, nm):
+    """J[:, cj[k]] -= M A^-1 C[:, k] for the nm columns of C at once (C overwritten): the
+    triangular solves and the product run along the rows of C and MC, over all columns together
+    (vectorised), instead of one solve and one product per column (5 of the body model's 19 us a
+    Jacobian, docs/performance.md)."""
+    for c in range(n):  # the LU's row swaps
+        p = piv[c]
+        if p != c:
+            for k in range(nm):
+                tmp = C[c, k]
+                C[c, k] = C[p, k]
+                C[p, k] = tmp
+    for i in range(n):  # L (unit diagonal)
+        for r in range(i):
+            a = A[i, r]
+            if a != 0.0:
+                for k in range(nm):
+                    C[i, k] -= a * C[r, k]
+    for i in range(n - 1, -1, -1):  # U
+        for r in range(i + 1, n):
+            a = A[i, r]
+            if a != 0.0:
+                for k in range(nm):
+                    C[i, k] -= a * C[r, k]
+        d = 1.0 / A[i, i]
+        for k in range(nm):
+            C[i, k] *= d
+    for i in range(nx):
+        for k in range(nm):
+            MC[i, k] = 0.0
+        for g in range(n):
+            a = M[i, g]
+            if a != 0.0:
+                for k in range(nm):
+                    MC[i, k] += a * C[g, k]
+        for k in range(nm):
+            J[i, cj[k]] -= MC[i, k]
 
 
 # inlined (numba IR) into integrate_batch, its one caller: numba links a callee's machine code into
