@@ -250,13 +250,16 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
                     if not rhs_into(min(t + tab_c[s] * hh, tlim), xs, P, lay, work, fn):
                         good = False
                         break
+                # W k_s = h f + h J g_s + h^2 d_s f_t, with h J g_s = (g_s - W g_s) / gamma (W = I - gamma
+                # h J): k_s = W^-1 (h f + h^2 d_s f_t + g_s / gamma) - g_s / gamma, no product with J
+                # (Hairer & Wanner II (7.21)'s transformed stages, written over the classical ones)
                 d_s = tab_d[s]
                 for i in range(nx):
-                    acc = 0.0
-                    for j in range(nx):
-                        acc += J[i, j] * gs[j]
-                    K[s, i] = hh * fn[i] + hh * acc + hh * hh * d_s * ft[i]
+                    gs[i] *= 1.0 / GAMMA
+                    K[s, i] = hh * fn[i] + hh * hh * d_s * ft[i] + gs[i]
                 lu_apply(W, piv, K[s], nx)
+                for i in range(nx):
+                    K[s, i] -= gs[i]
             enorm = np.inf
             if good:
                 enorm = 0.0
