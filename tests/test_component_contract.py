@@ -306,7 +306,7 @@ def test_an_expression_on_a_parameter_the_matrix_does_not_read_keeps_it_constant
     assert not groups["arteriole"].constant
     lay = build_layout(c)
     et_of = {eid: k for k, eid in enumerate(e for g in c.groups for e in g.ids)}
-    cm = lay.lay[-2]
+    cm = lay.fields.cm
     assert cm[et_of["Lb"]] == 1 and cm[et_of["art"]] == 0
 
 

@@ -25,16 +25,16 @@ JacWork = namedtuple("JacWork", (
     "Jxs",         # (nx, Sm) those partials d dx / d x_own (at the ex offsets)
     "Jx",          # (Sm, Sm) one element's d dx / d x (derivs_jac's Jx)
     "Ju",          # (Sm, Lm) one element's d dx / d u (derivs_jac's Ju)
-    "C",           # (n+1, nx) the columns dR/dx_j that move a stamp, side by side; then -du/dx_j
-    "cj",          # (nx,) int: the state j of each of those columns
-    "MC",          # (nx, nx) dD/du times them
+    "C",           # (n+1, nx+1) the columns dR/dx_j that move a stamp, and dR/dt, side by side
+    "cj",          # (nx+1,) int: the state j of each of those columns (-1: t)
+    "MC",          # (nx, nx+1) dD/du times A^-1 times them
 ))
 
 
 @njit(cache=True, nogil=True, internal=True)
 def make_jac_work(lay):
     """The scratch arrays of local_jacobian_into (JacWork)."""
-    (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st) = lay
+    (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st, td) = lay
     Lm = 1
     for e in range(et.shape[0]):
         Lm = max(Lm, L[e])
@@ -56,12 +56,12 @@ def make_jac_work(lay):
                    Db=np.zeros(max(nx, 1)), Ab=np.zeros((nu, Lm)), bb=np.zeros(nu), has_expr=has_expr,
                    observed=observed, analytic=np.zeros(et.shape[0], dtype=np.int64),
                    Jxs=np.zeros((max(nx, 1), Sm)), Jx=np.zeros((Sm, Sm)), Ju=np.zeros((Sm, Lm)),
-                   C=np.zeros((n + 1, max(nx, 1))), cj=np.zeros(max(nx, 1), dtype=np.int64),
-                   MC=np.zeros((max(nx, 1), max(nx, 1))))
+                   C=np.zeros((n + 1, nx + 1)), cj=np.zeros(nx + 1, dtype=np.int64),
+                   MC=np.zeros((max(nx, 1), nx + 1)))
 
 
 @njit(cache=True, nogil=True, internal=True, _nrt=False)
-def local_jacobian_into(t, x, P, lay, work, jw, scales, J, xt, analytic):
+def local_jacobian_into(t, x, P, lay, work, jw, scales, J, xt, analytic, ft, want_ft):
     """State Jacobian J (nx, nx) at (t, x) from element-local differences composed through the
     nodal solve (as svZeroDSolver composes its blocks' derivatives), without a whole
     right-hand side per column.  With f = D(x, u), R(x, u) = A(x) u - b(x) = 0 the nodal
@@ -72,9 +72,12 @@ def local_jacobian_into(t, x, P, lay, work, jw, scales, J, xt, analytic):
     max(|u|, 1) for an unknown in mmHg or mL/s) -- or, with ``analytic``, dD/dx of its own
     states and dD/du from its kernel's derivs_jac where it has one (and no expression moves
     its parameters with the states): one call instead of one derivs per state and unknown.
+    With ``want_ft`` also df/dt into ft the same way: dR/dt and dD/dt differenced in t over the
+    elements that depend on t (td), composed as one more column (instead of a whole
+    right-hand side at t + dt).
     Returns 0, or -1 when it does not apply (an element nonlinear in the pressures, a singular
     nodal matrix): the caller then differences whole right-hand sides."""
-    (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st) = lay
+    (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st, td) = lay
     if nonlin != 0:
         return -1
     Pb, A, piv, ub, rb, M, col, Db, Ab, bb = jw.Pb, jw.A, jw.piv, jw.ub, jw.rb, jw.M, jw.col, jw.Db, jw.Ab, jw.bb
@@ -203,14 +206,52 @@ def local_jacobian_into(t, x, P, lay, work, jw, scales, J, xt, analytic):
                 cj[nm] = j
                 nm += 1
             xt[j] = x[j]
+    if want_ft:
+        # the time column: FD_REL seconds as represented at t (derivatives.time_step)
+        ht = (t + FD_REL) - t
+        effective_params(t + ht, x, P, lay, work)  # waveforms at t + ht
+        Pt = work.Pe
+        for i in range(n + 1):
+            col[i] = 0.0
+        for i in range(nx):
+            ft[i] = 0.0
+        moved = False
+        for e in range(E):
+            if td[e] == 0:
+                continue
+            if st[e] != 1:
+                stamp_element(e, t + ht, x, Pt, et, L, ep, ex, eu, ui, eo, io, u, Al, bl, ul, pl, xl, il)
+                for i in range(L[e]):
+                    r = ui[eu[e] + i]
+                    if r < n:
+                        acc = -bl[i]
+                        for k in range(L[e]):
+                            acc += Al[i, k] * ub[ui[eu[e] + k]]
+                        d = (acc - rb[eu[e] + i]) / ht
+                        if d != 0.0:
+                            col[r] += d
+                            moved = True
+            if S[e] > 0:
+                for i in range(L[e]):
+                    ul[i] = ub[ui[eu[e] + i]]
+                load_element(e, x, Pt, ep, ex, eo, io, pl, xl, il)
+                elem_derivs(et[e], pl, xl, ul, t + ht, il, dl)
+                for i in range(S[e]):
+                    ft[ex[e] + i] = (dl[i] - Db[ex[e] + i]) / ht
+        if moved:
+            for i in range(n):
+                C[i, nm] = col[i]
+            cj[nm] = -1
+            nm += 1
     if nm > 0:
-        compose_columns(A, piv, C, M, MC, cj, J, n, nx, nm)
+        compose_columns(A, piv, C, M, MC, cj, J, ft, n, nx, nm)
     return 0
 
 
 @njit(cache=True, nogil=True, inline="always")
-def compose_columns(A, piv, C, M, MC, cj, J, n, nx, nm):
-    """J[:, cj[k]] -= M A^-1 C[:, k] for the nm columns of C at once (C overwritten): the
+def compose_columns(A, piv, C, M, MC, cj, J, ft, n, nx, nm):
+    """J[:, cj[k]] -= M A^-1 C[:, k] (ft where cj[k] = -1: the time column) for the nm columns
+    of C at once (C overwritten): the
     triangular solves and the product run along the rows of C and MC, over all columns together
     (vectorised), instead of one solve and one product per column (5 of the body model's 19 us a
     Jacobian, docs/performance.md)."""
@@ -245,7 +286,10 @@ def compose_columns(A, piv, C, M, MC, cj, J, n, nx, nm):
                 for k in range(nm):
                     MC[i, k] += a * C[g, k]
         for k in range(nm):
-            J[i, cj[k]] -= MC[i, k]
+            if cj[k] >= 0:
+                J[i, cj[k]] -= MC[i, k]
+            else:
+                ft[i] -= MC[i, k]
 
 
 # inlined (numba IR) into integrate_batch, its one caller: numba links a callee's machine code into
@@ -254,26 +298,27 @@ def compose_columns(A, piv, C, M, MC, cj, J, n, nx, nm):
 def jacobian_into(t, x, f0, P, lay, work, jw, scales, J, ft, xt, ftmp, autonomous, local):
     """Jacobian J (nx, nx) and df/dt ft (nx,) at (t, x) with f0 = f(t, x): element-local
     (local_jacobian_into; ``local`` 1: with the kernels' analytic partials where they have
-    them, 2: differences only) when ``local`` and it applies, otherwise forward differences of
-    whole right-hand sides; ft by a forward difference in t (ft = 0 without an evaluation
-    when the circuit is autonomous).
+    them, 2: differences only; ft with it, local_jacobian_into's time column) when ``local`` and
+    it applies, otherwise forward differences of whole right-hand sides and ft by a forward
+    difference of one more in t (ft untouched when the circuit is autonomous).
     Returns the number of right-hand-side evaluations, or -1 if one failed (singular nodal
     system)."""
     nx = x.shape[0]
     nev = 0
-    if local == 0 or local_jacobian_into(t, x, P, lay, work, jw, scales, J, xt, local == 1) < 0:
+    if local != 0 and local_jacobian_into(t, x, P, lay, work, jw, scales, J, xt, local == 1, ft, not autonomous) == 0:
+        return 0  # J and (non-autonomous) ft element-locally
+    for i in range(nx):
+        xt[i] = x[i]
+    for j in range(nx):
+        hj = FD_REL * max(abs(x[j]), scales[j])
+        xt[j] = x[j] + hj
+        hj = xt[j] - x[j]
+        if not rhs_into(t, xt, P, lay, work, ftmp):
+            return -1
         for i in range(nx):
-            xt[i] = x[i]
-        for j in range(nx):
-            hj = FD_REL * max(abs(x[j]), scales[j])
-            xt[j] = x[j] + hj
-            hj = xt[j] - x[j]
-            if not rhs_into(t, xt, P, lay, work, ftmp):
-                return -1
-            for i in range(nx):
-                J[i, j] = (ftmp[i] - f0[i]) / hj
-            xt[j] = x[j]
-        nev = nx
+            J[i, j] = (ftmp[i] - f0[i]) / hj
+        xt[j] = x[j]
+    nev = nx
     if autonomous:
         return nev
     # FD_REL seconds as represented at t (derivatives.time_step: absolute, not relative to t)
@@ -299,3 +344,20 @@ def jacobian(t, x, P, lay, scales, local):
     J = np.zeros((nx, nx))
     jacobian_into(t, x, f0, P, lay, work, jw, scales, J, np.zeros(nx), np.empty(nx), np.empty(nx), True, local)
     return J
+
+
+@njit(cache=True, nogil=True)
+def time_derivative(t, x, P, lay, scales, local):
+    """df/dt (nx,) at (t, x) at fixed states (allocating; for tests and single calls): the
+    Jacobian's time column if ``local`` (1 or 2, where it applies), else (0) a whole right-hand
+    side differenced in t."""
+    nx = x.shape[0]
+    work = make_work(lay)
+    jw = make_jac_work(lay)
+    prepare_static(t, x, P, lay, work)
+    f0 = np.empty(nx)
+    rhs_into(t, x, P, lay, work, f0)
+    ft = np.zeros(nx)
+    jacobian_into(t, x, f0, P, lay, work, jw, scales, np.zeros((nx, nx)), ft, np.empty(nx), np.empty(nx), False,
+                  local)
+    return ft

@@ -25,6 +25,8 @@
 #   cm (E,)          1 if the element's matrix stamp is constant (summed once into A0)
 #   st (E,)          1 if its whole stamp is constant ("static": stamped once, into A0 and b0),
 #                    2 if it is nonlinear in the pressures (stamped at every Newton iterate), else 0
+#   td (E,)          1 if its stamp or derivatives may change with t at fixed states (a
+#                    time-dependent type, a waveform or an expression on its parameters), else 0
 # Units: as the numpy path -- pressures mmHg, flows mL/s, time s, states in declared units.
 #
 # Entry points called from Python: rhs, rhs_batch, nodal_outputs, jacobian, integrate_batch(_bdf).
@@ -94,7 +96,7 @@ Work = namedtuple("Work", (
 @njit(cache=True, nogil=True, internal=True)
 def make_work(lay):
     """The scratch arrays for one evaluation (Work)."""
-    (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st) = lay
+    (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st, td) = lay
     Lm, Sm, Pm, Im, Om = 1, 1, 1, 1, 1
     for e in range(et.shape[0]):
         Lm = max(Lm, L[e])
@@ -141,7 +143,7 @@ def load_element(e, x, Pe, ep, ex, eo, io, pl, xl, il):
 @njit(cache=True, nogil=True, internal=True, _nrt=False)
 def effective_params(t, x, P, lay, work):
     """Parameters with waveforms added and expressions evaluated (into work.Pe)."""
-    (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st) = lay
+    (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st, td) = lay
     Pe, O, pl, xl, il, ol = work.Pe, work.O, work.pl, work.xl, work.il, work.ol
     for i in range(P.shape[0]):
         Pe[i] = P[i]
@@ -177,7 +179,7 @@ def stamp_element(e, t, x, Pe, et, L, ep, ex, eu, ui, eo, io, u, Al, bl, ul, pl,
 def prepare_static(t, x, P, lay, work):
     """A0 = the constant matrix stamps, b0 = the static elements' right-hand sides, for the
     parameters P (call again whenever P changes)."""
-    (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st) = lay
+    (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st, td) = lay
     effective_params(t, x, P, lay, work)
     Pe = work.Pe
     A0, b0, u, Al, bl, ul, pl, xl, il = work.A0, work.b0, work.u, work.Al, work.bl, work.ul, work.pl, work.xl, work.il
@@ -203,7 +205,7 @@ def condense(lay, work):
     A0 = [[Acc, Acv], [Avc, Avv]]: Acc is factorised, Z = Acc^-1 Acv and the Schur complement
     S0 = Avv - Avc Z stored; an evaluation then solves only S0 + (varying stamps) (nv x nv).
     Used when V is at most half the unknowns and Acc is regular; otherwise the dense path."""
-    (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st) = lay
+    (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st, td) = lay
     A0, Fc, Z, S0, Avc, pivc, order, vpos, y = (work.A0, work.Fc, work.Z, work.S0, work.Avc, work.pivc, work.order,
                                                 work.vpos, work.y)
     work.condensed[0] = 0
@@ -316,7 +318,7 @@ def solve_nodes(t, x, Pe, lay, work):
     elastance) are summed once per solve into A1 (or Sw1) and b1, and only the elements
     nonlinear in the pressures (st 2) are stamped again at every iterate (svZeroDSolver's
     split of a block's contributions by what they depend on)."""
-    (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st) = lay
+    (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st, td) = lay
     A, b, u, un, piv, A0, b0, A1, Sw1, b1 = (work.A, work.b, work.u, work.un, work.piv, work.A0, work.b0, work.A1,
                                              work.Sw1, work.b1)
     Al, bl, ul, pl, xl, il = work.Al, work.bl, work.ul, work.pl, work.xl, work.il
@@ -419,7 +421,7 @@ def rhs_into(t, x, P, lay, work, dx):
     (dx is then NaN).  An empty dx: the nodal solve only (nodal_outputs_into: the outputs need
     no derivatives, a third of an evaluation; the same compiled function, so no second
     compilation of the inlined nodal solve)."""
-    (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st) = lay
+    (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st, td) = lay
     effective_params(t, x, P, lay, work)
     Pe = work.Pe
     if not solve_nodes(t, x, Pe, lay, work):
@@ -481,7 +483,7 @@ def nodal_outputs_into(T, X, P, lay, work, dx, U, F):
     and the nodal solution in work.u: its compilation (the integrator's, from the cache) is
     reused instead of typing the inlined nodal solve again (7 s of a first compilation).  An
     empty ``dx`` skips the derivatives there."""
-    (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st) = lay
+    (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st, td) = lay
     Pe, u, Al, bl, ul, pl, xl, il = work.Pe, work.u, work.Al, work.bl, work.ul, work.pl, work.xl, work.il
     m = X.shape[0]
     per = m // P.shape[0]

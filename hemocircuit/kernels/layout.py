@@ -26,7 +26,7 @@ MAX_DENSE_UNKNOWNS = 200
 #: the structure arrays the compiled engine reads (engine_nodal.py's header describes each)
 EngineLayout = namedtuple("EngineLayout", ("n", "nx", "et", "L", "S", "ep", "ex", "eu", "ui", "eo", "io", "eb", "ws",
                                            "w0", "wd", "xs", "xc", "xk", "xcode", "xconst", "oe", "nonlin", "cm",
-                                           "st"))
+                                           "st", "td"))
 
 
 @dataclass
@@ -109,7 +109,7 @@ def build_layout(circuit) -> Layout | None:
         return None
     kernels = engine_kernels(pairs)
     codes = {(k.stamp, k.derivs, k.observe): i for i, k in enumerate(kernels)}
-    et, L, S, cm, st = [], [], [], [], []
+    et, L, S, cm, st, td = [], [], [], [], [], []
     ep, ex, eu, eo, eb = [0], [0], [0], [0], [0]
     ui, io = [], []
     slots, obs_index, elem_index = {}, {}, {}
@@ -125,6 +125,7 @@ def build_layout(circuit) -> Layout | None:
             # 1 static, 2 stamped at every Newton iterate, 0 once per nodal solve (engine_nodal)
             st.append(2 if not g.comp.linear_in_pressure
                       else (1 if (const and g.S == 0 and not own and not g.comp.time_dependent) else 0))
+            td.append(int(bool(own) or g.comp.time_dependent))
             L.append(g.L)
             S.append(g.S)
             for name in names:
@@ -180,7 +181,7 @@ def build_layout(circuit) -> Layout | None:
     lay = EngineLayout(n=int(circuit.n), nx=int(circuit.nx), et=i64(et), L=i64(L), S=i64(S), ep=i64(ep), ex=i64(ex),
                        eu=i64(eu), ui=i64(ui), eo=i64(eo), io=i64(io), eb=i64(eb), ws=i64(ws), w0=i64(w0), wd=f64(wd),
                        xs=i64(xs), xc=i64(xc), xk=i64(xk), xcode=i64(code), xconst=f64(const), oe=i64(sorted(oe)),
-                       nonlin=nonlin, cm=i64(cm), st=i64(st))
+                       nonlin=nonlin, cm=i64(cm), st=i64(st), td=i64(td))
     lay = tuple(lay)  # Layout.lay: a plain tuple for numba
     autonomous = not ws and not any(g.comp.time_dependent for g in circuit.groups)
     return Layout(lay, kernels, slots, ep[-1], autonomous)

@@ -144,7 +144,7 @@ def helper_signatures(mod, lay, nx, n_params):
     return [(mod.elem_derivs_jac, elem + (numba.typeof(jw.Jx), numba.typeof(jw.Ju))),
             (mod.elem_derivs, elem),
             (mod.local_jacobian_into, (numba.float64, vx, numba.typeof(P), numba.typeof(lay), numba.typeof(work),
-                                       numba.typeof(jw), vx, J, vx, numba.boolean)),
+                                       numba.typeof(jw), vx, J, vx, numba.boolean, vx, numba.boolean)),
             (mod.make_jac_work, (numba.typeof(lay),)),
             # the Rosenbrock integrator's own small callees (event location, dense output, the
             # end of a member's run), which the first process reaches ~1 s into its compile

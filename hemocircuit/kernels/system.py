@@ -99,6 +99,13 @@ class CompiledSystem:
         return self.mod.jacobian(float(t), np.asarray(x, dtype=float), np.asarray(P, dtype=float), self.lay,
                                  self.scales, int(local))
 
+    def time_derivative(self, t, x, P, local=True):
+        """df/dt (nx,) at (t, x) with the states held: the integrator's (the element-local
+        Jacobian's time column where it applies, ``local`` as in :meth:`jacobian`) or (False / 0)
+        a whole right-hand side differenced in t."""
+        return self.mod.time_derivative(float(t), np.asarray(x, dtype=float), np.asarray(P, dtype=float), self.lay,
+                                        self.scales, int(local))
+
     def integrate(self, t_out, x0, P, rtol=1e-6, atol=None, breaks=(), h0=1e-3, hmax=np.inf,
                   max_steps=10_000_000, method=None, kinks=(), **tab_options):
         """States on the grid t_out (T,) from x0 at t_out[0] for one parameter row P (slots,).
