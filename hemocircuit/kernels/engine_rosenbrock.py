@@ -128,9 +128,9 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
         autonomous = tab.autonomous != 0  # no waveform or time-dependent element: df/dt = 0
         land = tab.land_releases != 0  # a rejected step retried to end on a held state's release
         local_jac = tab.local_jacobian  # element-local Jacobian (local_jacobian_into) where it applies: 1 analytic parts, 2 FD
-        # the classical coefficients: A, G (ns, ns), b, e, c, d, reuse (ns,); H (nd, ns) the
-        # dense-output rows (nd 0: cubic Hermite)
-        tab_A, tab_G, tab_b, tab_e, tab_c, tab_d = tab.A, tab.G, tab.b, tab.e, tab.c, tab.d
+        # the transformed coefficients (tableaus): a, C (ns, ns), m, m_err, c, d, reuse (ns,); H
+        # (nd, ns) the dense-output rows (nd 0: cubic Hermite); K holds the stages u_s
+        tab_a, tab_C, tab_m, tab_me, tab_c, tab_d = tab.a, tab.C, tab.m, tab.m_err, tab.c, tab.d
         tab_reuse, tab_H = tab.reuse, tab.H
         nd = tab_H.shape[0]
         ctrl = tab.controller  # step-size controller (tableaus.CONTROLLERS)
@@ -234,14 +234,14 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
                     xs[i] = x[i]
                     gs[i] = 0.0
                 for j in range(s):
-                    a_sj = tab_A[s, j]
-                    g_sj = tab_G[s, j]
+                    a_sj = tab_a[s, j]
+                    c_sj = tab_C[s, j]
                     if a_sj != 0.0:
                         for i in range(nx):
                             xs[i] += a_sj * K[j, i]
-                    if g_sj != 0.0:
+                    if c_sj != 0.0:
                         for i in range(nx):
-                            gs[i] += g_sj * K[j, i]
+                            gs[i] += c_sj * K[j, i]
                 if s == 0:
                     for i in range(nx):
                         fn[i] = f[i]
@@ -250,16 +250,11 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
                     if not rhs_into(min(t + tab_c[s] * hh, tlim), xs, P, lay, work, fn):
                         good = False
                         break
-                # W k_s = h f + h J g_s + h^2 d_s f_t, with h J g_s = (g_s - W g_s) / gamma (W = I - gamma
-                # h J): k_s = W^-1 (h f + h^2 d_s f_t + g_s / gamma) - g_s / gamma, no product with J
-                # (Hairer & Wanner II (7.21)'s transformed stages, written over the classical ones)
-                d_s = tab_d[s]
+                # W u_s = gamma (h f + sum_j C_sj u_j + h^2 d_s f_t): no product with J (tableaus)
+                gd_s = GAMMA * hh * hh * tab_d[s]
                 for i in range(nx):
-                    gs[i] *= 1.0 / GAMMA
-                    K[s, i] = hh * fn[i] + hh * hh * d_s * ft[i] + gs[i]
+                    K[s, i] = GAMMA * (hh * fn[i] + gs[i]) + gd_s * ft[i]
                 lu_apply(W, piv, K[s], nx)
-                for i in range(nx):
-                    K[s, i] -= gs[i]
             enorm = np.inf
             if good:
                 enorm = 0.0
@@ -267,8 +262,8 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
                     xi = x[i]
                     e = 0.0
                     for s in range(ns):
-                        xi += tab_b[s] * K[s, i]
-                        e += tab_e[s] * K[s, i]
+                        xi += tab_m[s] * K[s, i]
+                        e += tab_me[s] * K[s, i]
                     xn[i] = xi
                     sc = atol[i] + rtol * max(abs(x[i]), abs(xn[i]))
                     enorm += (e / sc) ** 2

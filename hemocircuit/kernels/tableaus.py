@@ -1,10 +1,20 @@
 """Rosenbrock(-W) tableaus for the compiled integrator, packed into one named tuple.
 
-The engine (engine_rosenbrock.integrate_batch) uses the classical form (Hairer & Wanner II, IV.7):
+The methods are written in the classical form (Hairer & Wanner II, IV.7):
 W = I - gamma h J and, for stages s = 1..ns,
 
     W k_s = h f(t + c_s h, x + sum_j A_sj k_j) + h J sum_j G_sj k_j + h^2 d_s f_t,
     x_new = x + sum_s b_s k_s,   error estimate = sum_s e_s k_s  (e = b - embedded b).
+
+The engine (engine_rosenbrock.integrate_batch) runs them in the transformed form of Hairer &
+Wanner II (7.21) (as rodas.f does), on the stages u_s = sum_j Gamma_sj k_j (Gamma = G + gamma I),
+with no product of J and a vector:
+
+    W u_s = gamma h f(t + c_s h, x + sum_j a_sj u_j) + gamma sum_j C_sj u_j + gamma h^2 d_s f_t,
+    x_new = x + sum_s m_s u_s,   error estimate = sum_s m_err_s u_s,
+
+a = A Gamma^-1, C = diag(1/gamma) - Gamma^-1 (below its diagonal), m = b Gamma^-1,
+m_err = e Gamma^-1 (:func:`transformed`).
 
 Methods (coefficients copied from the sources named; ``_from_transformed`` converts the
 transformed form u_i = sum_j Gamma_ij k_j of RODAS-type codes back to the classical one):
@@ -30,9 +40,10 @@ Packed (what the engine reads, :class:`RosenbrockMethod`, by field name): the nu
 ns, gamma, q the order of the error estimate (step-size exponent 1/q), the options
 (jac_reuse, event_restart, soft_kinks, autonomous, local_jacobian, controller, land_releases:
 :func:`packed`)
-and the coefficients A, G (ns, ns), b, e, c, d, reuse (ns,) -- reuse[s] = 1 when stage s
-evaluates f at the same point as stage s-1 (ROS4-type methods; the engine then skips the
-evaluation) -- and H (nd, ns), nd the number of dense-output rows (0: Hermite; at most 3).
+and the transformed coefficients a, C (ns, ns), m, m_err, c, d, reuse (ns,) -- reuse[s] = 1
+when stage s evaluates f at the same point as stage s-1 (ROS4-type methods; the engine then
+skips the evaluation) -- and H (nd, ns) over the transformed stages, nd the number of
+dense-output rows (0: Hermite; at most 3).
 Every field has the same type for every method and option (ints, floats, float64 arrays), so
 one compiled integrator serves them all.
 """
@@ -47,7 +58,7 @@ import numpy as np
 #: C-contiguous float64 arrays
 RosenbrockMethod = namedtuple("RosenbrockMethod", (
     "stages", "gamma", "q", "jac_reuse", "event_restart", "soft_kinks", "autonomous", "local_jacobian",
-    "controller", "land_releases", "A", "G", "b", "e", "c", "d", "reuse", "H"))
+    "controller", "land_releases", "a", "C", "m", "m_err", "c", "d", "reuse", "H"))
 
 
 def _no_dense(ns):
@@ -210,6 +221,15 @@ def dense(name):
     return _method(name)[6]
 
 
+def transformed(name):
+    """(gamma, a, C, m, m_err, H) of method ``name`` over the transformed stages u = Gamma k
+    (module docstring), from its classical form."""
+    gamma, A, G, b, e, _, H = _method(name)
+    Ginv = np.linalg.inv(G + gamma * np.eye(len(b)))
+    C = np.tril(np.eye(len(b)) / gamma - Ginv, -1)
+    return gamma, np.tril(A @ Ginv, -1), C, b @ Ginv, e @ Ginv, np.reshape(H, (-1, len(b))) @ Ginv
+
+
 def _method(name):
     """(gamma, A, G, b, e, q, H) of method ``name``."""
     if name not in METHODS:
@@ -241,7 +261,8 @@ def packed(name="rodas5p", jac_reuse=None, event_restart=1, soft_kinks=1, autono
 
 @functools.lru_cache(maxsize=64)
 def _packed(name, jr, event_restart, soft_kinks, autonomous, local_jacobian, controller, land_releases):
-    gamma, A, G, b, e, q, H = _method(name)
+    gamma, A, G, b, e, q, _ = _method(name)
+    _, a, C, m, m_err, H = transformed(name)
     ns = len(b)
     c = A.sum(axis=1)
     d = gamma + G.sum(axis=1)
@@ -256,5 +277,5 @@ def _packed(name, jr, event_restart, soft_kinks, autonomous, local_jacobian, con
         return a
 
     return RosenbrockMethod(int(ns), float(gamma), float(q), int(jr), event_restart, soft_kinks, autonomous,
-                            local_jacobian, int(controller), land_releases, frozen(A), frozen(G), frozen(b),
-                            frozen(e), frozen(c), frozen(d), frozen(reuse), frozen(np.reshape(H, (-1, ns))))
+                            local_jacobian, int(controller), land_releases, frozen(a), frozen(C), frozen(m),
+                            frozen(m_err), frozen(c), frozen(d), frozen(reuse), frozen(H))
