@@ -235,6 +235,7 @@ def _load_raw(path, chain, access, svzerod=None):
                       _load_child(name, overrides, where, path, chain, access, svzerod))
         elements = elements + inst.elements
         constraints = constraints + inst.constraints
+        merged_params = {**inst.parameters, **merged_params}
     derived = data.get("derived") or {}
     if not isinstance(derived, dict) or not all(isinstance(v, dict) and "expr" in v for v in derived.values()):
         raise NetlistError("'derived' must be a mapping name -> {expr: '<expression of columns>', unit: ...}",
@@ -275,7 +276,7 @@ def _load_child(name, overrides, where, path, chain, access, svzerod):
             e.values = resolve_files(_substitute(e.values, params, {"file": e.file, "element": e.id}),
                                      os.path.dirname(e.file), access, {"file": e.file, "element": e.id})
     return {"elements": raw["elements"], "constraints": raw["constraints"], "ic": raw["ic"], "ports": raw["ports"],
-            "file": child, "edit": lambda elements, remove, change: _edit(elements, remove, change, path, child,
+            "parameters": params, "file": child, "edit": lambda elements, remove, change: _edit(elements, remove, change, path, child,
                                                                           access)}
 
 

@@ -12,6 +12,8 @@
 Every element of the child becomes ``brain.ID`` (parameters ``brain.art.tau_Ca`` in the one
 namespace of ``--set``, ``--grid``, fit and sensitivity); its nodes become ``brain.NODE``
 except the ports, which are this netlist's nodes, and ground, which stays ground.  The child's
+expressions read the instance's own elements (``= art.r`` becomes ``= brain.art.r``) and
+parameters (``rho_b`` becomes ``brain__rho_b``, carried by this netlist); its
 constraints (nodes renamed; a calibration's ``when: {Pa.value: 80 mmHg}`` becomes
 ``brain.Pa.value``, and must name an element the instance keeps, else give the instance its own
 ``constraints``) and ``ic`` (``brain.ID.STATE``) come along; its ``outputs``,
@@ -25,6 +27,7 @@ import re
 from dataclasses import dataclass, field
 
 from .errors import NetlistError, did_you_mean, excerpt
+from .expressions import instance_references, is_expression
 
 INSTANCE_KEYS = {"id", "netlist", "ports", "remove", "change", "parameters", "constraints"}
 _ID = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
@@ -35,6 +38,8 @@ class Expanded:
     elements: list = field(default_factory=list)
     constraints: list = field(default_factory=list)
     ic: dict = field(default_factory=dict)
+    #: the children's netlist parameters their expressions read, as ``INSTANCE__NAME``
+    parameters: dict = field(default_factory=dict)
 
 
 def expand(items, path, load_child, ground="ground") -> Expanded:
@@ -76,6 +81,14 @@ def expand(items, path, load_child, ground="ground") -> Expanded:
         if not isinstance(overrides, dict):
             raise NetlistError(f"instance '{iid}': 'parameters' must be a mapping name -> value", **where)
         child = load_child(item["netlist"], overrides, where)
+        # the child's own expressions read the child's elements and parameters: this instance's
+        # copies of them (the instance's 'change' below is written in this netlist's names)
+        ids, consts = {e.id for e in child["elements"]}, child["parameters"]
+        for e in child["elements"]:
+            for key, value in list(e.values.items()):
+                if is_expression(value):
+                    e.values[key], used = instance_references(value, ids, iid, consts)
+                    out.parameters.update({f"{iid}__{k}": consts[k] for k in used})
         elements = child["edit"](child["elements"], item.get("remove") or [], item.get("change") or {})
         nodes = {n for e in elements for n in e.nodes}
         declared = child["ports"]

@@ -193,3 +193,42 @@ def test_two_instances_equal_the_hand_written_flat_netlist(folder):
     c = hc.load(folder(TWO, "two.yaml")).with_values({"left.art.tau_Ca": "5 s"})
     assert c.parameters.values["left.art.tau_Ca"][0] == pytest.approx(5.0)
     assert c.parameters.values["right.art.tau_Ca"][0] != pytest.approx(5.0)
+
+
+INERTIA_TWICE = """
+name: two_inertia_beds
+parameters:
+  rho_b: 2.0 kg/L                 # this netlist's own; the children's expressions keep theirs (1.06 kg/L)
+elements:
+  - {id: Pa, type: pressure_source, nodes: [carotid, ground], value: 80 mmHg}
+  - {id: Pv, type: pressure_source, nodes: [jugular, ground], value: 6 mmHg}
+  - {id: art, type: resistor, nodes: [carotid, jugular], R: 1000 mmHg*s/mL}   # an 'art' of this netlist
+instances:
+  - {id: left, netlist: inertia.yaml, ports: {in: carotid, out: jugular}, remove: [Pa, Pv],
+     constraints: [{node: ic, pressure: 10 mmHg}]}
+  - {id: right, netlist: inertia.yaml, ports: {in: carotid, out: jugular}, remove: [Pa, Pv],
+     change: {art: {n: 8000}}, constraints: [{node: ic, pressure: 10 mmHg}]}
+"""
+
+
+def test_a_childs_expressions_read_the_instances_own_elements_and_parameters(folder):
+    """inertia.yaml's Lb has L = rho_b art.L / (pi art.r^2 art.n): in each instance it reads that
+    instance's arteriole and the child's rho_b (1.06 kg/L), not the including netlist's element
+    'art' or its own rho_b.  Checked against the closed form at the operating point, the left bed
+    against inertia.yaml alone."""
+    c = hc.load(folder(INERTIA_TWICE, "two_inertia.yaml"))
+    alone = hc.load(str(folder.path / "inertia.yaml"))
+    op, op1 = c.operating_point(), alone.operating_point()
+    assert op["Q(left.Rla)"] == pytest.approx(op1["Q(Rla)"], rel=1e-9)
+    L = {}
+    for side in ("left", "right"):
+        g = next(g for g in c.groups if f"{side}.Lb" in g.ids)
+        p = c.system.bound_params(np.atleast_2d(op.x), c.system._params_for(1), 0.0)[c.groups.index(g)]
+        L[side] = float(np.ravel(p["L"])[g.ids.index(f"{side}.Lb")])
+    # closed form, mmHg*s^2/mL: rho [kg/m^3] * L_bed [m] / (pi r^2 [m^2] n) in Pa*s^2/m^3 -> / 133.322 * 1e-6
+    values = c.parameters.values
+    assert values["left.art.n"][0] == 320 and values["right.art.n"][0] == 8000  # inertia.yaml's, changed
+    for side in ("left", "right"):
+        r, n, bed = op[f"{side}.art.r"] * 1e-6, values[f"{side}.art.n"][0], values[f"{side}.art.L"][0]  # m, 1, m
+        expected = 1060.0 * bed / (np.pi * r ** 2 * n) / 133.322387415 * 1e-6
+        assert L[side] == pytest.approx(expected, rel=1e-6), (side, L[side], expected)
