@@ -117,7 +117,35 @@ def test_one_compiled_integrator_serves_every_method():
     for name in tableaus.METHODS:
         for opts in ({}, {"autonomous": 1, "local_jacobian": 2, "controller": "pi", "jac_reuse": 3}):
             m = tableaus.packed(name, **opts)
-            assert m.A.shape == (m.stages, m.stages) and m.H.shape[1] == m.stages
-            assert not any(getattr(m, f).flags.writeable for f in ("A", "G", "b", "e", "c", "d", "reuse", "H"))
+            assert m.a.shape == (m.stages, m.stages) and m.H.shape[1] == m.stages
+            assert not any(getattr(m, f).flags.writeable for f in ("a", "C", "m", "m_err", "c", "d", "reuse", "H"))
             types.add(numba.typeof(m))
     assert len(types) == 1, types
+
+
+def test_transformed_coefficients_recover_the_sources_and_the_classical_step():
+    """The engine's transformed coefficients (u = Gamma k) are RODAS5P's published ones (Steinebach
+    2023: a_21 = 3, C_21 = -14.155..., C_87 = -9.4886...), and for every method one step of the
+    transformed form on y' = lam y + cos(t) equals the classical form's step."""
+    gamma, a, C, m, m_err, H = tableaus.transformed("rodas5p")
+    assert a[1, 0] == pytest.approx(3.0, rel=1e-13)
+    assert C[1, 0] == pytest.approx(-14.155112264123755, rel=1e-13)
+    assert C[7, 6] == pytest.approx(-9.48861652309627, rel=1e-12)
+    assert np.allclose(m[-2:], 1.0) and H.shape == (3, 8)
+    lam, y0, t0, h = -3.0, 1.0, 0.2, 0.1
+    f = lambda t, y: lam * y + np.cos(t)  # noqa: E731
+    ft = lambda t: -np.sin(t)  # noqa: E731
+    for name in tableaus.METHODS:
+        g, A, G, b, e, _ = tableaus.classical(name)
+        _, a, C, m, me, _ = tableaus.transformed(name)
+        ns = len(b)
+        c, d = A.sum(axis=1), g + G.sum(axis=1)
+        W = 1.0 - g * h * lam
+        k, u = np.zeros(ns), np.zeros(ns)
+        for s in range(ns):
+            k[s] = (h * f(t0 + c[s] * h, y0 + A[s, :s] @ k[:s]) + h * lam * (G[s, :s] @ k[:s])
+                    + h * h * d[s] * ft(t0)) / W
+            u[s] = g * (h * f(t0 + c[s] * h, y0 + a[s, :s] @ u[:s]) + C[s, :s] @ u[:s]
+                        + h * h * d[s] * ft(t0)) / W
+        assert y0 + m @ u == pytest.approx(y0 + b @ k, rel=1e-13), name
+        assert me @ u == pytest.approx(e @ k, rel=1e-9, abs=1e-15), name
