@@ -202,14 +202,15 @@ def instance_references(text, elements, prefix, constants):
     """An instance's copy of one of its child netlist's expressions (``= art.r * 2``): references
     to the child's elements become the instance's (``= left.art.r * 2``), and names of the child's
     netlist parameters become ``PREFIX__NAME`` (the instance's copy of the parameter, which the
-    including netlist carries).  Returns (text, the parameter names used).  Text that does not
-    parse is returned as it is: its error is reported where the expression is read."""
+    including netlist carries; ``pi`` and the functions keep their meaning).  Returns (text, the
+    parameter names used, the child's element ids read).  Text that does not parse is returned
+    as it is: its error is reported where the expression is read."""
     body = text.lstrip()[1:]
     try:
         tree = ast.parse(body.strip(), mode="eval")
     except SyntaxError:
-        return text, set()
-    used = set()
+        return text, set(), set()
+    used, read = set(), set()
 
     class Prefix(ast.NodeTransformer):
         def visit_Attribute(self, node):
@@ -218,19 +219,20 @@ def instance_references(text, elements, prefix, constants):
                 return self.generic_visit(node)
             if dotted[0] not in elements:
                 return node
+            read.add(dotted[0])
             new = ast.Name(id=prefix, ctx=ast.Load())
             for part in (*dotted[0].split("."), dotted[1]):
                 new = ast.Attribute(value=new, attr=part, ctx=ast.Load())
             return ast.copy_location(new, node)
 
         def visit_Name(self, node):
-            if node.id in constants:
+            if node.id in constants and node.id not in _FUNCS and node.id != "pi":
                 used.add(node.id)
                 return ast.copy_location(ast.Name(id=f"{prefix}__{node.id}", ctx=ast.Load()), node)
             return node
 
     out = ast.fix_missing_locations(Prefix().visit(tree))
-    return "= " + ast.unparse(out), used
+    return "= " + ast.unparse(out), used, read
 
 
 class _Rename(ast.NodeTransformer):

@@ -235,7 +235,11 @@ def _load_raw(path, chain, access, svzerod=None):
                       _load_child(name, overrides, where, path, chain, access, svzerod))
         elements = elements + inst.elements
         constraints = constraints + inst.constraints
-        merged_params = {**inst.parameters, **merged_params}
+        clash = sorted(set(inst.parameters) & set(merged_params))
+        if clash:
+            raise NetlistError(f"parameter '{clash[0]}' is also the name under which an instance carries its "
+                               "netlist's parameter of that name (INSTANCE__NAME); rename this one", file=path)
+        merged_params = {**merged_params, **inst.parameters}
     derived = data.get("derived") or {}
     if not isinstance(derived, dict) or not all(isinstance(v, dict) and "expr" in v for v in derived.values()):
         raise NetlistError("'derived' must be a mapping name -> {expr: '<expression of columns>', unit: ...}",

@@ -84,12 +84,24 @@ def expand(items, path, load_child, ground="ground") -> Expanded:
         # the child's own expressions read the child's elements and parameters: this instance's
         # copies of them (the instance's 'change' below is written in this netlist's names)
         ids, consts = {e.id for e in child["elements"]}, child["parameters"]
+        reads = {}  # (element, parameter) -> (the child's elements its expression reads, its text)
         for e in child["elements"]:
             for key, value in list(e.values.items()):
                 if is_expression(value):
-                    e.values[key], used = instance_references(value, ids, iid, consts)
+                    e.values[key], used, read = instance_references(value, ids, iid, consts)
+                    reads[(e.id, key)] = (read, value)
                     out.parameters.update({f"{iid}__{k}": consts[k] for k in used})
         elements = child["edit"](child["elements"], item.get("remove") or [], item.get("change") or {})
+        kept = {e.id for e in elements}
+        for e in elements:
+            for key, value in e.values.items():
+                read, text = reads.get((e.id, key), ((), ""))
+                gone = sorted(r for r in read if r not in kept)
+                if gone and is_expression(value) and f"{iid}.{gone[0]}." in value:  # not replaced by 'change'
+                    raise NetlistError(f"instance '{iid}': {child['file']}'s {e.id}.{key} is the expression "
+                                       f"{excerpt(text, 60)}, which reads '{gone[0]}', an "
+                                       f"element the instance removes; keep '{gone[0]}', or give the instance "
+                                       f"change: {{{e.id}: {{{key}: VALUE}}}}", **where)
         nodes = {n for e in elements for n in e.nodes}
         declared = child["ports"]
         ports = {str(k): str(v) for k, v in ports.items()}

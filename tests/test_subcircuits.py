@@ -232,3 +232,55 @@ def test_a_childs_expressions_read_the_instances_own_elements_and_parameters(fol
         r, n, bed = op[f"{side}.art.r"] * 1e-6, values[f"{side}.art.n"][0], values[f"{side}.art.L"][0]  # m, 1, m
         expected = 1060.0 * bed / (np.pi * r ** 2 * n) / 133.322387415 * 1e-6
         assert L[side] == pytest.approx(expected, rel=1e-6), (side, L[side], expected)
+
+
+CHILD_READS_PA = """
+name: child
+parameters:
+  Qref: 10 mL/s
+elements:
+  - {id: Pa, type: pressure_source, nodes: [in, ground], value: 80 mmHg}
+  - {id: R1, type: resistor, nodes: [in, out], R: "= Pa.value / Qref * pi / pi"}
+  - {id: R2, type: resistor, nodes: [out, ground], R: 1 mmHg*s/mL}
+"""
+
+
+@pytest.mark.parametrize("instance, parameters, message", [
+    ("{id: left, netlist: child.yaml, ports: {in: top}, remove: [Pa]}", "",
+     "child.yaml's R1.R is the expression .* reads 'Pa', an element the instance removes; keep 'Pa', or give the "
+     "instance change: {R1: {R: VALUE}}"),
+    ("{id: left, netlist: child.yaml, ports: {in: top}}", "parameters: {left__Qref: 1 mL/s}",
+     "parameter 'left__Qref' is also the name under which an instance carries"),
+])
+def test_a_childs_expression_that_loses_its_element_or_parameter_name_is_an_error(folder, instance, parameters,
+                                                                                   message):
+    folder(CHILD_READS_PA, "child.yaml")
+    parent = f"""
+name: parent
+{parameters}
+elements:
+  - {{id: P0, type: pressure_source, nodes: [top, ground], value: 50 mmHg}}
+instances:
+  - {instance}
+"""
+    with pytest.raises(NetlistError, match=message):
+        hc.load(folder(parent, "parent.yaml"))
+
+
+def test_a_childs_expression_keeps_pi_and_reads_its_own_parameter(folder):
+    """In the child's R1 = Pa.value / Qref * pi / pi, ``pi`` stays pi and Qref is the child's
+    (80 mmHg / 10 mL/s = 8 mmHg*s/mL); a 'change' replacing the expression lets the instance
+    remove Pa."""
+    folder(CHILD_READS_PA, "child.yaml")
+    parent = """
+name: parent
+elements:
+  - {id: P0, type: pressure_source, nodes: [top, ground], value: 50 mmHg}
+instances:
+  - {id: left, netlist: child.yaml, ports: {in: top}, remove: [Pa], change: {R1: {R: 2 mmHg*s/mL}}}
+  - {id: right, netlist: child.yaml, ports: {in: top2}}
+"""
+    c = hc.load(folder(parent, "parent.yaml"))
+    op = c.operating_point()
+    assert op["Q(left.R1)"] == pytest.approx(50.0 / 3.0, rel=1e-12)  # 50 mmHg over 2 + 1 mmHg*s/mL
+    assert op["Q(right.R1)"] == pytest.approx(80.0 / 9.0, rel=1e-12)  # its own Pa, over 8 + 1
