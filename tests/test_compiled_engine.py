@@ -206,7 +206,7 @@ NOMINAL_ORDER = {"ros34pw2": 3, "ros34pw3": 4, "rodas4": 4, "rodas5p": 5}
 
 
 def _rosenbrock_fixed(name, n, embedded=False):
-    """Fixed-step run of a tableau with the exact Jacobian (numpy, the engine's classical form)
+    """Fixed-step run of a tableau with the exact Jacobian (numpy, the classical form)
     on a nonlinear, non-autonomous problem over [0, 1]; returns y(1)."""
     from hemocircuit.kernels.tableaus import classical
 
@@ -250,7 +250,7 @@ def test_tableau_observed_order(name):
 
 def test_rodas5p_dense_output_order():
     """RODAS5P's own dense output (tableaus.dense: Steinebach's coefficients, given over the
-    transformed stages and converted to the engine's classical ones) is order 4 inside a step:
+    transformed stages, converted to the classical ones here) is order 4 inside a step:
     halving h divides its local error at theta = 0.3, 0.5, 0.8 by ~2^5, against a DOP853
     reference; it ends on the step's solution (theta = 1) and starts on x0 (theta = 0)."""
     from scipy.integrate import solve_ivp

@@ -584,3 +584,27 @@ def test_a_group_in_one_compiled_loop_equals_its_elements_one_by_one(name, netli
         for key in ref:
             _close(got[key], ref[key], f"{name}: observable {key}")
     assert np.ptp(looped[0][0]) > 0 or np.ptp(looped[0][1]) > 0  # the elements differ: a real batch
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_a_type_that_reads_t_says_so(name, netlist_samples):
+    """Component.time_dependent: a type whose kernel functions do not declare it gives the same
+    stamp, derivatives and report at every t (the compiled Jacobian takes df/dt only from the
+    time-dependent elements and those with waveforms or expressions: engine_jacobian's time
+    column)."""
+    cls = TYPES[name]
+    if cls().kernel() is None or cls.time_dependent:
+        pytest.skip(f"'{name}' has no kernel or declares time_dependent")
+    for comp, p, x, u in samples_of(cls, netlist_samples):
+        k = comp.kernel()
+        pmat = _pmat(comp, p, x.shape[1])
+        for e in range(x.shape[1]):
+            xe, ue = np.ascontiguousarray(x[0, e]), np.ascontiguousarray(u[0, e])
+            with np.errstate(all="ignore"):
+                ref = _call_kernel(k, comp, pmat[e], xe, ue, 0.0, _python)
+                for t in (0.37, 1.37, 12.3):
+                    got = _call_kernel(k, comp, pmat[e], xe, ue, t, _python)
+                    for i, (g, r) in enumerate(zip(got, ref)):
+                        np.testing.assert_array_equal(g, r, err_msg=f"{name} {comp.opts} element {e}: output {i} "
+                                                                    f"changes between t = 0 and {t} s, but the "
+                                                                    "type does not declare time_dependent")
