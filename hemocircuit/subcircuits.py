@@ -89,15 +89,15 @@ def expand(items, path, load_child, ground="ground") -> Expanded:
             for key, value in list(e.values.items()):
                 if is_expression(value):
                     e.values[key], used, read = instance_references(value, ids, iid, consts)
-                    reads[(e.id, key)] = (read, value)
+                    reads[(e.id, key)] = (read, value, e.values[key])
                     out.parameters.update({f"{iid}__{k}": consts[k] for k in used})
         elements = child["edit"](child["elements"], item.get("remove") or [], item.get("change") or {})
         kept = {e.id for e in elements}
         for e in elements:
             for key, value in e.values.items():
-                read, text = reads.get((e.id, key), ((), ""))
+                read, text, renamed = reads.get((e.id, key), ((), "", None))
                 gone = sorted(r for r in read if r not in kept)
-                if gone and is_expression(value) and f"{iid}.{gone[0]}." in value:  # not replaced by 'change'
+                if gone and value == renamed:  # the child's expression, not replaced by 'change'
                     raise NetlistError(f"instance '{iid}': {child['file']}'s {e.id}.{key} is the expression "
                                        f"{excerpt(text, 60)}, which reads '{gone[0]}', an "
                                        f"element the instance removes; keep '{gone[0]}', or give the instance "

@@ -180,31 +180,16 @@ def local_jacobian_into(t, x, P, lay, work, jw, scales, J, xt, analytic, ft, wan
                 if e != e0 and not (observed and hasx[e] == 1):
                     continue
                 stamp_element(e, t, xt, Pt, et, L, ep, ex, eu, ui, eo, io, u, Al, bl, ul, pl, xl, il)
-                for i in range(L[e]):
-                    r = ui[eu[e] + i]
-                    if r < n:
-                        acc = -bl[i]
-                        for k in range(L[e]):
-                            acc += Al[i, k] * ub[ui[eu[e] + k]]
-                        d = (acc - rb[eu[e] + i]) / hj
-                        if d != 0.0:
-                            col[r] += d
-                            moved = True
+                moved |= residual_change(e, L, eu, ui, Al, bl, ub, rb, hj, col, n)
                 if S[e] > 0 and e == e0 and an[e] == 1:  # its own state: the kernel's partials
                     for i in range(S[e]):
                         J[ex[e] + i, j] += Jxs[ex[e] + i, j - ex[e0]]
                 elif S[e] > 0:
-                    for i in range(L[e]):
-                        ul[i] = ub[ui[eu[e] + i]]
-                    load_element(e, xt, Pt, ep, ex, eo, io, pl, xl, il)
-                    elem_derivs(et[e], pl, xl, ul, t, il, dl)
+                    derivs_at_base(e, t, xt, Pt, et, L, ep, ex, eu, ui, eo, io, ub, ul, pl, xl, il, dl)
                     for i in range(S[e]):
                         J[ex[e] + i, j] += (dl[i] - Db[ex[e] + i]) / hj
             if moved:
-                for i in range(n):
-                    C[i, nm] = col[i]
-                cj[nm] = j
-                nm += 1
+                nm = keep_column(C, cj, col, nm, j, n)
             xt[j] = x[j]
     if want_ft:
         # the time column: FD_REL seconds as represented at t (derivatives.time_step)
@@ -221,31 +206,53 @@ def local_jacobian_into(t, x, P, lay, work, jw, scales, J, xt, analytic, ft, wan
                 continue
             if st[e] != 1:
                 stamp_element(e, t + ht, x, Pt, et, L, ep, ex, eu, ui, eo, io, u, Al, bl, ul, pl, xl, il)
-                for i in range(L[e]):
-                    r = ui[eu[e] + i]
-                    if r < n:
-                        acc = -bl[i]
-                        for k in range(L[e]):
-                            acc += Al[i, k] * ub[ui[eu[e] + k]]
-                        d = (acc - rb[eu[e] + i]) / ht
-                        if d != 0.0:
-                            col[r] += d
-                            moved = True
+                moved |= residual_change(e, L, eu, ui, Al, bl, ub, rb, ht, col, n)
             if S[e] > 0:
-                for i in range(L[e]):
-                    ul[i] = ub[ui[eu[e] + i]]
-                load_element(e, x, Pt, ep, ex, eo, io, pl, xl, il)
-                elem_derivs(et[e], pl, xl, ul, t + ht, il, dl)
+                derivs_at_base(e, t + ht, x, Pt, et, L, ep, ex, eu, ui, eo, io, ub, ul, pl, xl, il, dl)
                 for i in range(S[e]):
                     ft[ex[e] + i] = (dl[i] - Db[ex[e] + i]) / ht
         if moved:
-            for i in range(n):
-                C[i, nm] = col[i]
-            cj[nm] = -1
-            nm += 1
+            nm = keep_column(C, cj, col, nm, -1, n)
     if nm > 0:
         compose_columns(A, piv, C, M, MC, cj, J, ft, n, nx, nm)
     return 0
+
+
+@njit(cache=True, nogil=True, inline="always")
+def residual_change(e, L, eu, ui, Al, bl, ub, rb, h, col, n):
+    """Add element e's change of local residual (Al ub - bl, stamped at the moved point, minus
+    the base rb) over the step h into the column col; True if some row moved."""
+    moved = False
+    for i in range(L[e]):
+        r = ui[eu[e] + i]
+        if r < n:
+            acc = -bl[i]
+            for k in range(L[e]):
+                acc += Al[i, k] * ub[ui[eu[e] + k]]
+            d = (acc - rb[eu[e] + i]) / h
+            if d != 0.0:
+                col[r] += d
+                moved = True
+    return moved
+
+
+@njit(cache=True, nogil=True, inline="always")
+def derivs_at_base(e, t, x, Pe, et, L, ep, ex, eu, ui, eo, io, ub, ul, pl, xl, il, dl):
+    """Element e's derivatives into dl at (t, x, parameters Pe) with its local unknowns at the
+    base solution ub."""
+    for i in range(L[e]):
+        ul[i] = ub[ui[eu[e] + i]]
+    load_element(e, x, Pe, ep, ex, eo, io, pl, xl, il)
+    elem_derivs(et[e], pl, xl, ul, t, il, dl)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def keep_column(C, cj, col, nm, j, n):
+    """Store col as column nm of C for state j (-1: t); returns the next column's index."""
+    for i in range(n):
+        C[i, nm] = col[i]
+    cj[nm] = j
+    return nm + 1
 
 
 @njit(cache=True, nogil=True, inline="always")

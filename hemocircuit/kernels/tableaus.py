@@ -224,7 +224,10 @@ def dense(name):
 def transformed(name):
     """(gamma, a, C, m, m_err, H) of method ``name`` over the transformed stages u = Gamma k
     (module docstring), from its classical form."""
-    gamma, A, G, b, e, _, H = _method(name)
+    return _transform(*_method(name))
+
+
+def _transform(gamma, A, G, b, e, q, H):
     Ginv = np.linalg.inv(G + gamma * np.eye(len(b)))
     C = np.tril(np.eye(len(b)) / gamma - Ginv, -1)
     return gamma, np.tril(A @ Ginv, -1), C, b @ Ginv, e @ Ginv, np.reshape(H, (-1, len(b))) @ Ginv
@@ -261,8 +264,9 @@ def packed(name="rodas5p", jac_reuse=None, event_restart=1, soft_kinks=1, autono
 
 @functools.lru_cache(maxsize=64)
 def _packed(name, jr, event_restart, soft_kinks, autonomous, local_jacobian, controller, land_releases):
-    gamma, A, G, b, e, q, _ = _method(name)
-    _, a, C, m, m_err, H = transformed(name)
+    classic = _method(name)
+    gamma, A, G, b, e, q, _ = classic
+    _, a, C, m, m_err, H = _transform(*classic)
     ns = len(b)
     c = A.sum(axis=1)
     d = gamma + G.sum(axis=1)
