@@ -15,12 +15,12 @@ converged results (``converged/``, relative to each variable's range, as the con
 runner) next to the acceptance tolerance of the case.  The machine is shared: the load
 average is printed, and under load the CPU times are the figures to read.
 
-Where their Python module ``pysvzerod`` is importable (built from their source; not a
-dependency of this project), their solver is also timed here, in this process, on the same
+Where their Python module is importable (``pysvzerod`` built from their source, or ``svzerod``
+from their PyPI wheel, ``pip install svzerod``; not a dependency of this project), their solver is also timed here, in this process, on the same
 JSON (``pysvzerod.simulate``: one untimed call, then the median of ``--repeat``), and the
 ratios are to that side-by-side time ("here"); the README's figure stays in its column.
 
-``--matched`` (needs pysvzerod) adds their accuracy-matched time: their solver at 1, 2, 3, 5 and 7
+``--matched`` (needs their module) adds their accuracy-matched time: their solver at 1, 2, 3, 5 and 7
 times the case's points per cycle (conformance.compare_their_rows against ``converged/``, by
 the runner's rules), the first that meets the case's tolerance, and our time over theirs
 there.  Where none does, their time at 10x (the converged run itself, so exact by
@@ -47,11 +47,21 @@ def their_ms(text):
     return float(np.mean(nums)) if nums else float("nan")
 
 
+def their_module():
+    """Their Python module: ``pysvzerod`` (built from source) or ``svzerod`` (their PyPI wheel),
+    or None."""
+    for name in ("pysvzerod", "svzerod"):
+        try:
+            return __import__(name)
+        except ImportError:
+            pass
+    return None
+
+
 def time_theirs(cfg, repeat):
-    """Median wall time [ms] of their in-process solve of ``cfg``, or None without pysvzerod."""
-    try:
-        import pysvzerod
-    except ImportError:
+    """Median wall time [ms] of their in-process solve of ``cfg``, or None without their module."""
+    pysvzerod = their_module()
+    if pysvzerod is None:
         return None
     import time
     pysvzerod.simulate(cfg)
@@ -69,7 +79,7 @@ def main(argv=None):
     ap.add_argument("--repeat", type=int, default=7)
     ap.add_argument("--case", action="append")
     ap.add_argument("--matched", action="store_true",
-                    help="also time their solver at finer steps, to the case's tolerance (needs pysvzerod)")
+                    help="also time their solver at finer steps, to the case's tolerance (needs their module)")
     args = ap.parse_args(argv)
     folder = os.path.abspath(args.folder)
     if not os.path.isdir(os.path.join(folder, "cases")):
@@ -123,7 +133,7 @@ def matched_row(model, cfg, converged, repeat):
     """[(multiple, their median wall time [ms], err P, err Q, meets the tolerance)] of their
     solver at MULTIPLES of the case's points per cycle (N -> k (N - 1) + 1: every output time
     of the case kept), against their converged rows."""
-    import pysvzerod
+    pysvzerod = their_module()
     from hemocircuit.svzerod.conformance import compare_their_rows, parse_result
     from hemocircuit.svzerod.tolerances import tolerances
 
@@ -162,7 +172,7 @@ def shooting_row(folder, their_text, repeat, tol=1e-5):
     x(T) - x(0); below the 2.3e-5 their 10 cycles leave, measured in session 10); beside it
     the residual their 10 cycles leave, cycle by cycle with our integrator at the same rtol
     (max scaled difference of the states between cycles 9 and 10).  Against their 10 cycles'
-    time (here when pysvzerod is importable, else the README's)."""
+    time (here when their module is importable, else the README's)."""
     import time
 
     from hemocircuit.analyses.periodic import _flow, shoot
