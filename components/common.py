@@ -77,13 +77,14 @@ def batch_shape(p, *shapes):
 
 
 @jit
-def branch(A, b, i, j, c, value):
-    """Stamp branch c from local node i to j: its flow (unknown c) leaves i and enters j, and
-    row c says P_i - P_j = value (a series resistance R adds A[c, c] = -R)."""
+def branch(A, b, i, j, c, value, R=0.0):
+    """Stamp branch c from local node i to j: its flow q (unknown c) leaves i and enters j, and
+    row c says P_i - P_j - R q = value (R: a series resistance, or a linearisation's slope)."""
     A[i, c] = 1.0
     A[j, c] = -1.0
     A[c, i] = 1.0
     A[c, j] = -1.0
+    A[c, c] -= R
     b[c] = value
 
 
@@ -94,6 +95,12 @@ def conductance(A, i, j, g):
     A[i, j] -= g
     A[j, i] -= g
     A[j, j] += g
+
+
+@jit
+def observe_first_state(p, x, iopt, out):
+    """``observe`` of the types whose one state-only observable is their first state."""
+    out[0] = x[0]
 
 
 @jit
@@ -114,8 +121,8 @@ def open_branches(A_loc, b_loc, rows, keep=None):
     return A_loc, b_loc
 
 
-def check_rmin_rmax(p):
-    """The valves' check: Rmin <= Rmax."""
+def check_rmin_rmax(comp, p):
+    """The valves' ``check`` method: Rmin <= Rmax."""
     bad = np.any(p["Rmax"] < p["Rmin"], axis=tuple(range(np.ndim(p["Rmin"]) - 1)))
     return [(int(i), "needs Rmin <= Rmax") for i in np.nonzero(np.atleast_1d(bad))[0]]
 

@@ -8,7 +8,7 @@ import numpy as np
 
 from hemocircuit.component import Observable, Param, State
 
-from .common import Block, imposed_flow, jit, kernel_method, short
+from .common import Block, imposed_flow, jit, kernel_method, observe_first_state, short
 
 
 # p = [L], state [q], local unknowns [P_a, P_b]; observable (state-only): q
@@ -22,18 +22,13 @@ def kernel_derivs(p, x, u, t, iopt, dx):
     dx[0] = (u[0] - u[1]) / p[0]  # dq/dt = (P_a - P_b)/L
 
 
-@jit
-def kernel_observe(p, x, iopt, out):
-    out[0] = x[0]
-
-
 class Inductor(Block):
     type_name = "inductor"
     terminals = ("a", "b")
     parameters = {"L": Param("mmHg*s**2/mL", lower=0.0, lower_open=True, doc="inertance")}
     role = "flow"
     matrix_params = ()  # A_loc = 0 (an imposed flow): L(r) of eq. inertia keeps the matrix constant
-    kernel = kernel_method(kernel_stamp, kernel_derivs, kernel_observe, ("q",))
+    kernel = kernel_method(kernel_stamp, kernel_derivs, observe_first_state, ("q",))
     #: conductance [mL/s/mmHg] of the inductor in the DC guess (a short circuit)
     DC_CONDUCTANCE = 1e6
     STATES = (State("q", "mL/s", 10.0, "flow a -> b"),)

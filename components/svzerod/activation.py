@@ -25,9 +25,9 @@ import math
 
 import numpy as np
 
-from hemocircuit.component import Param
+from hemocircuit.component import Observable, Param, State, Storage
 
-from ..common import jit
+from ..common import flow_observables, jit, open_branches
 
 KINDS = ("half_cosine", "piecewise_cosine", "two_hill", "wrapping_cosine", "fourier")
 
@@ -105,12 +105,24 @@ def act_parameters():
 
 
 class Activated:
-    """Mixin of the chambers driven by an activation function (their option ``activation``)."""
+    """Mixin of the chambers driven by an activation function (their option ``activation``):
+    terminals in, out, ref; their volume Vc stored from in to ref by branch 3 (q = dVc/dt)."""
 
     time_dependent = True
+    terminals = ("in", "out", "ref")
+    STATES = (State("Vc", "mL", 10.0, "chamber volume"),)
+    STORAGES = (Storage("in", "ref", "Vc", state="Vc"),)
+    OBSERVABLES = (Observable("Vc", "mL", "chamber volume", state_only=True),
+                   *flow_observables("the chamber", "the chamber"))
 
     def check(self, p):
-        return check_activation(self.opts["activation"], p)
+        """The chosen function's dividing parameters are > 0."""
+        kind, out = self.opts["activation"], []
+        for name in USED[kind]:
+            if name in POSITIVE:
+                bad = np.any(np.asarray(p[name]) <= 0, axis=tuple(range(np.ndim(p[name]) - 1)))
+                out += [(int(i), f"activation {kind} needs {name} > 0") for i in np.nonzero(np.atleast_1d(bad))[0]]
+        return out
 
     def breakpoints(self, p, t0, t1):
         """The activation's kinks (kink_phases): steps end there."""
@@ -120,38 +132,32 @@ class Activated:
         """[activation kind (index in KINDS)]."""
         return np.array([KINDS.index(self.opts["activation"])], dtype=np.int64)
 
+    def dc_stamp(self, p, A_loc, b_loc, keep):
+        """Steady state: the store open (q = 0) unless it anchors a conservation law."""
+        return open_branches(A_loc, b_loc, (3,), keep)
 
-def check_activation(kind, p):
-    """Cross-parameter checks: the chosen function's dividing parameters are > 0."""
-    out = []
-    for name in USED[kind]:
-        if name in POSITIVE:
-            bad = np.any(np.asarray(p[name]) <= 0, axis=tuple(range(np.ndim(p[name]) - 1)))
-            for i in np.nonzero(np.atleast_1d(bad))[0]:
-                out.append((int(i), f"activation {kind} needs {name} > 0"))
-    return out
+
+@jit
+def _two_hill(s, tau1, tau2, m1, m2):
+    """(g1/(1 + g1)/(1 + g2), its slope d log/d log s) with g1 = (s/tau1)^m1, g2 = (s/tau2)^m2."""
+    g1 = (s / tau1) ** m1
+    g2 = (s / tau2) ** m2
+    return g1 / (1.0 + g1) / (1.0 + g2), m1 / (1.0 + g1) - m2 * g2 / (1.0 + g2)
 
 
 @jit
 def _two_hill_max(T, tau1, tau2, m1, m2):
     lo, hi = math.log(T) - 40.0, math.log(T)
     s = T
-    g1 = (s / tau1) ** m1
-    g2 = (s / tau2) ** m2
-    if m1 / (1.0 + g1) - m2 * g2 / (1.0 + g2) < 0.0:  # the maximum lies inside (0, T)
+    if _two_hill(s, tau1, tau2, m1, m2)[1] < 0.0:  # the maximum lies inside (0, T)
         for _ in range(60):
             mid = 0.5 * (lo + hi)
-            s = math.exp(mid)
-            g1 = (s / tau1) ** m1
-            g2 = (s / tau2) ** m2
-            if m1 / (1.0 + g1) - m2 * g2 / (1.0 + g2) > 0.0:
+            if _two_hill(math.exp(mid), tau1, tau2, m1, m2)[1] > 0.0:
                 lo = mid
             else:
                 hi = mid
         s = math.exp(0.5 * (lo + hi))
-    g1 = (s / tau1) ** m1
-    g2 = (s / tau2) ** m2
-    return g1 / (1.0 + g1) / (1.0 + g2)
+    return _two_hill(s, tau1, tau2, m1, m2)[0]
 
 
 @jit
@@ -176,9 +182,7 @@ def activation(kind, t, T, a):
         s = np.fmod(tc - a[6], T)
         if s < 0.0:
             s += T
-        g1 = (s / a[7]) ** a[9]
-        g2 = (s / a[8]) ** a[10]
-        return g1 / (1.0 + g1) / (1.0 + g2) / _two_hill_max(T, a[7], a[8], a[9], a[10])
+        return _two_hill(s, a[7], a[8], a[9], a[10])[0] / _two_hill_max(T, a[7], a[8], a[9], a[10])
     if kind == 4:  # fourier
         return (fourier_raw(np.fmod(t, T), T) - FOURIER_MIN) / FOURIER_RANGE
     return wrapping_cosine(t, T, a[11], a[12])

@@ -21,8 +21,8 @@ import numpy as np
 from hemocircuit.component import Component, Observable, Option, Param, State, Storage
 from hemocircuit.kernels import Kernel
 
-from ..common import (branch, C_UNIT, flow_observables, imposed_flow, jit, L_UNIT, R_UNIT, S_UNIT, stenosis_drop,
-                      stenosis_linearised)
+from ..common import (branch, C_UNIT, flow_observables, imposed_flow, jit, L_UNIT, R_UNIT, S_UNIT, short,
+                      stenosis_drop, stenosis_linearised)
 
 PARAMS = {
     "R_poiseuille": Param(R_UNIT, lower=0.0, doc="Poiseuille resistance"),
@@ -44,8 +44,7 @@ def vessel_stamp(p, x, u, t, iopt, A, b):
     if iopt[0] != 0:
         Pc = x[0] / p[1]
         slope, off = stenosis_linearised(R, S, u[3])
-        branch(A, b, 0, 2, 3, Pc + off)  # Q_in: in -> (R) -> c -> ref
-        A[3, 3] = -slope
+        branch(A, b, 0, 2, 3, Pc + off, slope)  # Q_in: in -> (R) -> c -> ref
         if iopt[1] != 0:
             imposed_flow(b, 2, 1, x[1])  # Q_out delivered at out, drawn from ref
         else:
@@ -54,8 +53,7 @@ def vessel_stamp(p, x, u, t, iopt, A, b):
         imposed_flow(b, 0, 1, x[0])
     else:
         slope, off = stenosis_linearised(R, S, u[3])
-        branch(A, b, 0, 1, 3, off)
-        A[3, 3] = -slope
+        branch(A, b, 0, 1, 3, off, slope)
 
 
 @jit
@@ -97,10 +95,9 @@ def dc_series(A, c, R):
     A[..., c, 0], A[..., c, 1], A[..., c, c] = 1.0, -1.0, -R
 
 
-def dc_conductance(A, R):
+def dc_conductance(A, b, R):
     """DC guess of an inductive vessel: a conductance 1/R from in to out (large when R = 0)."""
-    g = 1.0 / np.maximum(R, 1e-6)
-    A[..., 0, 0], A[..., 0, 1], A[..., 1, 0], A[..., 1, 1] = g, -g, -g, g
+    short(A, b, 1.0 / np.maximum(R, 1e-6))
 
 
 class Vessel(Component):
@@ -171,7 +168,7 @@ class Vessel(Component):
         orig = (A_loc.copy(), b_loc.copy())
         A_loc[...] = 0.0
         b_loc[...] = 0.0
-        self.dc_fill(A_loc, p["R_poiseuille"])
+        self.dc_fill(A_loc, b_loc, p["R_poiseuille"])
         kept = np.asarray(keep, dtype=bool)
         if self.cap and kept.any():
             A_loc[:, kept] = orig[0][:, kept]
@@ -199,9 +196,9 @@ class BloodVessel(Vessel):
     def store_edge(self):
         return ("in", "ref") if self.ind else ("out", "ref")
 
-    def dc_fill(self, A, R):
+    def dc_fill(self, A, b, R):
         if self.ind and not self.cap:
-            return dc_conductance(A, R)
+            return dc_conductance(A, b, R)
         dc_series(A, 3, R)  # branch 3 carries in -> out through R
         if self.cap and not self.ind:  # Q_in = Q_out, P_out = P_in - R Q_in
             A[..., 1, 3], A[..., 1, 4] = 0.0, 1.0

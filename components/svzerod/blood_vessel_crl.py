@@ -30,8 +30,7 @@ def crl_stamp(p, x, u, t, iopt, A, b):
         imposed_flow(b, 0, 1, x[1])
     else:
         slope, off = stenosis_linearised(p[0], p[3] if iopt[2] != 0 else 0.0, u[4])
-        branch(A, b, 0, 1, 4, off)
-        A[4, 4] = -slope
+        branch(A, b, 0, 1, 4, off, slope)
 
 
 @jit
@@ -75,12 +74,12 @@ class BloodVesselCRL(Vessel):
             return BloodVessel.edges(self)
         return (("in", "ref", "pressure"), ("in", "out", "flow" if self.ind else "conductive"))
 
-    def dc_fill(self, A, R):
+    def dc_fill(self, A, b, R):
         if not self.cap:
-            return BloodVessel.dc_fill(self, A, R)
+            return BloodVessel.dc_fill(self, A, b, R)
         A[..., 3, 3] = 1.0  # capacitor flow 0
         if self.ind:
-            dc_conductance(A, R)
+            dc_conductance(A, b, R)
         else:
             dc_series(A, 4, R)
 

@@ -19,9 +19,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from hemocircuit.component import Observable, Option, Param, State, Storage
+from hemocircuit.component import Option, Param, State
 
-from ..common import Block, branch, E_UNIT, flow_observables, imposed_flow, jit, kernel_method, L_UNIT, open_branches, per_element
+from ..common import (Block, branch, E_UNIT, imposed_flow, jit, kernel_method, L_UNIT, observe_first_state, per_element,
+                      short)
 from .activation import KINDS, Activated, act_parameters, activation
 
 OWN_PARAMS = {"Emax": Param(E_UNIT, lower=0.0, doc="maximum elastance"),
@@ -60,11 +61,6 @@ def cei_derivs(p, x, u, t, iopt, dx):
 
 
 @jit
-def cei_observe(p, x, iopt, out):
-    out[0] = x[0]
-
-
-@jit
 def cei_report(p, x, u, t, iopt, out):
     out[0] = x[0]  # Vc
     out[1] = u[3] + x[1]  # Q_in
@@ -75,29 +71,16 @@ class ChamberElastanceInductor(Activated, Block):
     __doc__ = __doc__
     type_name = "chamber_elastance_inductor"
     svzerod_blocks = ("ChamberElastanceInductor",)
-    terminals = ("in", "out", "ref")
     parameters = {**OWN_PARAMS, **act_parameters()}
     options = {"activation": Option("half_cosine", choices=KINDS, doc="activation function A(t)")}
-    kernel = kernel_method(cei_stamp, cei_derivs, cei_observe, ("Vc",), report=cei_report)
+    kernel = kernel_method(cei_stamp, cei_derivs, observe_first_state, ("Vc",), report=cei_report)
     BRANCHES = (("in", "ref"),)
     EDGES = (("in", "ref", "pressure"), ("in", "out", "flow"))
-    STATES = (State("Vc", "mL", 10.0, "chamber volume"), State("Q_out", "mL/s", 0.1, "outflow (inductor)"))
-    STORAGES = (Storage("in", "ref", "Vc", state="Vc"),)
-    OBSERVABLES = (Observable("Vc", "mL", "chamber volume", state_only=True),
-                   *flow_observables("the chamber", "the chamber"))
+    STATES = (*Activated.STATES, State("Q_out", "mL/s", 0.1, "outflow (inductor)"))
 
     def dc_stamp(self, p, A_loc, b_loc, keep):
-        """Steady state: the store open (q = 0) unless it anchors a conservation law, the
-        inductor a short (a 1e6 mL/s/mmHg conductance, as the inductor component)."""
-        open_branches(A_loc, b_loc, (3,), keep)
-        g = 1e6
-        A_loc[..., 0, 0] += g
-        A_loc[..., 0, 1] -= g
-        A_loc[..., 1, 0] -= g
-        A_loc[..., 1, 1] += g
-        b_loc[..., 0] = 0.0
-        b_loc[..., 1] = 0.0
-        return A_loc, b_loc
+        """Steady state: the store open (Activated), the inductor a short (as the inductor component)."""
+        return short(*super().dc_stamp(p, A_loc, b_loc, keep))
 
     def initial_states(self, p, u, flows=None, x=None):
         law = per_element(cei_law, self, p, 0.0)  # [E, Vrest] at t = 0

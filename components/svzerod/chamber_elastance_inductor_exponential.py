@@ -20,10 +20,9 @@ import numpy as np
 
 from hemocircuit.component import Param
 
-from ..common import E_UNIT, jit, kernel_method, per_element
+from ..common import E_UNIT, jit, kernel_method, observe_first_state, per_element
 from .activation import act_parameters, activation
-from .chamber_elastance_inductor import (OWN_PARAMS, ChamberElastanceInductor, cei_derivs, cei_observe, cei_report,
-                                         chamber_stamp)
+from .chamber_elastance_inductor import OWN_PARAMS, ChamberElastanceInductor, cei_derivs, cei_report, chamber_stamp
 
 
 # --- the equations: p = [Emax, Kxp, Kxv, Vaso, Impedance, period, 13 activation parameters];
@@ -71,7 +70,7 @@ class ChamberElastanceInductorExponential(ChamberElastanceInductor):
                   "Kxv": Param("1/mL", doc="passive volume exponent"),
                   "Vaso": Param("mL", doc="rest volume"),
                   "Impedance": OWN_PARAMS["Impedance"], **act_parameters()}
-    kernel = kernel_method(ceie_stamp, cei_derivs, cei_observe, ("Vc",), report=cei_report)
+    kernel = kernel_method(ceie_stamp, cei_derivs, observe_first_state, ("Vc",), report=cei_report)
 
     def initial_states(self, p, u, flows=None, x=None):
         """Vc with P(Vc, 0) = the local pressure (ceie_volume)."""

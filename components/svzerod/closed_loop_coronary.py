@@ -41,8 +41,7 @@ def clcor_pim(p, t, iopt):
 
 @jit
 def clcor_stamp(p, x, u, t, iopt, A, b):
-    branch(A, b, 0, 3, 5, 0.0)  # P_in - P_a - Ra q_ra = 0
-    A[5, 5] = -p[0]
+    branch(A, b, 0, 3, 5, 0.0, p[0])  # P_in - P_a - Ra q_ra = 0
     branch(A, b, 3, 2, 6, x[0] / p[3])
     branch(A, b, 4, 2, 7, x[1] / p[4] + clcor_pim(p, t, iopt))
     conductance(A, 3, 4, 1.0 / p[1])

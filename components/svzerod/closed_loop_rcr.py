@@ -19,8 +19,7 @@ from ..common import Block, branch, C_UNIT, conductance, flow_observables, jit, 
 # --- the equations: p = [Rp, C, Rd]; state [V]; local unknowns [P_in, P_out, P_ref, P_c, q_p, q_c]
 @jit
 def clrcr_stamp(p, x, u, t, iopt, A, b):
-    branch(A, b, 0, 3, 4, 0.0)  # P_in - P_c - Rp q_p = 0
-    A[4, 4] = -p[0]
+    branch(A, b, 0, 3, 4, 0.0, p[0])  # P_in - P_c - Rp q_p = 0
     branch(A, b, 3, 2, 5, x[0] / p[1])
     conductance(A, 3, 1, 1.0 / p[2])
 

@@ -24,8 +24,7 @@ from ..common import Block, branch, C_UNIT, jit, kernel_method, R_UNIT
 # states [V_a, V_im]; local unknowns [P_node, P_ref, Q_in]
 @jit
 def coronary_stamp(p, x, u, t, iopt, A, b):
-    branch(A, b, 0, 1, 2, x[0] / p[3])  # P_node - P_ref - Ra1 Q_in = V_a/Ca
-    A[2, 2] = -p[0]
+    branch(A, b, 0, 1, 2, x[0] / p[3], p[0])  # P_node - P_ref - Ra1 Q_in = V_a/Ca
 
 
 @jit

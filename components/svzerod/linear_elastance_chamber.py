@@ -12,9 +12,9 @@ E (Vc - Vrest) carrying q = dVc/dt, and branch (in, out) with P_in = P_out carry
 from __future__ import annotations
 
 
-from hemocircuit.component import Observable, Option, Param, State, Storage
+from hemocircuit.component import Option, Param
 
-from ..common import Block, branch, E_UNIT, flow_observables, jit, kernel_method, open_branches, per_element
+from ..common import Block, branch, E_UNIT, jit, kernel_method, observe_first_state, per_element
 from .activation import KINDS, Activated, act_parameters, activation
 
 
@@ -39,11 +39,6 @@ def lec_derivs(p, x, u, t, iopt, dx):
 
 
 @jit
-def lec_observe(p, x, iopt, out):
-    out[0] = x[0]
-
-
-@jit
 def lec_report(p, x, u, t, iopt, out):
     out[0] = x[0]  # Vc
     out[1] = u[3] + u[4]  # Q_in
@@ -54,23 +49,14 @@ class LinearElastanceChamber(Activated, Block):
     __doc__ = __doc__
     type_name = "linear_elastance_chamber"
     svzerod_blocks = ("LinearElastanceChamber",)
-    terminals = ("in", "out", "ref")
     parameters = {"Emax": Param(E_UNIT, lower=0.0, doc="active elastance (added at full activation)"),
                   "Epass": Param(E_UNIT, lower=0.0, lower_open=True, doc="passive elastance"),
                   "Vrest": Param("mL", doc="rest volume"),
                   **act_parameters()}
     options = {"activation": Option("piecewise_cosine", choices=KINDS, doc="activation function A(t)")}
-    kernel = kernel_method(lec_stamp, lec_derivs, lec_observe, ("Vc",), report=lec_report)
+    kernel = kernel_method(lec_stamp, lec_derivs, observe_first_state, ("Vc",), report=lec_report)
     BRANCHES = (("in", "ref"), ("in", "out"))
     EDGES = (("in", "ref", "pressure"), ("in", "out", "pressure"))
-    STATES = (State("Vc", "mL", 10.0, "chamber volume"),)
-    STORAGES = (Storage("in", "ref", "Vc", state="Vc"),)
-    OBSERVABLES = (Observable("Vc", "mL", "chamber volume", state_only=True),
-                   *flow_observables("the chamber", "the chamber"))
-
-    def dc_stamp(self, p, A_loc, b_loc, keep):
-        """Steady state: the store open (q = 0) unless it anchors a conservation law."""
-        return open_branches(A_loc, b_loc, (3,), keep)
 
     def initial_states(self, p, u, flows=None, x=None):
         E = per_element(lec_elastance, self, p, 0.0)

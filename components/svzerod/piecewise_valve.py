@@ -43,6 +43,4 @@ class PiecewiseValve(Block):
     constant_matrix = False
     kernel = kernel_method(piecewise_valve_stamp, report=piecewise_valve_report)
     OBSERVABLES = (Observable("Q", "mL/s", "flow from in to out"),)
-
-    def check(self, p):
-        return check_rmin_rmax(p)
+    check = check_rmin_rmax

@@ -18,8 +18,7 @@ from ..common import Block, branch, C_UNIT, jit, kernel_method, R_UNIT
 # --- the equations: p = [Rp, C, Rd, Pd] (Pd with its waveform added); state [V]; local unknowns [P_node, P_ref, Q_in]
 @jit
 def rcr_stamp(p, x, u, t, iopt, A, b):
-    branch(A, b, 0, 1, 2, x[0] / p[1])  # P_node - P_ref - Rp Q_in = V/C
-    A[2, 2] = -p[0]
+    branch(A, b, 0, 1, 2, x[0] / p[1], p[0])  # P_node - P_ref - Rp Q_in = V/C
 
 
 @jit

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from hemocircuit.component import Observable, Param
 
-from ..common import Block, conductance, jit, kernel_method, R_UNIT
+from ..common import Block, conductance, imposed_flow, jit, kernel_method, R_UNIT
 
 
 # --- the equations: p = [R, Pd] (Pd with its waveform added); local unknowns [P_node, P_ref]
@@ -16,9 +16,7 @@ from ..common import Block, conductance, jit, kernel_method, R_UNIT
 def resistance_stamp(p, x, u, t, iopt, A, b):
     g = 1.0 / p[0]
     conductance(A, 0, 1, g)
-    j = -g * p[1]
-    b[0] = -j
-    b[1] = j
+    imposed_flow(b, 0, 1, -g * p[1])  # q = g (P_node - P_ref - Pd)
 
 
 @jit

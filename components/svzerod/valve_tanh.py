@@ -42,10 +42,9 @@ def valve_tanh_stamp(p, x, u, t, iopt, A, b):
     R = Rmin + (Rmax - Rmin) * s
     dR = -2.0 * (Rmax - Rmin) * k * s * (1.0 - s)
     c = max(1.0 - q * dR, 1.0)
-    branch(A, b, 0, 1, 2, (c - 1.0) * dp)  # = -q R' dP0 (Newton) unless the slope is clamped to 1
+    branch(A, b, 0, 1, 2, (c - 1.0) * dp, R)  # = -q R' dP0 (Newton) unless the slope is clamped to 1
     A[2, 0] = c
     A[2, 1] = -c
-    A[2, 2] = -R
 
 
 @jit
@@ -70,6 +69,4 @@ class ValveTanh(Block):
                    Observable("status", "dimensionless", "their valve_status (1 + tanh(k (P_out - P_in)))/2"))
     BRANCHES = (("in", "out"),)
     EDGES = (("in", "out", "conductive"),)
-
-    def check(self, p):
-        return check_rmin_rmax(p)
+    check = check_rmin_rmax
