@@ -24,26 +24,26 @@ import math
 
 import numpy as np
 
-from hemocircuit.component import Component, Observable, Option, Param, State
+from hemocircuit.component import Observable, Option, Param, State
 from hemocircuit.units import M3_PER_ML
 
-from .common import branch, jit as _jit, kernel_method, per_element
+from .common import Block, branch, jit as _jit, kernel_method, observe_first_state, per_element
 
 _READINGS = ("consistent", "thesis")
 #: smallest pool volume used as a divisor [m^3] (a collapsed compliance reports V = 0)
 _V_FLOOR = 1e-15
 
 
-def _common_parameters():
-    return {
-        "V": Param("mL", lower=0.0, doc="pool volume (e.g. '= Cv.V', or a constant)"),
-        "k_d": Param("1/s", default="0 1/s", lower=0.0, doc="first-order decay rate of the tracer in the pool"),
-        "h": Param("m**2/s", default="0 m**2/s", lower=0.0,
-                   doc="wall transfer coefficient per unit vessel length (thesis h_wv)"),
-        "l": Param("m", default="0 m", lower=0.0,
-                   doc="length of exchanging vessel (consistent reading only): conductance h*l"),
-        "C_x": Param("M", default="0 M", lower=0.0, doc="concentration across the wall (e.g. '= NOt.C')"),
-    }
+#: the parameters of both pools
+_COMMON_PARAMETERS = {
+    "V": Param("mL", lower=0.0, doc="pool volume (e.g. '= Cv.V', or a constant)"),
+    "k_d": Param("1/s", default="0 1/s", lower=0.0, doc="first-order decay rate of the tracer in the pool"),
+    "h": Param("m**2/s", default="0 m**2/s", lower=0.0,
+               doc="wall transfer coefficient per unit vessel length (thesis h_wv)"),
+    "l": Param("m", default="0 m", lower=0.0,
+               doc="length of exchanging vessel (consistent reading only): conductance h*l"),
+    "C_x": Param("M", default="0 M", lower=0.0, doc="concentration across the wall (e.g. '= NOt.C')"),
+}
 
 
 # --- the equations (hemocircuit.kernels contract) -------------------------------------------
@@ -129,21 +129,16 @@ def tissue_derivs(p, x, u, t, iopt, dx):
     dx[0] = (a - bb * x[0]) / vol
 
 
-@_jit
-def pool_observe(p, x, iopt, out):
-    out[0] = x[0]
-
-
-class _Pool(Component):
+class _Pool(Block):
     """Shared part: state C, wall exchange and decay, the two unit readings."""
 
-    constant_matrix = True
     options = {
         "units_reading": Option("consistent", choices=_READINGS,
                                 doc="'consistent' (SI, default) or 'thesis' (its numbers; MODEL_NOTES)"),
         "scale": Option(1e-12, kind=float, lower=0.0, lower_open=True, upper=1e3, unit="M",
                         doc="natural size of C [M] (solver tolerances); a number, 0 < scale <= 1e3"),
     }
+    OBSERVABLES = (Observable("C", "M", "tracer concentration in the pool", state_only=True),)
 
     def __init__(self, opts=None):
         super().__init__(opts)
@@ -156,9 +151,6 @@ class _Pool(Component):
 
     def states(self):
         return (State("C", "M", self.opts["scale"], "tracer concentration in the pool"),)
-
-    def observables(self):
-        return (Observable("C", "M", "tracer concentration in the pool", state_only=True),)
 
     def _thesis(self):
         return self.opts["units_reading"] == "thesis"
@@ -186,7 +178,7 @@ class TracerPool(_Pool):
     terminals = ("a", "b")
     role = "pressure"
     parameters = {
-        **_common_parameters(),
+        **_COMMON_PARAMETERS,
         "C_0": Param("M", default="0 M", lower=0.0, doc="concentration entering the feeding bed (eq. cinv C_in)"),
         "C_inf": Param("M", default="0 M", lower=0.0, doc="far-downstream limit of the feeding bed (e.g. '= art.Cb_inf')"),
         "k_feed": Param("m**2/s", default="0 m**2/s", lower=0.0,
@@ -195,21 +187,13 @@ class TracerPool(_Pool):
         "n_feed": Param("dimensionless", default="1", lower=0.0, lower_open=True,
                         doc="number of feeding tubes in parallel (e.g. '= art.n'; consistent reading only)"),
     }
-
-    kernel = kernel_method(tracer_stamp, tracer_derivs, pool_observe, ("C",), report=tracer_report)
-
-    def branches(self):
-        return (("a", "b"),)
-
-    def edges(self):
-        return (("a", "b", "pressure"),)
+    kernel = kernel_method(tracer_stamp, tracer_derivs, observe_first_state, ("C",), report=tracer_report)
+    BRANCHES = (("a", "b"),)
+    EDGES = (("a", "b", "pressure"),)
+    OBSERVABLES = (*_Pool.OBSERVABLES, Observable("C_feed", "M", "concentration of the inflow (eq. cinv, C_in,v)"))
 
     def initial_states(self, p, u, flows=None, x=None):
         return _steady(per_element(tracer_balance, self, p, u[..., 2]))
-
-    def observables(self):
-        return super().observables() + (
-            Observable("C_feed", "M", "concentration of the inflow (eq. cinv, C_in,v)"),)
 
 
 class TissuePool(_Pool):
@@ -220,11 +204,9 @@ class TissuePool(_Pool):
 
     type_name = "tissue_pool"
     terminals = ()
-    parameters = _common_parameters()
-    kernel = kernel_method(tissue_stamp, tissue_derivs, pool_observe, ("C",))
-
-    def edges(self):
-        return ()
+    parameters = dict(_COMMON_PARAMETERS)
+    kernel = kernel_method(tissue_stamp, tissue_derivs, observe_first_state, ("C",))
+    EDGES = ()
 
     def initial_states(self, p, u, flows=None, x=None):
         return np.broadcast_to(_steady(per_element(tissue_balance, self, p)), u.shape[:2] + (1,))
