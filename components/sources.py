@@ -16,17 +16,6 @@ from hemocircuit.netlist import GROUND
 from .common import branch, imposed_flow, jit as _jit, kernel_method
 
 
-#: a source's input is its value; its built-in sine term has the parameters below
-_DRIVE = Drive(value="value", amplitude="amplitude", frequency="frequency", phase="phase", start="start")
-
-
-def _sine_breakpoints(p, t0, t1):
-    """Sine starts in (t0, t1) of the elements whose sine term is on (amplitude != 0)."""
-    # either may vary over a batch alone (a sweep of the amplitude with one start, or of the start)
-    start, amp = np.broadcast_arrays(np.asarray(p["start"], dtype=float), np.asarray(p["amplitude"], dtype=float))
-    return sorted({float(s) for s, a in zip(start.reshape(-1), amp.reshape(-1)) if a != 0 and t0 < s < t1})
-
-
 def _sine_params(unit):
     return {
         "amplitude": Param(unit, default=f"0 {unit}", doc="amplitude of the built-in sine term"),
@@ -57,48 +46,50 @@ def flow_stamp(p, x, u, t, iopt, A, b):
     imposed_flow(b, 0, 1, kernel_value(p, t))  # local unknowns [P_a, P_b]: q = value from a to b
 
 
-class PressureSource(Component):
+class _Source(Component):
+    """What both sources share: an input drives their value, which has a built-in sine term."""
+
+    waveform_params = ("value",)
+    drive = Drive(value="value", amplitude="amplitude", frequency="frequency", phase="phase", start="start")
+    time_dependent = True
+
+    def varies_in_time(self, p):
+        return bool(np.any(p["amplitude"] != 0))
+
+    def breakpoints(self, p, t0, t1):
+        """Sine starts in (t0, t1) of the elements whose sine term is on (amplitude != 0)."""
+        # either may vary over a batch alone (a sweep of the amplitude with one start, or of the start)
+        start, amp = np.broadcast_arrays(np.asarray(p["start"], dtype=float), np.asarray(p["amplitude"], dtype=float))
+        return sorted({float(s) for s, a in zip(start.reshape(-1), amp.reshape(-1)) if a != 0 and t0 < s < t1})
+
+
+class PressureSource(_Source):
     """Imposes P(node) - P(ref) = value(t) [mmHg]; supplies whatever flow the circuit draws."""
 
     type_name = "pressure_source"
     svzerod_blocks = ("PRESSURE",)  # their PRESSURE boundary condition
     terminals = ("node", "ref")
     parameters = {"value": Param("mmHg", doc="constant pressure (or a waveform)"), **_sine_params("mmHg")}
-    waveform_params = ("value",)
-    drive = _DRIVE
     role = "pressure"
-    time_dependent = True
     kernel = kernel_method(pressure_stamp)
 
     def branches(self):
         return (("node", "ref"),)
-
-    def varies_in_time(self, p):
-        return bool(np.any(p["amplitude"] != 0))
-
-    def breakpoints(self, p, t0, t1):
-        return _sine_breakpoints(p, t0, t1)
 
     def drive_output(self, eid, nodes):
         """P(node) when the reference is ground (otherwise no column holds the difference)."""
         return f"P({nodes[0]})" if nodes[1] == GROUND and nodes[0] != GROUND else None
 
 
-class FlowSource(Component):
+class FlowSource(_Source):
     """Imposes a flow value(t) [mL/s] from terminal ``a`` through the source to ``b``."""
 
     type_name = "flow_source"
     svzerod_blocks = ("FLOW",)  # their FLOW boundary condition
     terminals = ("a", "b")
     parameters = {"value": Param("mL/s", doc="constant flow (or a waveform)"), **_sine_params("mL/s")}
-    waveform_params = ("value",)
-    drive = _DRIVE
     role = "flow"
-    time_dependent = True
     kernel = kernel_method(flow_stamp)
-
-    varies_in_time = PressureSource.varies_in_time
-    breakpoints = PressureSource.breakpoints
 
     def drive_output(self, eid, nodes):
         return f"Q({eid})"
