@@ -29,8 +29,6 @@ class Inductor(Block):
     role = "flow"
     matrix_params = ()  # A_loc = 0 (an imposed flow): L(r) of eq. inertia keeps the matrix constant
     kernel = kernel_method(kernel_stamp, kernel_derivs, observe_first_state, ("q",))
-    #: conductance [mL/s/mmHg] of the inductor in the DC guess (a short circuit)
-    DC_CONDUCTANCE = 1e6
     STATES = (State("q", "mL/s", 10.0, "flow a -> b"),)
     OBSERVABLES = (Observable("q", "mL/s", "flow a -> b", state_only=True),)
 
@@ -38,8 +36,7 @@ class Inductor(Block):
         return True
 
     def dc_stamp(self, p, A_loc, b_loc, keep):
-        """Short circuit: a large conductance between a and b, no imposed flow."""
-        return short(A_loc, b_loc, self.DC_CONDUCTANCE)
+        return short(A_loc, b_loc)  # a short circuit: common.short's conductance, no imposed flow
 
     def initial_states(self, p, u, flows=None, x=None):
         # DC: the inductor is a short circuit; its flow is what the guess network sends through it.

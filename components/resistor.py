@@ -18,5 +18,4 @@ class Resistor(Component):
     type_name = "resistor"
     terminals = ("a", "b")
     parameters = {"R": Param("mmHg*s/mL", lower=0.0, lower_open=True, doc="resistance")}
-    role = "conductive"
     kernel = kernel_method(kernel_stamp)

@@ -82,9 +82,13 @@ class ChamberElastanceInductor(Activated, Block):
         """Steady state: the store open (Activated), the inductor a short (as the inductor component)."""
         return short(*super().dc_stamp(p, A_loc, b_loc, keep))
 
-    def initial_states(self, p, u, flows=None, x=None):
+    def volume(self, p, P):
+        """Vc with P(Vc, t = 0) = P [mmHg]: P / E + Vrest."""
         law = per_element(cei_law, self, p, 0.0)  # [E, Vrest] at t = 0
-        Vc = (u[..., 0] - u[..., 2]) / law[..., 0] + law[..., 1]
+        return P / law[..., 0] + law[..., 1]
+
+    def initial_states(self, p, u, flows=None, x=None):
+        Vc = self.volume(p, u[..., 0] - u[..., 2])
         out = np.zeros(Vc.shape + (2,))
         out[..., 0] = Vc
         if flows is not None:

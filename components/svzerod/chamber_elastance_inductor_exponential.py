@@ -16,8 +16,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
 from hemocircuit.component import Param
 
 from ..common import E_UNIT, jit, kernel_method, observe_first_state, per_element
@@ -72,11 +70,6 @@ class ChamberElastanceInductorExponential(ChamberElastanceInductor):
                   "Impedance": OWN_PARAMS["Impedance"], **act_parameters()}
     kernel = kernel_method(ceie_stamp, cei_derivs, observe_first_state, ("Vc",), report=cei_report)
 
-    def initial_states(self, p, u, flows=None, x=None):
-        """Vc with P(Vc, 0) = the local pressure (ceie_volume)."""
-        V = per_element(ceie_volume, self, p, u[..., 0] - u[..., 2])
-        out = np.zeros(V.shape + (2,))
-        out[..., 0] = V
-        if flows is not None:
-            out[..., 1] = -flows[..., 1]
-        return out
+    def volume(self, p, P):
+        """Vc with P(Vc, t = 0) = P [mmHg] (ceie_volume)."""
+        return per_element(ceie_volume, self, p, P)

@@ -38,7 +38,6 @@ class PiecewiseValve(Block):
     terminals = ("in", "out")
     parameters = {"Rmin": Param(R_UNIT, lower=0.0, lower_open=True, doc="resistance when open (P_out < P_in)"),
                   "Rmax": Param(R_UNIT, lower=0.0, lower_open=True, doc="resistance when closed")}
-    role = "conductive"
     linear_in_pressure = False
     constant_matrix = False
     kernel = kernel_method(piecewise_valve_stamp, report=piecewise_valve_report)

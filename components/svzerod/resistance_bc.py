@@ -32,6 +32,5 @@ class ResistanceBC(Block):
     parameters = {"R": Param(R_UNIT, lower=0.0, lower_open=True, doc="resistance"),
                   "Pd": Param("mmHg", default="0 mmHg", doc="distal pressure (constant or a waveform)")}
     waveform_params = ("Pd",)
-    role = "conductive"
     kernel = kernel_method(resistance_stamp, report=resistance_report)
     OBSERVABLES = (Observable("Q_in", "mL/s", "flow into the block"),)

@@ -61,12 +61,10 @@ class ValveTanh(Block):
     parameters = {"Rmin": Param(R_UNIT, lower=0.0, doc="resistance when open"),
                   "Rmax": Param(R_UNIT, lower=0.0, lower_open=True, doc="resistance when closed"),
                   "steepness": Param("1/mmHg", lower=0.0, lower_open=True, doc="steepness k of the tanh")}
-    role = "conductive"
     linear_in_pressure = False
     constant_matrix = False
     kernel = kernel_method(valve_tanh_stamp, report=valve_tanh_report)
     OBSERVABLES = (Observable("Q", "mL/s", "flow from in to out"),
                    Observable("status", "dimensionless", "their valve_status (1 + tanh(k (P_out - P_in)))/2"))
     BRANCHES = (("in", "out"),)
-    EDGES = (("in", "out", "conductive"),)
     check = check_rmin_rmax
