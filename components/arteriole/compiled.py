@@ -22,22 +22,19 @@ from hemocircuit.units import M3_PER_ML, PA_PER_MMHG
 
 from ..common import conductance
 
-from .equations import (C_IN, CA_FLOOR, DP0, ETA, F1, F2, FRICTION_FLOOR, GAMMA_WB, K3, K4, K7, K_CA1, K_CA2,
-                        K_CGMP, L0, L_VES, LAMBDA_OPT, LN10, LN_95, MAX_EXP, MU_B, N_CA1, N_CA2, N_CGMP, N_VES,
-                        NO_L, NO_U, OMEGA_N, PCA_L, PCA_U, PCGMP_L, PCGMP_U, PSI_SERIES_X, Q1, Q2, Q3, R0, R_DB,
-                        SIGMA_L, SIGMA_U, T_W, TAU_CA, V_XB, W_C, ZETA, active_force, bed_volume, ca_bar, cb_inf,
-                        cb_mean, cgmp, d2Ca, dCa_first, dCw, dlam_affine, dr_dlambda, flow, kinetics, l2r,
-                        no_loss, no_rates, overlap, passive_force, psi, qs_numerators, quasi_steady, rates, resistance,
-                        tau_hat,
-                        transport_number, wall_stress)
+from .equations import (C_IN, CA_FLOOR, DP0, ETA, F1, F2, GAMMA_WB, K3, K4, K7, K_CA1, K_CA2, K_CGMP, L0, L_VES,
+                        LAMBDA_OPT, LN10, LN_95, MAX_EXP, MU_B, N_CA1, N_CA2, N_CGMP, N_VES, NO_L, NO_U, OMEGA_N,
+                        PCA_L, PCA_U, PCGMP_L, PCGMP_U, PSI_SERIES_X, Q1, Q2, Q3, R0, R_DB, SIGMA_L, SIGMA_U, T_W,
+                        TAU_CA, V_XB, W_C, ZETA, active_force, bed_volume, ca_bar, cb_inf, cb_mean, cgmp, d2Ca,
+                        dCa_first, dCw, dlam_affine, dr_dlambda, flow, friction, kinetics, l2r, no_loss, no_rates,
+                        overlap, passive_force, psi, qs_numerators, quasi_steady, rates, resistance, tau_hat,
+                        transport_number, wall_area, wall_stress)
 
 # --- iopt slots ---------------------------------------------------------------------------
 OPT_CA_ORDER, OPT_DYNAMIC, OPT_PASSIVE, OPT_VOLUME_FLOW, OPT_PIM_REF = 0, 1, 2, 3, 4
-N_OPTS = 5
 
 _PI = math.pi
 _R_FACTOR = M3_PER_ML / PA_PER_MMHG   # Pa*s/m^3 -> mmHg*s/mL
-_INF = math.inf
 
 # the contract functions compile on their own (hemocircuit.elementwise runs them compiled for
 # large batches); the helpers are equations, run as Python whenever Python calls them
@@ -67,25 +64,6 @@ def _bridges(x, p, iopt):
     return K1, K2, M, Mp, AMp, AM
 
 
-@_eq
-def _lambda_rate(x, p, iopt):
-    """(r [m], a [1/s], b [1/(s Pa)]): dlambda/dt = a + b P_im (eq FaNew solved for lambda_dot)."""
-    j = 2 if iopt[OPT_CA_ORDER] == 2 else 1
-    lam = x[j + 1]
-    r = l2r(lam, p)
-    _, _, _, _, AMp, AM = _bridges(x, p, iopt)
-    a, b = dlam_affine(lam, r, AMp, AM, p, iopt[OPT_PASSIVE] != 0)
-    return r, a, b
-
-
-@_eq
-def _ca_target(P, r, p, iopt):
-    """Ca_bar [M] (eq ssCa of sigma = P r / t_w); 0 for a passive arteriole."""
-    if iopt[OPT_PASSIVE] != 0:
-        return 0.0
-    return ca_bar(wall_stress(P, r, p), p)
-
-
 # --- the contract -------------------------------------------------------------------------
 @_jit
 def stamp(p, x, u, t, iopt, A, b):
@@ -100,7 +78,8 @@ def stamp(p, x, u, t, iopt, A, b):
     conductance(A, 0, 3, 2.0 * g)
     conductance(A, 3, 1, 2.0 * g)
     # eqs Vsa, dVsadt: q_v = 2 pi r L n dr/dt leaves mid into ref, dr/dt = (a + b P_im) dr/dlambda
-    r, da, db = _lambda_rate(x, p, iopt)
+    _, _, _, _, AMp, AM = _bridges(x, p, iopt)
+    da, db = dlam_affine(x[j + 1], r, AMp, AM, p, iopt[OPT_PASSIVE] != 0)   # eq FaNew solved for lambda_dot
     k_r = dr_dlambda(p)
     k = 2 * _PI * r * p[L_VES] * p[N_VES] / M3_PER_ML   # mL per m of radius
     c0 = k * (da * k_r)                       # mL/s
@@ -127,7 +106,7 @@ def derivs(p, x, u, t, iopt, dx):
     r = l2r(lam, p)                                             # eq l2r [m]
     Q = flow(r, dP, p)                                          # eq Poiseuille, one vessel
     K1, K2, M, Mp, AMp, AM = _bridges(x, p, iopt)
-    Cab = _ca_target(P, r, p, iopt)
+    Cab = 0.0 if iopt[OPT_PASSIVE] != 0 else ca_bar(wall_stress(P, r, p), p)   # eq ssCa; 0 when passive
     a, bb = dlam_affine(lam, r, AMp, AM, p, iopt[OPT_PASSIVE] != 0)
     cbm = cb_mean(Cw, r, transport_number(Q, r, h_w, p), h_w, p)   # eqs cbbar, cbbarpsi, psi
     if iopt[OPT_CA_ORDER] == 2:
@@ -241,9 +220,7 @@ def _rates_d(Ca, Cw, p):
 @_eq
 def _quasi_steady_d(a, b, p):
     """(AMp, AM, dAMp/da, dAMp/db, dAM/da, dAM/db) of equations.quasi_steady (fractions N_i / s)."""
-    k3 = p[K3]
-    k4 = p[K4]
-    k7 = p[K7]
+    k3, k4, k7 = p[K3], p[K4], p[K7]
     M, Mp, AMp, AM = qs_numerators(a, b, p)
     s = M + Mp + AMp + AM
     dM_a, dM_b = b * k4, a * k4 + k3 * k7 + 2.0 * b * k7 + k4 * k7
@@ -270,10 +247,8 @@ def derivs_jac(p, x, u, t, iopt, dx, Jx, Ju):
     if iopt[OPT_PASSIVE] != 0:
         return 0
     derivs(p, x, u, t, iopt, dx)
-    S = 8 if dynamic else 4
-    if ca_order != 2:
-        S -= 1
     j = 2 if ca_order == 2 else 1
+    S = j + (6 if dynamic else 2)  # states Ca, (dCa,) Cw, lambda (, M, Mp, AMp, AM)
     Lu = 4 if iopt[OPT_VOLUME_FLOW] != 0 else 3
     for i in range(S):
         for k in range(S):
@@ -316,10 +291,9 @@ def derivs_jac(p, x, u, t, iopt, dx, Jx, Ju):
     dG = -G * (lam - p[LAMBDA_OPT]) / p[ETA]
     lm = 0.0 if lam < 0.0 else lam
     z = p[Q2] * (lm ** p[Q3] - 1.0)
-    capped = z > MAX_EXP
-    dFp = 0.0 if (capped or lam <= 0.0) else p[Q1] * math.exp(z) * p[Q2] * p[Q3] * lm ** (p[Q3] - 1.0)
+    dFp = 0.0 if (z > MAX_EXP or lam <= 0.0) else p[Q1] * math.exp(z) * p[Q2] * p[Q3] * lm ** (p[Q3] - 1.0)
     f1v = p[F1] * p[V_XB]
-    D = p[L0] * (G * (p[F1] * AMp + p[F2] * AM) + FRICTION_FLOOR)
+    D = friction(lam, AMp, AM, p, False)
     a_l, b_l = dlam_affine(lam, r, AMp, AM, p, False)
     lam_dot = a_l + b_l * P
     dN_lam = -(dFp + f1v * AMp * dG) + p[W_C] * kr * P
@@ -330,7 +304,7 @@ def derivs_jac(p, x, u, t, iopt, dx, Jx, Ju):
     dld_P = b_l
 
     # eq dNOdt with eqs cbbar, cbbarpsi, psi
-    Aw = _PI * ((p[R0] + p[T_W]) ** 2.0 - p[R0] ** 2.0)
+    Aw = wall_area(p)
     kk = no_loss(r, h_w, p)
     dkk_r = p[R_DB] * 2.0 * _PI * r
     aq = abs(Q)
@@ -340,7 +314,7 @@ def derivs_jac(p, x, u, t, iopt, dx, Jx, Ju):
     dxt_aq = -xt / aq if aq > 0.0 else 0.0
     if xt < PSI_SERIES_X:
         dpsi = 1 / 2 - xt * (1 / 3 - xt * (1 / 8 - xt * (1 / 30 - xt / 144)))
-    elif xt < _INF:
+    elif xt < math.inf:
         dpsi = -math.expm1(-xt) / (xt * xt) - math.exp(-xt) / xt
     else:
         dpsi = 0.0
@@ -374,9 +348,7 @@ def derivs_jac(p, x, u, t, iopt, dx, Jx, Ju):
     if dynamic:
         Jx[cl, j + 4] = dld_AMp
         Jx[cl, j + 5] = dld_AM
-        k3 = p[K3]
-        k4 = p[K4]
-        k7 = p[K7]
+        k3, k4, k7 = p[K3], p[K4], p[K7]
         # linear in the kinetic states (eq 4state) ...
         Jx[j + 2, j + 2], Jx[j + 2, j + 3], Jx[j + 2, j + 5] = -K1, K2, k7
         Jx[j + 3, j + 2], Jx[j + 3, j + 3], Jx[j + 3, j + 4] = K1, -(K2 + k3), k4

@@ -80,7 +80,6 @@ class Arteriole(Component):
         "volume_flow": Option(False, kind=bool, doc="the bed's volume rate leaves the midpoint into ref"),
         "pim_reference": Option("gauge", choices=("gauge", "ref"), doc="intramural pressure against 0 or P(ref)"),
     }
-    role = "conductive"
     constant_matrix = False
     # a tone input (e.g. seeded noise for CO2 and neural fluctuations, docs/body.md): its
     # waveform adds to the parameter's value
@@ -102,12 +101,9 @@ class Arteriole(Component):
         return ("mid",) if self.opts["volume_flow"] else ()
 
     def edges(self):
-        e = [("in", "out", "conductive")] if not self.opts["volume_flow"] else \
-            [("in", "mid", "conductive"), ("mid", "out", "conductive")]
-        # ref carries no flow without volume_flow; it still anchors P_im in 'ref' mode
-        if self.opts["volume_flow"]:
-            e.append(("mid", "ref", "flow"))
-        return tuple(e)
+        if not self.opts["volume_flow"]:  # ref carries no flow; it still anchors P_im in 'ref' mode
+            return (("in", "out", "conductive"),)
+        return (("in", "mid", "conductive"), ("mid", "out", "conductive"), ("mid", "ref", "flow"))
 
     def storages(self):
         return (Storage("mid", "ref", "V"),) if self.opts["volume_flow"] else ()

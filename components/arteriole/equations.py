@@ -171,9 +171,7 @@ def rates(Ca, cG, p, passive):
 def qs_numerators(a, b, p):
     """Unnormalised (M, Mp, AMp, AM) of eq 4stateSS with a = K1 = K6, b = K2 = K5 (spanning
     trees of the M-Mp-AMp-AM cycle, the matrix-tree theorem)."""
-    k3 = p[K3]
-    k4 = p[K4]
-    k7 = p[K7]
+    k3, k4, k7 = p[K3], p[K4], p[K7]
     return (b * (a * k4 + k3 * k7 + b * k7 + k4 * k7), a * (a * k4 + b * k7 + k4 * k7), a * k3 * (a + k7),
             a * b * k3)
 
@@ -190,9 +188,7 @@ def quasi_steady(a, b, p):
 @_eq
 def kinetics(K1, K2, M, Mp, AMp, AM, p):
     """d(M, Mp, AMp, AM)/dt [1/s] (eq 4state, K5 = K2, K6 = K1)."""
-    k3 = p[K3]
-    k4 = p[K4]
-    k7 = p[K7]
+    k3, k4, k7 = p[K3], p[K4], p[K7]
     return (-K1 * M + K2 * Mp + k7 * AM, K1 * M - (K2 + k3) * Mp + k4 * AMp,
             k3 * Mp - (k4 + K2) * AMp + K1 * AM, K2 * AMp - (K1 + k7) * AM)
 
@@ -235,12 +231,18 @@ def force_excess(lam, r, P, AMp, p):
 
 
 @_eq
+def friction(lam, AMp, AM, p, passive):
+    """The force per lambda_dot in F_a [N*s] (eq FaNew), l0 (G (f1 AMp + f2 AM) + floor), the floor
+    PASSIVE_FRICTION in passive mode and FRICTION_FLOOR otherwise."""
+    floor = PASSIVE_FRICTION if passive else FRICTION_FLOOR
+    return p[L0] * (overlap(lam, p) * (p[F1] * AMp + p[F2] * AM) + floor)
+
+
+@_eq
 def dlam_affine(lam, r, AMp, AM, p, passive):
     """(a [1/s], b [1/(s Pa)]) with dlambda/dt = a + b P: the force balance w_c P r = F_p + F_a
-    (eqs FT, FMFP, FaNew, passiveNew) solved for lambda_dot, friction l0 (G (f1 AMp + f2 AM) +
-    floor), the floor PASSIVE_FRICTION in passive mode and FRICTION_FLOOR otherwise."""
-    floor = PASSIVE_FRICTION if passive else FRICTION_FLOOR
-    D = p[L0] * (overlap(lam, p) * (p[F1] * AMp + p[F2] * AM) + floor)
+    (eqs FT, FMFP, FaNew, passiveNew) solved for lambda_dot, D = friction."""
+    D = friction(lam, AMp, AM, p, passive)
     return -isometric_load(lam, AMp, p) / D, p[W_C] * r / D
 
 

@@ -85,13 +85,9 @@ def unpack(x, options=None) -> dict:
     return {n: x[..., i] for i, n in enumerate(names)}
 
 
-def _as_dict(states, options) -> dict:
-    return states if isinstance(states, dict) else unpack(states, options)
-
-
 def at_ca_floor(states, options=None):
     """True where [Ca] <= CA_FLOOR (the integrator then resets dCa/dt to 0 and continues)."""
-    return np.asarray(_as_dict(states, options)["Ca"]) <= CA_FLOOR
+    return np.asarray((states if isinstance(states, dict) else unpack(states, options))["Ca"]) <= CA_FLOOR
 
 
 def clip_states(states, options=None):

@@ -138,8 +138,7 @@ def effective(params: dict) -> dict:
     """Apply ``no_speed`` (sec. dynfitting): h_w, r_dw, s_w, k_tau are multiplied by it.
 
     Returns a new dict with the scaled coefficients and ``no_speed = 1``, so applying it twice
-    is harmless.  Every model function calls it on the parameters it is given.
-    """
+    is harmless (the equations apply no_speed themselves: equations.no_rates)."""
     s = params["no_speed"]
     if np.all(np.equal(s, 1.0)):
         return params

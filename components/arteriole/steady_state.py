@@ -20,7 +20,6 @@ from . import equations as eq
 from .model import resolve_options
 
 
-
 class SteadyStateWarning(RuntimeWarning):
     """Several equilibria, or none in the searched radius range."""
 
