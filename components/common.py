@@ -9,6 +9,8 @@ current iterate q0 (f'(q0) = R + 2 S |q0|).
 """
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 
 from hemocircuit.component import Component, Observable
@@ -28,10 +30,20 @@ E_UNIT = "mmHg/mL"
 
 class Block(Component):
     """A component type whose structure does not depend on its options, declared as class
-    attributes: BRANCHES, STATES, STORAGES, OBSERVABLES and EDGES (None: from ``role``)."""
+    attributes: INTERNAL_NODES, BRANCHES, STATES, STORAGES, OBSERVABLES and EDGES (None: from
+    ``role``).  A subclass without a docstring takes its module's (a svZeroDSolver block's: its
+    equations)."""
 
-    BRANCHES = STATES = STORAGES = OBSERVABLES = ()
+    INTERNAL_NODES = BRANCHES = STATES = STORAGES = OBSERVABLES = ()
     EDGES = None
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        if cls.__doc__ is None:
+            cls.__doc__ = sys.modules[cls.__module__].__doc__
+
+    def internal_nodes(self):
+        return self.INTERNAL_NODES
 
     def branches(self):
         return self.BRANCHES

@@ -18,10 +18,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from hemocircuit.component import Component, Observable, Option, Param, State, Storage
+from hemocircuit.component import Observable, Option, Param, State, Storage
 from hemocircuit.kernels import Kernel
 
-from ..common import (branch, C_UNIT, flow_observables, imposed_flow, jit, L_UNIT, R_UNIT, S_UNIT, short,
+from ..common import (Block, branch, C_UNIT, flow_observables, imposed_flow, jit, L_UNIT, R_UNIT, S_UNIT, short,
                       stenosis_drop, stenosis_linearised)
 
 PARAMS = {
@@ -38,9 +38,7 @@ PARAMS = {
 # stenotic vessel (an affine one is stamped once per nodal solve, its iterate not read)
 @jit
 def vessel_stamp(p, x, u, t, iopt, A, b):
-    R, S = p[0], p[3]
-    if iopt[2] == 0:
-        S = 0.0
+    R, S = p[0], (p[3] if iopt[2] != 0 else 0.0)
     if iopt[0] != 0:
         Pc = x[0] / p[1]
         slope, off = stenosis_linearised(R, S, u[3])
@@ -58,7 +56,6 @@ def vessel_stamp(p, x, u, t, iopt, A, b):
 
 @jit
 def vessel_derivs(p, x, u, t, iopt, dx):
-    R, S = p[0], p[3]
     if iopt[0] != 0:
         Pc = x[0] / p[1]
         if iopt[1] != 0:
@@ -67,7 +64,7 @@ def vessel_derivs(p, x, u, t, iopt, dx):
         else:
             dx[0] = u[3] + u[4]
     elif iopt[1] != 0:
-        dx[0] = (u[0] - u[1] - stenosis_drop(R, S, x[0])) / p[2]
+        dx[0] = (u[0] - u[1] - stenosis_drop(p[0], p[3], x[0])) / p[2]
 
 
 @jit
@@ -100,7 +97,7 @@ def dc_conductance(A, b, R):
     short(A, b, 1.0 / np.maximum(R, 1e-6))
 
 
-class Vessel(Component):
+class Vessel(Block):
     """Common structure of BloodVessel and BloodVesselCRL (options, states, DC stamp)."""
 
     terminals = ("in", "out", "ref")
@@ -177,7 +174,6 @@ class Vessel(Component):
 
 
 class BloodVessel(Vessel):
-    __doc__ = __doc__
     type_name = "blood_vessel"
     svzerod_blocks = ("BloodVessel",)
 

@@ -56,7 +56,6 @@ def crl_report(p, x, u, t, iopt, out):
 
 
 class BloodVesselCRL(Vessel):
-    __doc__ = __doc__
     type_name = "blood_vessel_crl"
     svzerod_blocks = ("BloodVesselCRL",)
     KERNEL = (crl_stamp, crl_derivs, crl_report)

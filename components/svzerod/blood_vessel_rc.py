@@ -40,7 +40,6 @@ def bvrc_report(p, x, u, t, iopt, out):
 
 
 class BloodVesselRC(Block):
-    __doc__ = __doc__
     type_name = "blood_vessel_rc"
     svzerod_blocks = ("BloodVesselRC",)
     terminals = ("in", "out", "ref")

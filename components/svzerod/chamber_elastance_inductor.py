@@ -68,7 +68,6 @@ def cei_report(p, x, u, t, iopt, out):
 
 
 class ChamberElastanceInductor(Activated, Block):
-    __doc__ = __doc__
     type_name = "chamber_elastance_inductor"
     svzerod_blocks = ("ChamberElastanceInductor",)
     parameters = {**OWN_PARAMS, **act_parameters()}

@@ -59,7 +59,6 @@ def ceie_volume(p, target, iopt):
 
 
 class ChamberElastanceInductorExponential(ChamberElastanceInductor):
-    __doc__ = __doc__
     type_name = "chamber_elastance_inductor_exponential"
     svzerod_blocks = ("ChamberElastanceInductorExponential",)
     # Impedance and period at the slots chamber_elastance_inductor's kernels read (4, 5)

@@ -96,7 +96,6 @@ def sphere_report(p, x, u, t, iopt, out):
 
 
 class ChamberSphere(Block):
-    __doc__ = __doc__
     type_name = "chamber_sphere"
     svzerod_blocks = ("ChamberSphere",)
     terminals = ("in", "out", "ref")

@@ -69,7 +69,6 @@ def clcor_report(p, x, u, t, iopt, out):
 
 
 class ClosedLoopCoronary(Block):
-    __doc__ = __doc__
     type_name = "closed_loop_coronary"
     svzerod_blocks = ("ClosedLoopCoronaryLeft", "ClosedLoopCoronaryRight")
     terminals = ("in", "out", "ref")
@@ -85,6 +84,7 @@ class ClosedLoopCoronary(Block):
                   "period": Param("s", lower=0.0, lower_open=True, doc="cardiac period (the heart's)")}
     time_dependent = True
     kernel = kernel_method(clcor_stamp, clcor_derivs, clcor_observe, ("V_a", "V_im"), report=clcor_report)
+    INTERNAL_NODES = ("a", "m")
     BRANCHES = (("in", "a"), ("a", "ref"), ("m", "ref"))
     EDGES = (("in", "a", "conductive"), ("a", "ref", "pressure"), ("a", "m", "conductive"),
              ("m", "ref", "pressure"), ("m", "out", "conductive"))
@@ -95,9 +95,6 @@ class ClosedLoopCoronary(Block):
                    Observable("V_im", "mL", "intramyocardial volume", state_only=True),
                    Observable("P_im", "mmHg", "intramyocardial pressure im * P_vent"),
                    *flow_observables())
-
-    def internal_nodes(self):
-        return ("a", "m")
 
     def volume_observables(self):
         """Two stores: both reported as ID.V_a, ID.V_im (one V(ID) column cannot hold both)."""

@@ -202,7 +202,6 @@ def heart_report(p, x, u, t, iopt, out):
 
 
 class ClosedLoopHeartAndPulmonary(Block):
-    __doc__ = __doc__
     type_name = "closed_loop_heart_pulmonary"
     svzerod_blocks = ("ClosedLoopHeartAndPulmonary",)
     terminals = ("in", "out", "ref")

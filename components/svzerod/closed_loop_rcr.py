@@ -43,7 +43,6 @@ def clrcr_report(p, x, u, t, iopt, out):
 
 
 class ClosedLoopRCR(Block):
-    __doc__ = __doc__
     type_name = "closed_loop_rcr"
     svzerod_blocks = ("ClosedLoopRCR",)
     svzerod_steady_zeroed = (("C",), ("V",))  # their to_steady
@@ -55,6 +54,7 @@ class ClosedLoopRCR(Block):
     #: peripheral resistance, a thigh-cuff release; docs/body.md)
     waveform_params = ("Rd",)
     kernel = kernel_method(clrcr_stamp, clrcr_derivs, clrcr_observe, ("V", "P_c"), report=clrcr_report)
+    INTERNAL_NODES = ("c",)
     BRANCHES = (("in", "c"), ("c", "ref"))
     EDGES = (("in", "c", "conductive"), ("c", "out", "conductive"), ("c", "ref", "pressure"))
     STATES = (State("V", "mL", 1.0, "volume of C (C * P_c)"),)
@@ -62,9 +62,6 @@ class ClosedLoopRCR(Block):
     OBSERVABLES = (Observable("V", "mL", "volume of C", state_only=True),
                    Observable("P_c", "mmHg", "pressure of the capacitor", state_only=True),
                    *flow_observables())
-
-    def internal_nodes(self):
-        return ("c",)
 
     def dc_stamp(self, p, A_loc, b_loc, keep):
         """Steady state: C open (q_c = 0) unless it anchors a conservation law."""

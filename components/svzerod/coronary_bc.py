@@ -48,7 +48,6 @@ def coronary_report(p, x, u, t, iopt, out):
 
 
 class CoronaryBC(Block):
-    __doc__ = __doc__
     type_name = "coronary_bc"
     svzerod_blocks = ("CORONARY",)
     svzerod_steady_zeroed = (("Ca", "Cc"), ("V_a", "V_im"))  # their to_steady

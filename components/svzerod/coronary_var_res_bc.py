@@ -61,7 +61,6 @@ def coronary_var_res_report(p, x, u, t, iopt, out):
 
 
 class CoronaryVarResBC(CoronaryBC):
-    __doc__ = __doc__
     type_name = "coronary_var_res_bc"
     svzerod_blocks = ("CORONARY_VAR_RES",)
     # the first seven in coronary_bc's order (its compiled stamp reads p[0] = Ra1, p[3] = Ca)

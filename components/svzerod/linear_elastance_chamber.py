@@ -46,7 +46,6 @@ def lec_report(p, x, u, t, iopt, out):
 
 
 class LinearElastanceChamber(Activated, Block):
-    __doc__ = __doc__
     type_name = "linear_elastance_chamber"
     svzerod_blocks = ("LinearElastanceChamber",)
     parameters = {"Emax": Param(E_UNIT, lower=0.0, doc="active elastance (added at full activation)"),

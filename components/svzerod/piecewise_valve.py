@@ -32,7 +32,6 @@ def piecewise_valve_report(p, x, u, t, iopt, out):
 
 
 class PiecewiseValve(Block):
-    __doc__ = __doc__
     type_name = "piecewise_valve"
     svzerod_blocks = ("PiecewiseValve",)
     terminals = ("in", "out")

@@ -38,7 +38,6 @@ def rcr_report(p, x, u, t, iopt, out):
 
 
 class RCRBC(Block):
-    __doc__ = __doc__
     type_name = "rcr_bc"
     svzerod_blocks = ("RCR",)
     svzerod_steady_zeroed = (("C",), ("V",))  # their to_steady

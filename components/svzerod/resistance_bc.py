@@ -25,7 +25,6 @@ def resistance_report(p, x, u, t, iopt, out):
 
 
 class ResistanceBC(Block):
-    __doc__ = __doc__
     type_name = "resistance_bc"
     svzerod_blocks = ("RESISTANCE",)
     terminals = ("node", "ref")

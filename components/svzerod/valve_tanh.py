@@ -54,7 +54,6 @@ def valve_tanh_report(p, x, u, t, iopt, out):
 
 
 class ValveTanh(Block):
-    __doc__ = __doc__
     type_name = "valve_tanh"
     svzerod_blocks = ("ValveTanh",)
     terminals = ("in", "out")
