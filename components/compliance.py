@@ -65,10 +65,8 @@ def _exp_clipped(a):
 @_jit
 def log_pressure(k, P0, Vn, V, extended):
     """dP = P0 + exp(k (V - Vn)) (thesis eqs. Cv, P2), continued linearly below dP - P0 = EPS."""
-    if not extended:
-        return P0 + _exp_clipped(k * (V - Vn))
     V_eps = Vn + _LOGEPS / k
-    if V >= V_eps:  # then np.maximum(V, V_eps) is V
+    if not extended or V >= V_eps:  # extended: then np.maximum(V, V_eps) is V
         return P0 + _exp_clipped(k * (V - Vn))
     return P0 + EPS * (1 + k * (V - V_eps))
 

@@ -136,8 +136,7 @@ def _state_part(p, x, iopt, out):
 
 @_jit
 def observe(p, x, iopt, out):
-    """State-only observables, circuit units, in the order of ``observables(ca_order)``:
-    r [um], lambda, Ca [M], (dCa [M/s],) Cw [M], R [mmHg*s/mL], V [mL], Cb_inf [M], k_NO [m^2/s]."""
+    """State-only observables in the order of ``observables(ca_order)``, circuit units (element._OBS)."""
     r, i = _state_part(p, x, iopt, out)
     Cw = out[i - 1]
     out[i] = resistance(r, p) * _R_FACTOR                      # eq Rsa
@@ -149,9 +148,7 @@ def observe(p, x, iopt, out):
 
 @_jit
 def report(p, x, u, t, iopt, out):
-    """Every observable, circuit units, in the order of ``Arteriole.observables()``: r [um],
-    lambda, Ca, (dCa,) Cw, Cb_mean, cGMP [M], M, Mp, AMp, AM, sigma [Pa], tau_hat, Q [mL/s, the
-    bed], R [mmHg*s/mL], V [mL], F_a, F_p [N], q_out [mL/s], Cb_inf [M], k_NO [m^2/s]."""
+    """Every observable in the order of ``Arteriole.observables()``, circuit units (element._OBS)."""
     r, i = _state_part(p, x, iopt, out)
     Cw, lam = out[i - 1], out[1]
     P, dP = pressures(u, iopt)

@@ -150,8 +150,7 @@ class Arteriole(Component):
         return _finite(super().derivatives(p, x, u, t, src), "derivatives")
 
     def kernel_options(self):
-        """[ca_order (1|2), kinetics dynamic (0|1), passive (0|1), volume_flow (0|1),
-        pim_reference 'ref' (0|1)] (the iopt layout of compiled.py)."""
+        """The iopt layout of compiled.py."""
         o = self.opts
         return np.array([int(o["ca_order"]), int(o["kinetics"] == "dynamic"), int(bool(o["passive"])),
                          int(bool(o["volume_flow"])), int(o["pim_reference"] == "ref")], dtype=np.int64)
