@@ -6,7 +6,9 @@
 # rule: hemocircuit.kernels.runs; the LU: hemocircuit.linalg.
 
 
-@njit(cache=True, nogil=True)
+# held_on_bound, any_released and release_fraction are called only from the integrator:
+# internal (no Python entry wrapper unboxing the layout and work tuples: 3 s of a first compile)
+@njit(cache=True, nogil=True, internal=True, _nrt=False)
 def held_on_bound(k, x, f, lim_i, lim_b, lim_r, atol):
     """Whether limited state k sits on its bound (to LIMIT_ON_BOUND x atol) without rising: held
     there (a closed valve).  Not a limit with a reset state (lim_r >= 0: the second-order Ca
@@ -16,7 +18,7 @@ def held_on_bound(k, x, f, lim_i, lim_b, lim_r, atol):
     return lim_r[k] < 0 and x[li] <= lim_b[k] + LIMIT_ON_BOUND * atol[li] and f[li] <= 0.0
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, internal=True, _nrt=False)
 def any_released(held, lim_i, fv):
     """Whether a held state's derivative in fv is positive."""
     for k in range(lim_i.shape[0]):
@@ -25,7 +27,7 @@ def any_released(held, lim_i, fv):
     return False
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, internal=True, _nrt=False)
 def release_fraction(t, hh, tlim, x, f, xn, P, lay, work, lim_i, lim_b, lim_r, atol, held, xe, fe, xh, fh):
     """Where in the step t -> t + hh a state held on its hard limit at t is released: the
     earliest fraction of the step at which one of them, kept on its bound, has a positive
