@@ -46,11 +46,8 @@ _COMMON_PARAMETERS = {
 }
 
 
-# --- the equations (hemocircuit.kernels contract) -------------------------------------------
-# State [C] (M); iopt = [thesis] (units_reading: 0 consistent, 1 thesis); observables: C
-# (and tracer_pool's C_feed).  p (the ``parameters`` order): V, k_d, h, l, C_x (both) then C_0,
-# C_inf, k_feed, L_feed, n_feed (tracer_pool).  tracer_pool local unknowns [P_a, P_b, q] (q the
-# metered flow a -> b); tissue_pool has none.
+# --- the equations (hemocircuit.kernels contract): iopt = [thesis]; p in the ``parameters``
+# order (the last five tracer_pool's); tracer_pool's local unknowns [P_a, P_b, q] (q: a -> b)
 _V, _K_D, _H, _L, _C_X, _C_0, _C_INF, _K_FEED, _L_FEED, _N_FEED = range(10)
 
 
