@@ -40,7 +40,7 @@ class Block(Component):
     def __init_subclass__(cls, **kwargs):
         super().__init_subclass__(**kwargs)
         if cls.__doc__ is None:
-            cls.__doc__ = sys.modules[cls.__module__].__doc__
+            cls.__doc__ = getattr(sys.modules.get(cls.__module__), "__doc__", None)
 
     def internal_nodes(self):
         return self.INTERNAL_NODES
