@@ -155,3 +155,26 @@ def test_bdf_rejects_tableau_options():
     s = CompiledSystem.of(c)
     with pytest.raises(ValueError, match="Rosenbrock"):
         s.integrate(np.linspace(0, 1, 3), np.zeros(c.nx), s.params(c)[0], method="bdf", jac_reuse=3)
+
+
+SHARED_HEART = os.path.join(os.environ.get("SVZEROD_CASES", "/work/shared/svzerod"), "cases",
+                            "closedLoopHeart_singleVessel.json")
+
+
+@pytest.mark.skipif(not os.path.isfile(SHARED_HEART), reason="svZeroDSolver's shared cases not present")
+def test_bdf_at_a_valve_opening_says_to_use_rodas5p():
+    """The BDF method does not locate where a closed valve's held flow is released (the
+    Rosenbrock methods do): on the monolithic closed-loop heart its step collapses at the first
+    opening after the start (t = 0.45 s).  The error names the state and says which integrator
+    runs the circuit; that one runs the same second."""
+    from hemocircuit.errors import SolverError
+    from hemocircuit.svzerod.loading import load_svzerod
+
+    c = load_svzerod(SHARED_HEART)
+    with pytest.raises(SolverError) as err:
+        c.simulate(1.0, dt=0.01, integrator="bdf")
+    msg = str(err.value)
+    assert "step size too small" in msg and "CLH.Q_LA" in msg
+    assert "--integrator rodas5p" in msg
+    r = c.simulate(1.0, dt=0.01, integrator="rodas5p")
+    assert r.t[-1] == pytest.approx(1.0)

@@ -220,9 +220,23 @@ def _range(system, c, P, tpts, x, rtol, atol, h0, max_step, stats, ts, xs, segs,
         if st["status"] < 0:
             bad = X[good][-1] if good.any() else x
             t_bad = float(tpts[good][-1]) if good.any() else float(tpts[0])
-            raise SolverError(f"compiled integrator failed: {st['message']}{fastest_state(system, c, P, t_bad, bad)}",
+            raise SolverError(f"compiled integrator failed: {st['message']}{fastest_state(system, c, P, t_bad, bad)}"
+                              f"{_bdf_hint(system, method, st['status'])}",
                               time=st["t"], state=c.state_dict(bad), partial=collect(c, ts, xs, segs))
         return X[-1].copy(), used
+
+
+def _bdf_hint(system, method, status):
+    """How to go on when the BDF method's step collapsed in a circuit with hard limits: it
+    does not locate where a held state (a closed valve's flow) is released, the Rosenbrock
+    methods do (engine_rosenbrock.release_fraction); the whole-body heart stops it at its
+    first valve opening."""
+    from ..kernels.tableaus import BDF
+
+    if method != BDF or status != -1 or system.lim_i.size == 0:
+        return ""
+    return ("; the bdf integrator does not locate where a state held on its hard limit (a closed valve's flow) "
+            "is released: run this circuit with --integrator rodas5p (the default), which does")
 
 
 def fastest_state(system, c, P, t, x):
