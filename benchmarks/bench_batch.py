@@ -38,10 +38,11 @@ def bench_freq(loop_sample=6):
              ({"art.tau_Ca": "1 s", "Pa.value": "30 mmHg"})]
     workers = default_workers()
     t0 = time.perf_counter()
-    rows = []
+    unsettled = errors = 0
     for case in cases:
-        cc = c.with_values(case)
-        rows += frequency_response(cc, freqs, workers=workers)
+        res = frequency_response(c.with_values(case), freqs, workers=workers)
+        unsettled += int(np.sum(~np.asarray(res["settled"], dtype=bool)))
+        errors += int(np.sum(np.asarray(res["error"]) != ""))
     wall = time.perf_counter() - t0
     n = len(cases) * len(freqs)
     # one by one: a sample of the same runs, each alone (batch of one), extrapolated
@@ -54,7 +55,7 @@ def bench_freq(loop_sample=6):
     loop = (time.perf_counter() - t1) / (len(sample) * len(cases)) * n
     res = {"runs": n, "wall_s": wall, "workers": workers, "runs_per_s_per_core": n / wall / workers,
            "one_by_one_estimate_s": loop, "speedup": loop / wall,
-           "unsettled": sum(1 for r in rows if not r.get("settled", True)), "errors": sum(1 for r in rows if r.get("error"))}
+           "unsettled": unsettled, "errors": errors}
     print(json.dumps(res, indent=1))
     save("freq_sweep", res)
 
@@ -65,15 +66,16 @@ def bench_envelope(n_pressures=40, t_end=1000.0, rtol=1e-6):
     zetas = [0.0, 0.05, 0.1, 0.15, 0.2, 0.3]
     workers = default_workers()
     t0 = time.perf_counter()
-    rows = envelope(c, ("Pa.value", list(pressures)), [("art.zeta", zetas)], outputs=["art.r", "Q(Rla)"],
-                    t_end=t_end, workers=workers, rtol=rtol)
+    env = envelope(c, ("Pa.value", list(pressures)), [("art.zeta", zetas)], outputs=["art.r", "Q(Rla)"],
+                   t_end=t_end, workers=workers, rtol=rtol)
     wall = time.perf_counter() - t0
-    n = len(rows)
-    i80 = [r for r in rows if abs(float(r["Pa.value"]) - 80.0) < 3 and r["art.zeta"] == 0.1]
-    res = {"rtol": rtol, "r_range_Pa80_zeta0.1": [(r["art.r min"], r["art.r max"]) for r in i80 if "art.r min" in r],
+    n = env.n_rows
+    near80 = (np.abs(env["Pa.value"] - 80.0) < 3) & (env["art.zeta"] == 0.1)
+    res = {"rtol": rtol, "r_range_Pa80_zeta0.1": [(lo, hi) for lo, hi in zip(env["min(art.r)"][near80],
+                                                                           env["max(art.r)"][near80])],
            "runs": n, "t_end_s": t_end, "wall_s": wall, "workers": workers, "runs_per_s_per_core": n / wall / workers,
-           "oscillating": sum(1 for r in rows if r.get("oscillating")),
-           "errors": sum(1 for r in rows if "error" in r)}
+           "oscillating": int(np.sum(env["oscillating"])),
+           "errors": int(np.sum(np.asarray(env["error"]) != ""))}
     # one by one: a few members alone
     t1 = time.perf_counter()
     picks = [(80.0, 0.1), (120.0, 0.0), (40.0, 0.3)]
