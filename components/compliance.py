@@ -63,9 +63,16 @@ def _exp_clipped(a):
 
 
 @_jit
+def linear_below(k, Vn):
+    """V_eps = Vn + ln(EPS) / k [mL]: where dP - P0 = EPS, below which the log law is continued
+    linearly (the extended law, the compliance's floor).  Numbers or numpy arrays."""
+    return Vn + _LOGEPS / k
+
+
+@_jit
 def log_pressure(k, P0, Vn, V, extended):
     """dP = P0 + exp(k (V - Vn)) (thesis eqs. Cv, P2), continued linearly below dP - P0 = EPS."""
-    V_eps = Vn + _LOGEPS / k
+    V_eps = linear_below(k, Vn)
     if not extended or V >= V_eps:  # extended: then np.maximum(V, V_eps) is V
         return P0 + _exp_clipped(k * (V - Vn))
     return P0 + EPS * (1 + k * (V - V_eps))
@@ -81,7 +88,7 @@ def log_observe(p, x, iopt, out):
     k, Vn = p[0], p[2]
     V = x[0]
     out[0] = _observed_volume(V, iopt)
-    V_eps = Vn + _LOGEPS / k
+    V_eps = linear_below(k, Vn)
     if V >= V_eps:
         out[1] = math.exp(-k * (V - Vn)) / k
     else:
@@ -155,5 +162,5 @@ class LogCompliance(_Store):
         """The inverse law V(dP) (the DC guess's state), continued linearly below EPS as log_pressure."""
         k, P0, Vn = p["k"], p["P0"], p["Vn"]
         e = dP - P0
-        V_eps = Vn + np.log(self.EPS) / k
+        V_eps = linear_below.py_func(k, Vn)
         return np.where(e >= self.EPS, Vn + np.log(np.maximum(e, self.EPS)) / k, V_eps + (e / self.EPS - 1) / k)

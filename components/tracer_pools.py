@@ -27,6 +27,7 @@ import numpy as np
 from hemocircuit.component import Observable, Option, Param, State
 from hemocircuit.units import M3_PER_ML
 
+from .arteriole.equations import outlet_concentration
 from .common import Block, branch, jit as _jit, kernel_method, observe_first_state, per_element
 
 _READINGS = ("consistent", "thesis")
@@ -74,7 +75,7 @@ def tracer_feed(p, q, thesis):
     qs = q * M3_PER_ML
     K = p[_K_FEED] * p[_L_FEED] * (1.0 if thesis else p[_N_FEED])
     x = K / qs if qs > 0 else math.inf
-    return (p[_C_INF] - p[_C_0]) * (-math.expm1(-x)) + p[_C_0]
+    return outlet_concentration(p[_C_INF], p[_C_0], x)
 
 
 @_jit

@@ -294,9 +294,11 @@ def cb_mean(Cw, r, x, h_w, p):
 
 
 @_eq
-def cb_outlet(Cw, r, x, h_w, p):
-    """Blood [NO] at the outlet [M] (eq cinv): (Cb_inf - C_in)(1 - e^-x) + C_in."""
-    return (cb_inf(Cw, r, h_w, p) - p[C_IN]) * (-np.expm1(-x)) + p[C_IN]
+def outlet_concentration(c_far, c_in, x):
+    """Concentration at the outlet of a perfused length with transport number x (eq cinv):
+    (c_far - c_in)(1 - e^-x) + c_in; the blood's [NO] with c_far = Cb_inf (the tracer pools'
+    feed too).  x = inf (no flow) gives c_far."""
+    return (c_far - c_in) * (-np.expm1(-x)) + c_in
 
 
 @_eq

@@ -26,7 +26,8 @@ def test_cbbar_equals_integrated_NO1(art, kuo, Q):
     eq, pv = art.equations, art.equations.vector(p)
     x = eq.transport_number(Q, r, p["h_w"], pv)
     np.testing.assert_allclose(eq.cb_mean(Cw, r, x, p["h_w"], pv), mean_num, rtol=1e-7)
-    np.testing.assert_allclose(eq.cb_outlet(Cw, r, x, p["h_w"], pv), end_num, rtol=1e-7)
+    outlet = eq.outlet_concentration(eq.cb_inf(Cw, r, p["h_w"], pv), p["C_in"], x)
+    np.testing.assert_allclose(outlet, end_num, rtol=1e-7)
 
 
 def test_psi_limits_without_nan(art, kuo):
