@@ -23,12 +23,12 @@ from hemocircuit.units import M3_PER_ML, PA_PER_MMHG
 from ..common import conductance
 
 from .equations import (C_IN, CA_FLOOR, DP0, ETA, F1, F2, GAMMA_WB, K3, K4, K7, K_CA1, K_CA2, K_CGMP, L0, L_VES,
-                        LAMBDA_OPT, LN10, LN_95, MAX_EXP, MU_B, N_CA1, N_CA2, N_CGMP, N_VES, NO_L, NO_U, OMEGA_N,
+                        LAMBDA_OPT, LN10, MAX_EXP, MU_B, N_CA1, N_CA2, N_CGMP, N_VES, NO_L, NO_U, OMEGA_N,
                         PCA_L, PCA_U, PCGMP_L, PCGMP_U, PSI_SERIES_X, Q1, Q2, Q3, R0, R_DB, SIGMA_L, SIGMA_U, T_W,
                         TAU_CA, V_XB, W_C, ZETA, active_force, bed_volume, ca_bar, cb_inf, cb_mean, cgmp, d2Ca,
                         dCa_first, dCw, dlam_affine, dr_dlambda, flow, friction, kinetics, l2r, no_loss, no_rates,
-                        overlap, passive_force, psi, qs_numerators, quasi_steady, rates, resistance, tau_hat,
-                        transport_number, wall_area, wall_stress)
+                        overlap, passive_force, psi, qs_numerators, quasi_steady, rates, resistance,
+                        sigmoid_fraction, tau_hat, transport_number, wall_area, wall_stress)
 
 # --- iopt slots ---------------------------------------------------------------------------
 OPT_CA_ORDER, OPT_DYNAMIC, OPT_PASSIVE, OPT_VOLUME_FLOW, OPT_PIM_REF = 0, 1, 2, 3, 4
@@ -187,10 +187,8 @@ def observables(ca_order: int) -> tuple:
 # The values come from the equations above; these functions add only their derivatives.
 @_eq
 def _sigmoid_slope(x, x_L, x_U, y_L, y_U):
-    """d/dx of equations.sigmoid_5_95."""
-    z_half = 0.5 * (x_L + x_U)
-    k_z = (x_L - x_U) / (2.0 * LN_95)
-    s = 1.0 / (1.0 + math.exp(-((x - z_half) / k_z)))
+    """d/dx of equations.sigmoid_5_95: (y_U - y_L) s (1 - s) / k_z."""
+    s, k_z = sigmoid_fraction(x, x_L, x_U)
     return (y_U - y_L) * s * (1.0 - s) / k_z
 
 

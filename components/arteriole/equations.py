@@ -109,12 +109,19 @@ def wall_area(p):
 
 # --- sigmoids (eqs sigmoiddef, NOcGMP, ssCa) ------------------------------------------------
 @_eq
-def sigmoid_5_95(x, x_L, x_U, y_L, y_U):
-    """y_L + (y_U - y_L) / (1 + exp(-(x - z_half)/k_z)), z_half = (x_L + x_U)/2,
-    k_z = (x_L - x_U)/(2 ln(1/0.95 - 1)) (eq sigmoiddef): 5 % of the step at x_L, 95 % at x_U."""
+def sigmoid_fraction(x, x_L, x_U):
+    """(s, k_z) of eq sigmoiddef: the step's fraction s = 1 / (1 + exp(-(x - z_half)/k_z)),
+    z_half = (x_L + x_U)/2, k_z = (x_L - x_U)/(2 ln(1/0.95 - 1)): s = 0.05 at x_L, 0.95 at x_U."""
     z_half = 0.5 * (x_L + x_U)
     k_z = (x_L - x_U) / (2.0 * LN_95)
-    return y_L + (y_U - y_L) * (1.0 / (1.0 + np.exp(-((x - z_half) / k_z))))
+    return 1.0 / (1.0 + np.exp(-((x - z_half) / k_z))), k_z
+
+
+@_eq
+def sigmoid_5_95(x, x_L, x_U, y_L, y_U):
+    """y_L + (y_U - y_L) s(x) (eq sigmoiddef, s of :func:`sigmoid_fraction`)."""
+    s, _ = sigmoid_fraction(x, x_L, x_U)
+    return y_L + (y_U - y_L) * s
 
 
 @_eq
