@@ -97,9 +97,15 @@ def tracer_stamp(p, x, u, t, iopt, A, b):
 
 
 @_jit
+def pool_rate(a, b, vol, C):
+    """dC/dt [M/s] of a pool's balance V dC/dt = a - b C (both pools)."""
+    return (a - b * C) / vol
+
+
+@_jit
 def tracer_derivs(p, x, u, t, iopt, dx):
     a, bb, vol = tracer_balance(p, u[2], iopt)
-    dx[0] = (a - bb * x[0]) / vol
+    dx[0] = pool_rate(a, bb, vol, x[0])
 
 
 @_jit
@@ -124,7 +130,7 @@ def tissue_stamp(p, x, u, t, iopt, A, b):
 @_jit
 def tissue_derivs(p, x, u, t, iopt, dx):
     a, bb, vol = tissue_balance(p, iopt)
-    dx[0] = (a - bb * x[0]) / vol
+    dx[0] = pool_rate(a, bb, vol, x[0])
 
 
 class _Pool(Block):
