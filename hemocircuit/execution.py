@@ -329,6 +329,10 @@ def finish_batch(res, interrupted=None):
 
 # ---------------------------------------------------------------- the front's signal handler ----
 _pending = []  # a signal that arrived inside compiled code, not yet raised
+#: True once an Interrupted has been raised (by the handler or by check_interrupted): later
+#: signals, among them the handler's own re-delivery of a kept one, are ignored while stopping
+_stopping = [False]
+_redeliver = []  # the timer that delivers a kept signal again (cancelled once it is raised)
 
 
 def catch_signals():
@@ -339,19 +343,21 @@ def catch_signals():
     compiled integrators' pieces call it) or delivered again shortly.  Returns the previous
     handlers for :func:`restore_signals`."""
     import signal
-    state = {"stopping": False}
+    _stopping[0] = False
 
     def handler(signum, frame):
-        if state["stopping"]:
+        if _stopping[0]:
             return
         if frame is not None and f"{os.sep}numba{os.sep}" in frame.f_code.co_filename:
             _pending[:] = [signum]
             import threading
             again = threading.Timer(0.2, os.kill, (os.getpid(), signum))
             again.daemon = True
+            _cancel_redelivery()
+            _redeliver.append(again)
             again.start()
             return
-        state["stopping"] = True
+        _stopping[0] = True
         _pending.clear()
         raise Interrupted(signum)
 
@@ -364,16 +370,26 @@ def catch_signals():
     return previous
 
 
+def _cancel_redelivery():
+    while _redeliver:
+        _redeliver.pop().cancel()
+
+
 def restore_signals(previous):
     import signal
     _pending.clear()
+    _cancel_redelivery()  # a re-delivery after this would meet the default handler: killed, not 143
     for sig, h in previous.items():
         signal.signal(sig, h)
 
 
 def check_interrupted():
-    """Raise the Interrupted of a signal kept while compiled code ran (see catch_signals)."""
+    """Raise the Interrupted of a signal kept while compiled code ran (see catch_signals).
+    From then on the process is stopping: the kept signal's re-delivery (0.2 s later) is
+    ignored, instead of raising a second Interrupted inside the partial result's writing."""
     if _pending:
         signum = _pending.pop()
         _pending.clear()
+        _stopping[0] = True
+        _cancel_redelivery()
         raise Interrupted(signum)
