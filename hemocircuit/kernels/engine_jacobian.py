@@ -338,10 +338,11 @@ def jacobian_into(t, x, f0, P, lay, work, jw, scales, J, ft, xt, ftmp, autonomou
 
 
 @njit(cache=True, nogil=True)
-def jacobian(t, x, P, lay, scales, local):
-    """State Jacobian (nx, nx) at (t, x) (allocating; for tests and single calls): element-local
-    if ``local`` (1: with the kernels' analytic partials, 2: differences only; where it
-    applies), else (0) whole right-hand sides differenced."""
+def jacobian_parts(t, x, P, lay, scales, local, want_ft):
+    """(J (nx, nx), df/dt (nx,)) at (t, x) (allocating; for tests and single calls), as the
+    integrator computes them: element-local if ``local`` (1: with the kernels' analytic
+    partials, 2: differences only; where it applies), else (0) whole right-hand sides
+    differenced; df/dt (the time column) only with ``want_ft``, else zeros."""
     nx = x.shape[0]
     work = make_work(lay)
     jw = make_jac_work(lay)
@@ -349,22 +350,6 @@ def jacobian(t, x, P, lay, scales, local):
     f0 = np.empty(nx)
     rhs_into(t, x, P, lay, work, f0)
     J = np.zeros((nx, nx))
-    jacobian_into(t, x, f0, P, lay, work, jw, scales, J, np.zeros(nx), np.empty(nx), np.empty(nx), True, local)
-    return J
-
-
-@njit(cache=True, nogil=True)
-def time_derivative(t, x, P, lay, scales, local):
-    """df/dt (nx,) at (t, x) at fixed states (allocating; for tests and single calls): the
-    Jacobian's time column if ``local`` (1 or 2, where it applies), else (0) a whole right-hand
-    side differenced in t."""
-    nx = x.shape[0]
-    work = make_work(lay)
-    jw = make_jac_work(lay)
-    prepare_static(t, x, P, lay, work)
-    f0 = np.empty(nx)
-    rhs_into(t, x, P, lay, work, f0)
     ft = np.zeros(nx)
-    jacobian_into(t, x, f0, P, lay, work, jw, scales, np.zeros((nx, nx)), ft, np.empty(nx), np.empty(nx), False,
-                  local)
-    return ft
+    jacobian_into(t, x, f0, P, lay, work, jw, scales, J, ft, np.empty(nx), np.empty(nx), not want_ft, local)
+    return J, ft

@@ -29,7 +29,7 @@
 #                    time-dependent type, a waveform or an expression on its parameters), else 0
 # Units: as the numpy path -- pressures mmHg, flows mL/s, time s, states in declared units.
 #
-# Entry points called from Python: rhs, rhs_batch, nodal_outputs, jacobian, time_derivative,
+# Entry points called from Python: rhs, rhs_batch, nodal_outputs, jacobian_parts,
 # integrate_batch(_bdf).
 # Every other compiled function is ``internal=True`` (the header's njit): numba then builds no
 # Python/C wrapper for it, whose unboxing of the layout and work tuples cost ~15 % of the first

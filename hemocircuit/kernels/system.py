@@ -96,15 +96,18 @@ class CompiledSystem:
         element-local, composed through the nodal solve (``local`` True or 1: with the kernels'
         analytic partials where they have them; 2: element-local differences only; where it
         applies) or (False / 0) one whole right-hand side per state -- the integrator's ways."""
-        return self.mod.jacobian(float(t), np.asarray(x, dtype=float), np.asarray(P, dtype=float), self.lay,
-                                 self.scales, int(local))
+        return self._parts(t, x, P, local, False)[0]
 
     def time_derivative(self, t, x, P, local=True):
         """df/dt (nx,) at (t, x) with the states held: the integrator's (the element-local
         Jacobian's time column where it applies, ``local`` as in :meth:`jacobian`) or (False / 0)
         a whole right-hand side differenced in t."""
-        return self.mod.time_derivative(float(t), np.asarray(x, dtype=float), np.asarray(P, dtype=float), self.lay,
-                                        self.scales, int(local))
+        return self._parts(t, x, P, local, True)[1]
+
+    def _parts(self, t, x, P, local, want_ft):
+        """engine_jacobian.jacobian_parts: one compiled entry for both."""
+        return self.mod.jacobian_parts(float(t), np.asarray(x, dtype=float), np.asarray(P, dtype=float), self.lay,
+                                       self.scales, int(local), bool(want_ft))
 
     def integrate(self, t_out, x0, P, rtol=1e-6, atol=None, breaks=(), h0=1e-3, hmax=np.inf,
                   max_steps=10_000_000, method=None, kinks=(), **tab_options):
