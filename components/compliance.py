@@ -15,6 +15,7 @@ import math
 import numpy as np
 
 from hemocircuit.component import Observable, Option, Param, State, Storage
+from hemocircuit.kernels.jit import equation
 
 from .common import Block, branch, jit as _jit, kernel_method, open_branches
 
@@ -62,10 +63,11 @@ def _exp_clipped(a):
     return math.exp(a)
 
 
-@_jit
+@equation(cache=True, nogil=True, error_model="numpy", _nrt=False)
 def linear_below(k, Vn):
     """V_eps = Vn + ln(EPS) / k [mL]: where dP - P0 = EPS, below which the log law is continued
-    linearly (the extended law, the compliance's floor).  Numbers or numpy arrays."""
+    linearly (the extended law, the compliance's floor).  Compiled in the kernels, numpy arrays
+    from Python (the inverse law)."""
     return Vn + _LOGEPS / k
 
 
@@ -162,5 +164,5 @@ class LogCompliance(_Store):
         """The inverse law V(dP) (the DC guess's state), continued linearly below EPS as log_pressure."""
         k, P0, Vn = p["k"], p["P0"], p["Vn"]
         e = dP - P0
-        V_eps = linear_below.py_func(k, Vn)
+        V_eps = linear_below(k, Vn)
         return np.where(e >= self.EPS, Vn + np.log(np.maximum(e, self.EPS)) / k, V_eps + (e / self.EPS - 1) / k)
