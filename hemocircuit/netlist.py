@@ -280,8 +280,8 @@ def _load_child(name, overrides, where, path, chain, access, svzerod):
             e.values = resolve_files(_substitute(e.values, params, {"file": e.file, "element": e.id}),
                                      os.path.dirname(e.file), access, {"file": e.file, "element": e.id})
     return {"elements": raw["elements"], "constraints": raw["constraints"], "ic": raw["ic"], "ports": raw["ports"],
-            "parameters": params, "file": child, "edit": lambda elements, remove, change: _edit(elements, remove, change, path, child,
-                                                                          access)}
+            "parameters": params, "file": child,
+            "edit": lambda elements, remove, change: _edit(elements, remove, change, path, child, access)}
 
 
 def _outputs(value, path):

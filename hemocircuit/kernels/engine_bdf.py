@@ -17,7 +17,7 @@ BDF_NEWTON_MAXITER = 4
 #: test (nlscoef) at every rtol.  0.03 (or the round-off floor 10 eps/rtol, larger below
 #: rtol 7e-14): 2.0 a step, a forced run's integration 27 % less time, freq's error against
 #: a roadrunner rtol 1e-11 reference 6.2e-6 / 2.3e-4 deg against 6.0e-6 / 2.2e-4
-#: (docs/performance.md, session 16)
+#: (measured on freq's forced runs)
 BDF_NEWTON_TOL = 0.03
 BDF_MIN_FACTOR = 0.2
 BDF_MAX_FACTOR = 10.0

@@ -107,7 +107,7 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
 
     One function, not a per-member function called (or inlined) here: numba's IR inlining deep-copies
     the callee's blocks, each with a copy of the whole scope (5.6 s of a first compilation), and a
-    separate function is compiled, linked and code-generated once more (docs/performance.md, session 11)."""
+    separate function is compiled, linked and code-generated once more."""
     B = X0.shape[0]
     out_all = np.empty((B, t_out_all.shape[1], X0.shape[1]))
     stats = np.zeros((B, 6))

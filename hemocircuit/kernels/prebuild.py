@@ -87,7 +87,7 @@ def before_integrator(system):
     compiling them a second time.
     Without this the integrator reaches the Jacobian in its own typing order (make_work,
     prepare_static, rhs_into, local_jacobian_into) and compiled it itself whenever the helper was
-    seconds late (docs/performance.md, session 11).  Once per engine module and process."""
+    seconds late.  Once per engine module and process."""
     import time
 
     proc = _pending.pop(system.mod.__name__, None)

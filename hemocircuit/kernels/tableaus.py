@@ -187,13 +187,13 @@ JAC_REUSE = {"ros34pw2": 6, "ros34pw3": 6, "rodas4": 1, "rodas5p": 1}
 #: other integrator
 BDF = "bdf"
 #: the engine's default method: RODAS5P (order 5, fresh element-local Jacobian each step).
-#: Measured with the PI controller (session 5): the same CPU as ROS34PW2 at rtol 1e-5 and 55x
+#: Measured with the PI controller: the same CPU as ROS34PW2 at rtol 1e-5 and 55x
 #: closer to the reference cycle; BDF 2-3x less CPU on the vasomotion run at rtol 1e-6 to 1e-8
 #: (its Jacobian is kept: ~2.8 right-hand sides per step against ~8.8 plus a Jacobian) and its
 #: limit cycle within 3.3e-5 of the reference at 1e-6, but it damps a slowly growing
 #: oscillation: in the envelope map's member Pa = 70 mmHg, zeta = 0.2 its r max at t = 1000 s
 #: is 4.3e-3 off a rtol 1e-9 reference at rtol 1e-6 (13 % of the amplitude), RODAS5P's 6.8e-4
-#: at 1e-5 (2.6e-3 with the predictive controller, RODAS5P's default since session 8: its
+#: at 1e-5 (2.6e-3 with the predictive controller, RODAS5P's default: its
 #: longer steps cost accuracy on that member, docs/performance.md).  So BDF is used where it is
 #: as accurate: the forced runs of ``freq``.
 DEFAULT = "rodas5p"
@@ -202,8 +202,7 @@ DEFAULT = "rodas5p"
 #: Hairer & Wanner's RODAS/RADAU5 (IV.8 (8.21)): the smaller of the I rule 0.9 h err^(-1/q) and
 #: 0.9 h (h / h_prev) (err_prev / err^2)^(1/q), err_prev >= 1e-2; growth within [0.2, 6]; after
 #: a rejection, as their code, h 0.9 err^(-1/q) within [0.2 h, 0.9 h].  "predictive-halving": the
-#: same, but a rejection at least halves the step (pi's rule, and predictive's before session
-#: 14).  Measured (docs/performance.md, session 14): predictive takes 20 % fewer steps and half
+#: same, but a rejection at least halves the step (pi's rule).  Measured: predictive takes 20 % fewer steps and half
 #: the rejections on the vasomotion envelope (rtol 1e-5), 4 % fewer on the vasomotion run at
 #: 1e-6; predictive-halving gives shooting a smoother period map (closedLoopHeart_singleVessel
 #: from 16 starts: 6.25 Anderson periods on average against 7.0), so periodic uses it.
