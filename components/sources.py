@@ -52,9 +52,7 @@ class _Source(Component):
     waveform_params = ("value",)
     drive = Drive(value="value", amplitude="amplitude", frequency="frequency", phase="phase", start="start")
     time_dependent = True
-
-    def varies_in_time(self, p):
-        return bool(np.any(p["amplitude"] != 0))
+    time_switch = "amplitude"  # no sine: a constant value
 
     def breakpoints(self, p, t0, t1):
         """Sine starts in (t0, t1) of the elements whose sine term is on (amplitude != 0)."""

@@ -179,6 +179,9 @@ class Component:
     linear_in_pressure: bool = True
     #: True when the element drives its branch from a time-dependent source value
     time_dependent: bool = False
+    #: a parameter whose value 0 makes a time-dependent type constant in time (a source's sine
+    #: amplitude): the stamps of such values are static, and a circuit of them autonomous
+    time_switch: str | None = None
 
     #: option overrides used while solving for a steady state (must not change the states)
     steady_opts: dict = {}
@@ -229,8 +232,11 @@ class Component:
                 and not any(self.matrix_reads(name) for name in expression_params))
 
     def varies_in_time(self, p) -> bool:
-        """True if the stamps of these parameter values change with time (sources with a sine)."""
-        return self.time_dependent
+        """True if the stamps of these parameter values change with time: a time-dependent
+        type, unless its :attr:`time_switch` is 0 for every element and member."""
+        if not self.time_dependent or self.time_switch is None:
+            return self.time_dependent
+        return bool(np.any(np.asarray(p[self.time_switch]) != 0))
 
     # --- checks ------------------------------------------------------------------------
     def check(self, p: dict[str, np.ndarray]) -> list[tuple[int, str]]:

@@ -664,3 +664,33 @@ def test_nodal_newton_with_condensation_matches_numpy_path(tmp_path):
             f_np, f_c = c.rhs(t, x), system.rhs(t, x, P)
             assert np.allclose(f_c, f_np, rtol=1e-8, atol=1e-10 * np.max(np.abs(f_np))), (t, p_down, f_c, f_np)
     assert seen == {"open", "closed", "band"}
+
+
+def test_a_source_without_its_sine_is_static():
+    """A pressure source whose sine amplitude is 0 in every member is stamped once per parameter
+    set and leaves the circuit autonomous (CompiledSystem.lay_for); with a sine it is stamped
+    at every evaluation.  R-C driven by Pin = 80 + A sin(w t) from Pa(0) = 80 (tau = RC = 1 s):
+    Pa = 80 + A / (1 + (w tau)^2) (sin w t - w tau cos w t + w tau exp(-t / tau)), in one batch with a
+    member without the sine (Pa = 80), each member as it runs alone."""
+    from hemocircuit.batch_integrator import integrate
+
+    c = hc.load(os.path.join(TEST_NETLISTS, "base_rc.yaml"))  # R = 2 mmHg s/mL, C = 0.5 mL/mmHg
+    system = CompiledSystem.of(c)
+    ep = system.layout.fields.ep  # the source's element index: the one holding its columns of P
+    src = int(np.searchsorted(ep, system.layout.slots[("Ps", "value")], side="right") - 1)
+    lay, autonomous = system.lay_for(system.params(c))
+    st = system.layout.fields._make(lay).st
+    assert autonomous and st[src] == 1 and system.layout.fields.st[src] == 0
+    b = c.batch(2).with_values({"Ps.amplitude": np.array([0.0, 5.0]), "Ps.frequency": "0.5 Hz"})
+    lay, autonomous = system.lay_for(system.params(b))
+    assert not autonomous and system.layout.fields._make(lay).st[src] == 0
+    t = np.linspace(0.0, 6.0, 61)
+    x0 = np.full((2, c.nx), 0.5 * 80.0)  # V = C Pa
+    both = integrate(b, x0, t, rtol=1e-9)
+    w, A = 2 * np.pi * 0.5, 5.0
+    expect = 80.0 + A / (1 + w ** 2) * (np.sin(w * t) - w * np.cos(w * t) + w * np.exp(-t))
+    assert np.max(np.abs(both.x[1, :, 0] / 0.5 - expect)) < 1e-6
+    assert np.max(np.abs(both.x[0, :, 0] / 0.5 - 80.0)) < 1e-9
+    for m in range(2):
+        alone = integrate(b.subset([m]), x0[m:m + 1], t, rtol=1e-9)
+        assert np.array_equal(both.x[m], alone.x[0]), m

@@ -38,6 +38,11 @@ class Layout:
     slots: dict            # (element id, parameter) -> column of P
     n_params: int
     autonomous: bool = False  # no waveform, no time-dependent element: f does not depend on t
+    #: (element index, column of P) of the elements static but for their type's time switch
+    #: (Component.time_switch, a source's sine amplitude): with it 0 in every member they are
+    #: static (CompiledSystem.lay_for); timed: every element of a time-dependent type
+    switches: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), dtype=np.int64))
+    timed: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     #: (element ids, parameter) -> their columns of P (param_matrix; filled on first use)
     columns: dict = field(default_factory=dict, repr=False)
 
@@ -109,7 +114,7 @@ def build_layout(circuit) -> Layout | None:
         return None
     kernels = engine_kernels(pairs)
     codes = {(k.stamp, k.derivs, k.observe): i for i, k in enumerate(kernels)}
-    et, L, S, cm, st, td = [], [], [], [], [], []
+    et, L, S, cm, st, td, timed, switches = [], [], [], [], [], [], [], []
     ep, ex, eu, eo, eb = [0], [0], [0], [0], [0]
     ui, io = [], []
     slots, obs_index, elem_index = {}, {}, {}
@@ -123,9 +128,14 @@ def build_layout(circuit) -> Layout | None:
             const = g.comp.matrix_constant(own)  # expressions and waveforms change in time
             cm.append(int(const))
             # 1 static, 2 stamped at every Newton iterate, 0 once per nodal solve (engine_nodal)
+            static = g.comp.linear_in_pressure and const and g.S == 0 and not own
             st.append(2 if not g.comp.linear_in_pressure
-                      else (1 if (const and g.S == 0 and not own and not g.comp.time_dependent) else 0))
+                      else (1 if (static and not g.comp.time_dependent) else 0))
             td.append(int(bool(own) or g.comp.time_dependent))
+            if g.comp.time_dependent:
+                timed.append(len(et) - 1)
+                if static and g.comp.time_switch is not None:
+                    switches.append((len(et) - 1, ep[-1] + names.index(g.comp.time_switch)))
             L.append(g.L)
             S.append(g.S)
             for name in names:
@@ -184,7 +194,8 @@ def build_layout(circuit) -> Layout | None:
                        nonlin=nonlin, cm=i64(cm), st=i64(st), td=i64(td))
     lay = tuple(lay)  # Layout.lay: a plain tuple for numba
     autonomous = not ws and not any(g.comp.time_dependent for g in circuit.groups)
-    return Layout(lay, kernels, slots, ep[-1], autonomous)
+    return Layout(lay, kernels, slots, ep[-1], autonomous, switches=np.array(switches, dtype=np.int64).reshape(-1, 2),
+                  timed=i64(timed))
 
 
 def param_matrix(circuit, layout: Layout) -> np.ndarray:

@@ -31,6 +31,7 @@ class CompiledSystem:
         self.lim_i = np.array([li for li, _, _ in limits], dtype=np.int64)
         self.lim_b = np.array([b for _, b, _ in limits], dtype=float)
         self.lim_r = np.array([-1 if r is None else r for _, _, r in limits], dtype=np.int64)
+        self._lays = {}  # lay_for's layouts, by which time switches are off
 
     @classmethod
     def of(cls, circuit) -> "CompiledSystem | None":
@@ -61,13 +62,38 @@ class CompiledSystem:
         kept = circuit.cached(("param_matrix", id(layout)), lambda: (layout, param_matrix(circuit, layout)))
         return kept[1].copy()
 
+    def lay_for(self, P):
+        """(layout tuple, autonomous) for the parameter rows P (slots,) or (B, slots): the
+        elements of a time-dependent type whose time switch (Component.time_switch, a
+        source's sine amplitude) is 0 in every row are static -- stamped once per parameter set,
+        not at every evaluation -- and without another time-dependent element or a waveform
+        the circuit is autonomous (the integrator's Jacobian then skips df/dt).  The same
+        arrays' types, so the same compiled engine."""
+        layout = self.layout
+        sw = layout.switches
+        if not len(sw):
+            return self.lay, layout.autonomous
+        P = np.asarray(P, dtype=float)
+        off = ~np.any(P.reshape(-1, P.shape[-1])[:, sw[:, 1]] != 0, axis=0)
+        if not off.any():
+            return self.lay, layout.autonomous
+        key = off.tobytes()
+        if key not in self._lays:
+            f = layout.fields
+            st, td = f.st.copy(), f.td.copy()
+            st[sw[off, 0]], td[sw[off, 0]] = 1, 0
+            autonomous = not len(f.ws) and set(layout.timed.tolist()) <= set(sw[off, 0].tolist())
+            self._lays[key] = (tuple(f._replace(st=st, td=td)), autonomous)
+        return self._lays[key]
+
     def rhs(self, t, x, P):
         """dx/dt for x (nx,) or rows (m, nx); P (1 or m, slots)."""
         x = np.asarray(x, dtype=float)
         P = np.atleast_2d(P)
+        lay = self.lay_for(P)[0]
         if x.ndim == 1:
-            return self.mod.rhs(float(t), x, P[0], self.lay)
-        return self.mod.rhs_batch(float(t), np.ascontiguousarray(x), P, self.lay)
+            return self.mod.rhs(float(t), x, P[0], lay)
+        return self.mod.rhs_batch(float(t), np.ascontiguousarray(x), P, lay)
 
     def nodal_outputs(self, t, X, P):
         """(u (m, n+1), element flows (m, E)) for rows X (m, nx) at times t (m,) with P (B,
@@ -80,7 +106,7 @@ class CompiledSystem:
         P.setflags(write=False)  # read-only rows, as the integrator's: its rhs_into compilation serves
         fields = self.layout.fields
         U, F = np.empty((m, fields.n + 1)), np.empty((m, fields.et.shape[0]))
-        if self.mod.nodal_outputs(T, X, P, self.lay, U, F) >= 0 or not (np.all(np.isfinite(U))
+        if self.mod.nodal_outputs(T, X, P, self.lay_for(P)[0], U, F) >= 0 or not (np.all(np.isfinite(U))
                                                                         and np.all(np.isfinite(F))):
             return None
         return U, F
@@ -106,7 +132,8 @@ class CompiledSystem:
 
     def _parts(self, t, x, P, local, want_ft):
         """engine_jacobian.jacobian_parts: one compiled entry for both."""
-        return self.mod.jacobian_parts(float(t), np.asarray(x, dtype=float), np.asarray(P, dtype=float), self.lay,
+        P = np.asarray(P, dtype=float)
+        return self.mod.jacobian_parts(float(t), np.asarray(x, dtype=float), P, self.lay_for(P)[0],
                                        self.scales, int(local), bool(want_ft))
 
     def integrate(self, t_out, x0, P, rtol=1e-6, atol=None, breaks=(), h0=1e-3, hmax=np.inf,
@@ -153,23 +180,44 @@ class CompiledSystem:
         hmax = np.ascontiguousarray(np.broadcast_to(np.asarray(hmax, dtype=float), (B,)))
         method = method or tableaus.DEFAULT
         brk, jump = member_breaks(B, breaks, kinks)
-        prebuild.start(self)  # a first compile: part of it in a second process
-        prebuild.before_integrator(self)  # ... and the rest here, before the integrator needs it
         if method == tableaus.BDF:
             unknown = set(tab_options) - {"local_jacobian"}
             if unknown:
                 raise ValueError(f"options {sorted(unknown)} apply to the Rosenbrock methods, not to {method!r}")
-            return self.mod.integrate_batch_bdf(t_out, X0, P, self.lay, self.scales, self.lim_i, self.lim_b,
+        prebuild.start(self)  # a first compile: part of it in a second process
+        prebuild.before_integrator(self)  # ... and the rest here, before the integrator needs it
+        args = (t_out, X0, P, brk, jump, hmax)
+        sw = self.layout.switches[:, 1]
+        kinds = np.unique(P[:, sw] != 0, axis=0, return_inverse=True)[1].reshape(-1) if len(sw) else np.zeros(B, int)
+        if np.all(kinds == kinds[0]):
+            return self._integrate(*args, rtol, atol_v, h0, max_steps, method, tab_options)
+        # members whose time switches differ run apart (each its own lay_for): a member's
+        # numbers do not depend on the batch it runs in
+        X, stats = np.empty((B, t_out.shape[1], X0.shape[1])), np.empty((B, len(runs.STATS)))
+        for k in np.unique(kinds):
+            rows = np.flatnonzero(kinds == k)
+            part = [np.ascontiguousarray(a[rows]) for a in args]
+            for a, whole in zip(part, args):  # the same flags (P read-only): the same compiled integrator
+                a.setflags(write=whole.flags.writeable)
+            X[rows], stats[rows] = self._integrate(*part, rtol, atol_v, h0, max_steps, method, tab_options)
+        return X, stats
+
+    def _integrate(self, t_out, X0, P, brk, jump, hmax, rtol, atol_v, h0, max_steps, method, tab_options):
+        """integrate_batch's call of the compiled integrator, for members of one lay_for."""
+        lay, autonomous = self.lay_for(P)
+        if method == tableaus.BDF:
+            return self.mod.integrate_batch_bdf(t_out, X0, P, lay, self.scales, self.lim_i, self.lim_b,
                                                 self.lim_r, brk, float(rtol), atol_v, float(h0), hmax,
                                                 int(max_steps), int(tab_options.get("local_jacobian", 1)))
-        return self.mod.integrate_batch(t_out, X0, P, self.lay, self.scales, self.lim_i, self.lim_b, self.lim_r,
+        return self.mod.integrate_batch(t_out, X0, P, lay, self.scales, self.lim_i, self.lim_b, self.lim_r,
                                         brk, jump, float(rtol), atol_v, float(h0),
                                         hmax, int(max_steps),
-                                        self.tableau(method, **tab_options))
+                                        self.tableau(method, autonomous=autonomous, **tab_options))
 
-    def tableau(self, method, **tab_options):
-        """The packed method for integrate_batch (hemocircuit.kernels.tableaus)."""
-        opts = {"autonomous": int(self.layout.autonomous), **tab_options}
+    def tableau(self, method, autonomous=None, **tab_options):
+        """The packed method for integrate_batch (hemocircuit.kernels.tableaus); ``autonomous``
+        default: the layout's (lay_for says it for a parameter matrix)."""
+        opts = {"autonomous": int(self.layout.autonomous if autonomous is None else autonomous), **tab_options}
         return tableaus.packed(method, **opts)
 
 
