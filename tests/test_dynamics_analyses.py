@@ -468,6 +468,25 @@ def test_more_damping_removes_the_oscillation(vaso_env):
     assert r["mean(art.r)"] == pytest.approx(r["steady(art.r)"], abs=1e-3)
 
 
+def test_envelope_checks_the_settling_run_too(tmp_path):
+    """The statistics read the window (the last 30 %), but plausibility covers the whole run:
+    a source pressure beyond 1e4 mmHg from 1.5 to 3 s of 20 (long before the window, at
+    the settling part's coarser output times) is reported for the member it happens in."""
+    (tmp_path / "spike.yaml").write_text(
+        "name: spike\nelements:\n"
+        "  - {id: Ps, type: pressure_source, nodes: [in, ground], value: {pwl: [[0 s, 80 mmHg], [1 s, 80 mmHg],"
+        " [1.5 s, 2e4 mmHg], [3 s, 2e4 mmHg], [3.5 s, 80 mmHg], [20 s, 80 mmHg]]}}\n"
+        "  - {id: R1, type: resistor, nodes: [in, a], R: 2 mmHg*s/mL}\n"
+        "  - {id: C1, type: compliance, nodes: [a, ground], C: 0.5 mL/mmHg}\n")
+    c = hc.load(str(tmp_path / "spike.yaml"))
+    res = envelope(c, ("R1.R", [2.0, 4.0]), outputs=["P(a)"], t_end=20.0, dt=0.1, scheduler="serial")
+    assert not any(res["error"])
+    assert np.all(res["max(P(a))"] < 1e3)  # the window (14-20 s) has settled near 80 mmHg
+    warned = res.metadata.get("warnings", [])
+    for member in ("R1.R=2.0", "R1.R=4.0"):
+        assert any(w.startswith(member) and "P(in)" in w and "beyond" in w for w in warned), warned
+
+
 # ------------------------------------------------------------ 6. periodic orbits ---------------
 def test_shooting_converges_on_the_vasomotion_limit_cycle(vaso, vaso_env):
     x, T = guess_from_run(vaso, "art.r", t_settle=300.0, rtol=1e-5)
