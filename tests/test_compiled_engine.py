@@ -9,6 +9,7 @@ import pytest
 
 import hemocircuit as hc
 from hemocircuit.analyses.op import operating_point
+from hemocircuit.kernels.layout import EngineLayout
 from hemocircuit.kernels.system import CompiledSystem
 
 from paths import NETLISTS as TEST_NETLISTS, ROOT
@@ -679,11 +680,11 @@ def test_a_source_without_its_sine_is_static():
     ep = system.layout.fields.ep  # the source's element index: the one holding its columns of P
     src = int(np.searchsorted(ep, system.layout.slots[("Ps", "value")], side="right") - 1)
     lay, autonomous = system.lay_for(system.params(c))
-    st = system.layout.fields._make(lay).st
+    st = EngineLayout(*lay).st
     assert autonomous and st[src] == 1 and system.layout.fields.st[src] == 0
     b = c.batch(2).with_values({"Ps.amplitude": np.array([0.0, 5.0]), "Ps.frequency": "0.5 Hz"})
     lay, autonomous = system.lay_for(system.params(b))
-    assert not autonomous and system.layout.fields._make(lay).st[src] == 0
+    assert not autonomous and EngineLayout(*lay).st[src] == 0
     t = np.linspace(0.0, 6.0, 61)
     x0 = np.full((2, c.nx), 0.5 * 80.0)  # V = C Pa
     both = integrate(b, x0, t, rtol=1e-9)

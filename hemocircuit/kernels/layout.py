@@ -24,9 +24,9 @@ MAX_DENSE_UNKNOWNS = 200
 
 
 #: the structure arrays the compiled engine reads (engine_nodal.py's header describes each)
-EngineLayout = namedtuple("EngineLayout", ("n", "nx", "et", "L", "S", "ep", "ex", "eu", "ui", "eo", "io", "eb", "ws",
-                                           "w0", "wd", "xs", "xc", "xk", "xcode", "xconst", "oe", "nonlin", "cm",
-                                           "st", "td"))
+ENGINE_FIELDS = ("n", "nx", "et", "L", "S", "ep", "ex", "eu", "ui", "eo", "io", "eb", "ws", "w0", "wd", "xs", "xc", "xk",
+                 "xcode", "xconst", "oe", "nonlin", "cm", "st", "td")
+EngineLayout = namedtuple("EngineLayout", ENGINE_FIELDS)
 
 
 @dataclass
@@ -50,6 +50,10 @@ class Layout:
     def fields(self) -> EngineLayout:
         """The layout's arrays by name (the same arrays as ``lay``)."""
         return EngineLayout(*self.lay)
+
+    def lay_with(self, **arrays) -> tuple:
+        """``lay`` with some of its arrays replaced (by field name), as the engine reads it."""
+        return tuple(arrays.get(name, v) for name, v in zip(ENGINE_FIELDS, self.lay))
 
 
 #: environment variable choosing the engine's types: "used" (default) or "all"

@@ -83,7 +83,7 @@ class CompiledSystem:
             st, td = f.st.copy(), f.td.copy()
             st[sw[off, 0]], td[sw[off, 0]] = 1, 0
             autonomous = not len(f.ws) and set(layout.timed.tolist()) <= set(sw[off, 0].tolist())
-            self._lays[key] = (tuple(f._replace(st=st, td=td)), autonomous)
+            self._lays[key] = (layout.lay_with(st=st, td=td), autonomous)
         return self._lays[key]
 
     def rhs(self, t, x, P):
