@@ -9,9 +9,18 @@
 
 Circuit units: pressure mmHg, flow mL/s, volume mL, time s (see hemocircuit.units).
 """
-from .errors import HemocircuitError, NetlistError, SolverError, TopologyError  # noqa: F401
+import os as _os
+import sys as _sys
 
-from .version import __version__  # noqa: F401
+# The engine is compiled at LLVM -O1, not numba's default -O3: the same run speed (vasomotion,
+# the body model, a decomposed heart), a first compile 3.4 s shorter (docs/performance.md).
+# Only when numba is not loaded yet (its settings are read once) and NUMBA_OPT is not set.
+if "NUMBA_OPT" not in _os.environ and "numba" not in _sys.modules:
+    _os.environ["NUMBA_OPT"] = "1"
+
+from .errors import HemocircuitError, NetlistError, SolverError, TopologyError  # noqa: E402,F401
+
+from .version import __version__  # noqa: E402,F401
 
 _LAZY = {"Circuit", "assemble", "load"}
 

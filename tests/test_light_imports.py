@@ -118,3 +118,17 @@ def test_each_builtin_type_alone_is_the_registry_s_class():
     assert len(fast) >= 25 and fast == {n: full[n] for n in fast}
     builtin = {n for n, path in full.items() if path.startswith("hemocircuit.components.")}
     assert builtin <= set(fast)  # (a plug-in, e.g. the documented one, may be installed too)
+
+
+@pytest.mark.parametrize("env, numba_first, expect", [(None, False, 1), ("3", False, 3), (None, True, 3)])
+def test_engine_optimisation_level(env, numba_first, expect):
+    """hemocircuit compiles at LLVM -O1 (the same run speed as numba's -O3, a shorter first
+    compile; docs/performance.md) unless the user set NUMBA_OPT or loaded numba first."""
+    import os
+    code = ("import numba\n" if numba_first else "") + "import hemocircuit, numba\nprint(int(numba.config.OPT))\n"
+    environ = {k: v for k, v in os.environ.items() if k != "NUMBA_OPT"}
+    if env is not None:
+        environ["NUMBA_OPT"] = env
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=True,
+                         env=environ)
+    assert int(out.stdout.strip().splitlines()[-1]) == expect
