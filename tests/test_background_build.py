@@ -239,7 +239,8 @@ prebuild._pending[mod.__name__] = proc
 prebuild._decided.add(mod.__name__)  # and no real helper for the integrator below: it compiles everything here
 prebuild.before_integrator(system)
 rc_at_return = proc.returncode  # set by before_integrator's poll only if it saw the helper end
-compiled_here = [len(mod.prepare_static.overloads), len(mod.rhs_into.overloads), len(mod.local_jacobian_into.overloads)]
+compiled_here = [len(mod.prepare_static.overloads), len(mod.rhs_into.overloads), len(mod.release_fraction.overloads),
+                 len(mod.local_jacobian_into.overloads)]
 prebuild.before_integrator(system)  # once per module: returns at once
 t = np.linspace(0.0, 5.0, 101)
 X, st = system.integrate_batch(t, np.zeros((1, c.nx)), system.params(c), rtol=1e-8)
@@ -249,25 +250,27 @@ helper_sigs = [sig in fn.signatures for fn, sig in prebuild.helper_signatures(mo
                                                                               system.layout.n_params)]
 print(json.dumps({"compiled_here": compiled_here, "rc_at_return": rc_at_return, "helper_sigs": helper_sigs,
                   "finish_member_sigs": len(mod.finish_member.signatures),
-                  "after": [len(mod.prepare_static.overloads), len(mod.rhs_into.overloads)],
+                  "after": [len(mod.prepare_static.overloads), len(mod.rhs_into.overloads),
+                            len(mod.release_fraction.overloads)],
                   "V": X[0, :, c.state_names.index("C1.V")].tolist(), "status": float(st[0, 0])}))
 """
 
 
 def test_before_integrator_compiles_the_nodal_solve_here_and_waits_for_the_helper(tmp_path):
     """kernels.prebuild.before_integrator, with a stand-in helper that compiles nothing and
-    ends after 1 s: it compiles prepare_static and rhs_into in this process (one
-    specialisation each, which the integrator then uses: still one each after the run), not
+    ends after 1 s: it compiles prepare_static, rhs_into and the Rosenbrock integrator's
+    release_fraction in this process (one specialisation each, which the integrator then uses:
+    still one each after the run), not
     the local Jacobian (the helper's part), and returns only once the helper has ended, since
     the Jacobian never appears in the cache; the integrator then compiles the helper's part
     itself, with the signatures the helper compiles by (prebuild.helper_signatures: else
     the helper's work would be done twice); the run is right (V = C P (1 - exp(-t/RC)))."""
     r = _run_in_fresh_cache(_BEFORE_SCRIPT, tmp_path)
-    assert r["compiled_here"] == [1, 1, 0], r
+    assert r["compiled_here"] == [1, 1, 1, 0], r
     # elem_derivs_jac, elem_derivs, local_jacobian_into, make_jac_work, hermite_root, hermite,
     # stage_dense, finish_member; and one finish_member for every call (no literal specialisation)
     assert r["helper_sigs"] == [True] * 8 and r["finish_member_sigs"] == 1, r
     assert r["rc_at_return"] == 0, r  # it returned after the helper ended, not before
-    assert r["after"] == [1, 1] and r["status"] == 0, r
+    assert r["after"] == [1, 1, 1] and r["status"] == 0, r
     t = np.linspace(0.0, 5.0, 101)
     assert np.max(np.abs(np.array(r["V"]) - 0.5 * 80.0 * (1 - np.exp(-t)))) < 2e-7 * 40.0

@@ -78,13 +78,15 @@ def start(system):
     return proc
 
 
-def before_integrator(system):
+def before_integrator(system, rosenbrock=True):
     """Just before the first call of a compiled integrator in this process, when :func:`start`
     launched a helper for its engine: compile the nodal solve and the right-hand side here
     (``prepare_static`` and ``rhs_into``, by the signatures the integrators call them with),
-    then wait while the helper is running until its ``local_jacobian_into`` and scratch makers
-    are in numba's cache (at most WAIT_S), so that the integrator loads them instead of
-    compiling them a second time.
+    and for a Rosenbrock integrator its callee ``release_fraction`` (which calls rhs_into: the
+    helper, busy with the Jacobian, could not start it earlier; here it fills the time this
+    process would wait for the helper), then wait while the helper is running until its
+    ``local_jacobian_into`` and scratch makers are in numba's cache (at most WAIT_S), so that
+    the integrator loads them instead of compiling them a second time.
     Without this the integrator reaches the Jacobian in its own typing order (make_work,
     prepare_static, rhs_into, local_jacobian_into) and compiled it itself whenever the helper was
     seconds late.  Once per engine module and process."""
@@ -104,6 +106,11 @@ def before_integrator(system):
         sig_w = (t, vx, numba.typeof(P), lay, numba.typeof(work))
         mod.prepare_static.compile(sig_w)
         mod.rhs_into.compile(sig_w + (vx,))
+        if rosenbrock:  # (t, hh, tlim, x, f, xn, P, lay, work, lim_i, lim_b, lim_r, atol, held, xe, fe, xh, fh)
+            f64 = numba.float64
+            mod.release_fraction.compile((f64, f64, f64, vx, vx, vx) + sig_w[2:] + (
+                numba.typeof(system.lim_i), numba.typeof(system.lim_b), numba.typeof(system.lim_r), vx,
+                numba.typeof(np.zeros(1, dtype=np.bool_)), vx, vx, vx, vx))
     except Exception:  # noqa: BLE001 - only a head start: the integrator compiles what is missing
         pass
     # the helper's part the integrator reaches first, in the helper's order

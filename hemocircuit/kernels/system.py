@@ -185,7 +185,7 @@ class CompiledSystem:
             if unknown:
                 raise ValueError(f"options {sorted(unknown)} apply to the Rosenbrock methods, not to {method!r}")
         prebuild.start(self)  # a first compile: part of it in a second process
-        prebuild.before_integrator(self)  # ... and the rest here, before the integrator needs it
+        prebuild.before_integrator(self, method != tableaus.BDF)  # ... and the rest here, before the integrator
         args = (t_out, X0, P, brk, jump, hmax)
         sw = self.layout.switches[:, 1]
         kinds = np.unique(P[:, sw] != 0, axis=0, return_inverse=True)[1].reshape(-1) if len(sw) else np.zeros(B, int)
