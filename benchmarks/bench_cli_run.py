@@ -86,6 +86,12 @@ def main(argv=None):
         print(f"{what}: hemocircuit {med('hc_long', i):.2f} - {med('hc_short', i):.2f} = {hc_s:.2f} s; "
               f"roadrunner {med('rr_long', i):.2f} - {med('rr_short', i):.2f} = {rr_s:.2f} s; "
               f"ratio {hc_s / rr_s:.2f}")
+        # the same from each round's own differences (the four commands of a round run one
+        # after the other, so a drift of the machine's speed between rounds cancels)
+        ratios = [(h[i] - hs[i]) / (r[i] - rs[i])
+                  for h, hs, r, rs in zip(res["hc_long"], res["hc_short"], res["rr_long"], res["rr_short"])]
+        print(f"{what}: per-round ratio median {statistics.median(ratios):.2f} "
+              f"(range {min(ratios):.2f}-{max(ratios):.2f})")
 
 
 if __name__ == "__main__":
