@@ -14,7 +14,8 @@ import sys as _sys
 
 # The engine is compiled at LLVM -O1, not numba's default -O3: the same run speed (vasomotion,
 # the body model, a decomposed heart), a first compile 3.4 s shorter (docs/performance.md).
-# Only when numba is not loaded yet (its settings are read once) and NUMBA_OPT is not set.
+# Only when NUMBA_OPT is not set and numba is not loaded yet (then the user's numba keeps its
+# level); process-wide, as numba's settings are.  The compile helpers get this process's level.
 if "NUMBA_OPT" not in _os.environ and "numba" not in _sys.modules:
     _os.environ["NUMBA_OPT"] = "1"
 

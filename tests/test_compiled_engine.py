@@ -695,3 +695,17 @@ def test_a_source_without_its_sine_is_static():
     for m in range(2):
         alone = integrate(b.subset([m]), x0[m:m + 1], t, rtol=1e-9)
         assert np.array_equal(both.x[m], alone.x[0]), m
+
+
+def test_integrate_batch_edge_cases_of_the_switch_split():
+    """An empty batch gives empty results (not an IndexError from the switch grouping), and an
+    explicit ``autonomous`` option still reaches the tableau (tab_options override lay_for)."""
+    c = hc.load(os.path.join(TEST_NETLISTS, "base_rc.yaml"))
+    system = CompiledSystem.of(c)
+    t = np.linspace(0.0, 1.0, 11)
+    P = system.params(c)
+    X, st = system.integrate_batch(t, np.zeros((0, c.nx)), P[:0], rtol=1e-8)
+    assert X.shape == (0, 11, c.nx) and st.shape[0] == 0
+    X1, _ = system.integrate_batch(t, np.zeros((1, c.nx)), P, rtol=1e-8, autonomous=0)
+    X2, _ = system.integrate_batch(t, np.zeros((1, c.nx)), P, rtol=1e-8)
+    assert np.max(np.abs(X1 - X2)) < 1e-9 * 40.0  # df/dt = 0 here either way: the same run

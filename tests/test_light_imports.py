@@ -132,3 +132,17 @@ def test_engine_optimisation_level(env, numba_first, expect):
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=True,
                          env=environ)
     assert int(out.stdout.strip().splitlines()[-1]) == expect
+
+
+@pytest.mark.parametrize("numba_first, expect", [(False, "1"), (True, "3")])
+def test_compile_helpers_get_this_process_optimisation_level(numba_first, expect):
+    """The compile helpers (kernels.prebuild, kernels.background) are started with the level
+    this process compiles at, so both compile the same code (a user who imported numba first
+    keeps -O3 in the helpers too, though their own ``import hemocircuit`` would set -O1)."""
+    import os
+    code = (("import numba\n" if numba_first else "") + "import hemocircuit, numba\n"
+            "from hemocircuit.kernels.prebuild import helper_env\nprint(helper_env()['NUMBA_OPT'])\n")
+    environ = {k: v for k, v in os.environ.items() if k != "NUMBA_OPT"}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=True,
+                         env=environ)
+    assert out.stdout.strip().splitlines()[-1] == expect

@@ -28,6 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .prebuild import helper_env
+
 #: simulated time [s] of the builder's run: enough to call every transient entry point
 BUILD_RUN = 1e-6
 
@@ -94,7 +96,7 @@ def start(system, circuit, x0, t0: float, rtol: float) -> bool:
         with open(log, "ab") as out:
             proc = subprocess.Popen([sys.executable, "-m", "hemocircuit.kernels.background", str(job)],
                                     stdin=subprocess.DEVNULL, stdout=out, stderr=out, start_new_session=True,
-                                    close_fds=True)
+                                    close_fds=True, env=helper_env())
         _marker(system, "building").write_text(str(proc.pid))
     except (OSError, pickle.PicklingError, TypeError, AttributeError):
         job.unlink(missing_ok=True)

@@ -49,6 +49,16 @@ _pending: dict = {}
 WAIT_S = 60.0
 
 
+def helper_env() -> dict:
+    """The environment of a compile helper process: this one's, with numba's optimisation level
+    as this process compiles at (hemocircuit/__init__.py), so that both compile the same code."""
+    env = dict(os.environ)
+    numba = sys.modules.get("numba")
+    if numba is not None:
+        env["NUMBA_OPT"] = str(int(numba.config.OPT))
+    return env
+
+
 def start(system):
     """Start the helper for ``system``'s engine, once per engine module and process, unless
     ``local_jacobian_into`` is compiled here or in numba's cache already (or
@@ -68,7 +78,7 @@ def start(system):
     try:
         proc = subprocess.Popen([sys.executable, "-m", "hemocircuit.kernels.prebuild"], stdin=subprocess.PIPE,
                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
-                                close_fds=True)
+                                close_fds=True, env=helper_env())
         proc.stdin.write(job)  # the job through its stdin: no file to leave behind
         proc.stdin.close()
     except OSError:

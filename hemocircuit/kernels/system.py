@@ -189,7 +189,7 @@ class CompiledSystem:
         args = (t_out, X0, P, brk, jump, hmax)
         sw = self.layout.switches[:, 1]
         kinds = np.unique(P[:, sw] != 0, axis=0, return_inverse=True)[1].reshape(-1) if len(sw) else np.zeros(B, int)
-        if np.all(kinds == kinds[0]):
+        if B == 0 or np.all(kinds == kinds[0]):
             return self._integrate(*args, rtol, atol_v, h0, max_steps, method, tab_options)
         # members whose time switches differ run apart (each its own lay_for): a member's
         # numbers do not depend on the batch it runs in
@@ -212,7 +212,7 @@ class CompiledSystem:
         return self.mod.integrate_batch(t_out, X0, P, lay, self.scales, self.lim_i, self.lim_b, self.lim_r,
                                         brk, jump, float(rtol), atol_v, float(h0),
                                         hmax, int(max_steps),
-                                        self.tableau(method, autonomous=autonomous, **tab_options))
+                                        self.tableau(method, **{"autonomous": autonomous, **tab_options}))
 
     def tableau(self, method, autonomous=None, **tab_options):
         """The packed method for integrate_batch (hemocircuit.kernels.tableaus); ``autonomous``
