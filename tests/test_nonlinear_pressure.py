@@ -47,3 +47,40 @@ elements:
     assert op["Q(R)"] == pytest.approx(q, rel=1e-10)
     assert op["Q(Rq)"] == pytest.approx(q, rel=1e-10)
     assert op["P(a)"] == pytest.approx(3 * q, rel=1e-10)
+
+
+class _ImposedFlow(component_types()["flow_source"]):
+    """A flow source declaring what is true of it: its A_loc is 0 (matrix_params = ()), so an
+    expression on its value leaves the nodal matrix constant -- but not its right-hand side."""
+
+    type_name = "test_imposed_flow"
+    matrix_params = ()
+
+
+def test_an_expression_on_a_right_hand_side_parameter_is_stamped_at_every_evaluation(tmp_path):
+    """Q = q0 - k V(C1) into C1 (C = 0.5 mL/mmHg): dV/dt = q0 - k V, so at V = 10 and 20 mL
+    the right-hand side is 5 - 0.1 V.  On the numpy path the element was static (stamped once,
+    at the expression's first value) because its matrix is constant; the compiled path
+    re-stamped it.  Both now follow the expression."""
+    types = component_types()
+    types[_ImposedFlow.type_name] = _ImposedFlow
+    try:
+        net = tmp_path / "flow_expr.yaml"
+        net.write_text("""
+parameters:
+  q0: 5 mL/s
+  k: 0.1 1/s
+elements:
+  - {id: Qs, type: test_imposed_flow, nodes: [ground, a], value: "= q0 - k * C1.V"}
+  - {id: C1, type: compliance, nodes: [a, ground], C: 0.5 mL/mmHg}
+  - {id: R, type: resistor, nodes: [a, ground], R: 1e12 mmHg*s/mL}
+""")
+        c = hc.load(str(net))
+        from hemocircuit.kernels.system import CompiledSystem
+        system = CompiledSystem.of(c)
+        for V in (10.0, 20.0):
+            expect = 5.0 - 0.1 * V - (V / 0.5) / 1e12
+            assert c.rhs(0.0, np.array([V]))[0] == pytest.approx(expect, rel=1e-12), V
+            assert system.rhs(0.0, np.array([V]), system.params(c))[0] == pytest.approx(expect, rel=1e-12), V
+    finally:
+        types.pop(_ImposedFlow.type_name)

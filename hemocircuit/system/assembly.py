@@ -78,7 +78,8 @@ class Assembly:
         self.all_constant = True
         self.dynamic_groups = []
         for g in self.groups:
-            g.static = (g.constant and g.S == 0 and not g.waves
+            # the compiled layout's rule (kernels.layout): an expression may move its right-hand side
+            g.static = (g.constant and g.S == 0 and not g.waves and not g.exprs
                         and not g.comp.varies_in_time(g.p))
             if g.constant:
                 A_loc, b_loc = g.comp.stamp(g.p, np.zeros((1, g.E, g.S)), None, 0.0, None)
