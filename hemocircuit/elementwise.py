@@ -19,13 +19,30 @@ from __future__ import annotations
 import numpy as np
 
 from .kernels.jit import LazyDispatcher
-from .kernels.loops import loop
+from .kernels.loops import loop, ready
 
 #: element calls from which a group runs in one compiled loop (kernels.loops: ~0.01 us of
 #: overhead an element against ~5 us for a call from Python, ~40 us for the arteriole's
 #: equations run as Python; the loop's compile, ~0.1-0.5 s, is loaded from numba's cache after
 #: the first run, ~50 ms)
 LOOP_CALLS = 64
+#: ... provided the loop is compiled or in numba's cache (kernels.loops.ready), or this process
+#: has made this many calls of the function in groups that large: a first short run's outputs
+#: (101 rows) take ~5 ms as Python against ~0.9 s of compiling their loops, while a large
+#: circuit's right-hand side (a 3 000-element ladder) compiles its loops at its 4th evaluation
+LOOP_COMPILE_CALLS = 10_000
+_seen: dict = {}  # (kernel function, loop kind) -> [element calls so far, loop ready]
+
+
+def _looped(fn, kind, calls) -> bool:
+    """Run a group of ``calls`` element calls of ``fn`` as one compiled loop?"""
+    if calls < LOOP_CALLS:
+        return False
+    seen = _seen.get((fn, kind))
+    if seen is None:
+        seen = _seen[(fn, kind)] = [0, ready(fn, kind)]
+    seen[0] += calls
+    return seen[1] or seen[0] >= LOOP_COMPILE_CALLS
 
 _PYTHON_REFUSES = (OverflowError, ZeroDivisionError, ValueError)
 
@@ -119,7 +136,7 @@ def stamp(comp, p, x, u, t, src=None):
     L = bt.L
     A = np.zeros((bt.B, bt.E, L, L))
     b = np.zeros((bt.B, bt.E, L))
-    if bt.B * bt.E >= LOOP_CALLS:
+    if _looped(k.stamp, "stamp", bt.B * bt.E):
         loop(k.stamp, "stamp")(bt.P, bt.X, bt.U, bt.T, bt.iopt, A, b)
         return A, b
     run = _runner(k.stamp)
@@ -136,7 +153,7 @@ def derivatives(comp, p, x, u, t, src=None):
     k = kernel_of(comp)
     bt = Batch(comp, p, x, u, t, src)
     dx = np.zeros((bt.B, bt.E, bt.S))
-    if bt.B * bt.E >= LOOP_CALLS:
+    if _looped(k.derivs, "one", bt.B * bt.E):
         loop(k.derivs, "one")(bt.P, bt.X, bt.U, bt.T, bt.iopt, dx)
         return dx
     run = _runner(k.derivs)
@@ -159,7 +176,7 @@ def observe(comp, p, x, u, t, src=None):
     bt = Batch(comp, p, x, u, t, src)
     out = np.zeros((bt.B, bt.E, len(names)))
     fn = k.report if full else k.observe
-    if bt.B * bt.E >= LOOP_CALLS:
+    if _looped(fn, "one" if full else "observe", bt.B * bt.E):
         if full:
             loop(fn, "one")(bt.P, bt.X, bt.U, bt.T, bt.iopt, out)
         else:

@@ -570,6 +570,7 @@ def test_a_group_in_one_compiled_loop_equals_its_elements_one_by_one(name, netli
     K = len(comp.local_nodes)
     ub[..., :K] = rng.uniform(0.0, 100.0, (B, E, K))  # node pressures either way round (valves open and shut)
     t = np.array([[0.0], [0.7], [1.37]])
+    monkeypatch.setattr(elementwise, "LOOP_COMPILE_CALLS", 0)  # the loop even where it is not compiled yet
     with np.errstate(all="ignore"):
         looped = (elementwise.stamp(comp, pb, xb, ub, t), elementwise.derivatives(comp, pb, xb, ub, t),
                   elementwise.observe(comp, pb, xb, ub, t), elementwise.observe(comp, pb, xb, None, t))
@@ -608,3 +609,29 @@ def test_a_type_that_reads_t_says_so(name, netlist_samples):
                         np.testing.assert_array_equal(g, r, err_msg=f"{name} {comp.opts} element {e}: output {i} "
                                                                     f"changes between t = 0 and {t} s, but the "
                                                                     "type does not declare time_dependent")
+
+
+def test_a_group_loop_compiles_only_once_it_pays(netlist_samples, monkeypatch):
+    """elementwise runs a group of >= LOOP_CALLS element calls in its compiled loop when that
+    loop is ready (compiled, or in numba's cache), and otherwise only once this process has
+    made LOOP_COMPILE_CALLS calls in such groups: a first short run's outputs stay Python
+    (no ~0.9 s compile), a large circuit's right-hand side compiles its loop soon."""
+    from hemocircuit import elementwise
+    from hemocircuit.kernels import loops
+    comp, p, x, u = samples_of(TYPES["resistor"], netlist_samples)[-1]
+    k = comp.kernel()
+    used = []
+    monkeypatch.setattr(elementwise, "_seen", {})
+    monkeypatch.setattr(elementwise, "ready", lambda fn, kind: False)  # a fresh install's first run
+    monkeypatch.setattr(elementwise, "loop", lambda fn, kind: used.append(kind) or loops.loop(fn, kind))
+    E = 100  # 100 calls a group: above LOOP_CALLS
+    pb = {n: np.broadcast_to(np.asarray(p[n])[:, :1], (1, E)) for n in comp.parameters}
+    xb, ub = np.zeros((1, E, 0)), np.broadcast_to(u[:1, :1], (1, E, u.shape[-1])).copy()
+    first = elementwise.stamp(comp, pb, xb, ub, np.zeros((1, 1)))
+    for _ in range(elementwise.LOOP_COMPILE_CALLS // E - 2):
+        elementwise.stamp(comp, pb, xb, ub, np.zeros((1, 1)))
+    assert used == []  # 9 900 calls: as Python
+    last = elementwise.stamp(comp, pb, xb, ub, np.zeros((1, 1)))
+    assert used == ["stamp"]  # the 100th group reaches 10 000 calls: the loop
+    np.testing.assert_array_equal(first[0], last[0])
+    np.testing.assert_array_equal(first[1], last[1])

@@ -33,6 +33,17 @@ def loop(fn, kind: str):
     return _loops[key]
 
 
+def ready(fn, kind: str) -> bool:
+    """True when the compiled loop of ``fn`` runs without a compile worth waiting for: it is
+    compiled in this process, or numba's cache holds loops of this kind (from an earlier run;
+    a kernel whose own loop is not among them compiles it, ~0.3 s).  A process's first runs
+    evaluate small groups as Python instead (hemocircuit.elementwise.LOOP_COMPILE_CALLS)."""
+    from .prebuild import in_cache
+
+    dispatcher = loop(fn, kind)
+    return bool(dispatcher.signatures) or in_cache(dispatcher)
+
+
 def _salt(fn) -> int:
     """A number from the text of the file that defines ``fn`` (see the module docstring)."""
     try:
