@@ -709,3 +709,27 @@ def test_integrate_batch_edge_cases_of_the_switch_split():
     X1, _ = system.integrate_batch(t, np.zeros((1, c.nx)), P, rtol=1e-8, autonomous=0)
     X2, _ = system.integrate_batch(t, np.zeros((1, c.nx)), P, rtol=1e-8)
     assert np.max(np.abs(X1 - X2)) < 1e-9 * 40.0  # df/dt = 0 here either way: the same run
+
+
+def test_one_integrator_specialisation_for_every_batch_shape(monkeypatch):
+    """numba compiles a function once per argument types, read-only flags included: a single
+    run, a batch from one grid and a batch of per-member grids reach the compiled integrator
+    with the same flags (t_out, P and hmax read-only, X0 a writable copy), so a process that
+    runs `tran` and then `freq` compiles (or loads) one integrator, not two."""
+    c = hc.load(os.path.join(TEST_NETLISTS, "base_rc.yaml"))
+    system = CompiledSystem.of(c)
+    seen = []
+    real = system.mod.integrate_batch
+
+    def spy(t_out, X0, P, lay, scales, lim_i, lim_b, lim_r, brk, jump, rtol, atol, h0, hmax, *rest):
+        seen.append(tuple(a.flags.writeable for a in (t_out, X0, P, hmax, brk, jump)))
+        return real(t_out, X0, P, lay, scales, lim_i, lim_b, lim_r, brk, jump, rtol, atol, h0, hmax, *rest)
+
+    monkeypatch.setattr(system.mod, "integrate_batch", spy)
+    t = np.linspace(0.0, 1.0, 11)
+    P = system.params(c)
+    system.integrate_batch(t, np.zeros((1, c.nx)), P, rtol=1e-6)
+    system.integrate_batch(t, np.zeros((3, c.nx)), np.repeat(P, 3, axis=0), rtol=1e-6)
+    system.integrate_batch(np.repeat(t[None], 2, axis=0), np.zeros((2, c.nx)), np.repeat(P, 2, axis=0), rtol=1e-6,
+                           hmax=np.full(2, 0.5))
+    assert seen == [(False, True, False, False, True, True)] * 3, seen

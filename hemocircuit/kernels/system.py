@@ -163,21 +163,20 @@ class CompiledSystem:
         scalar or (B,); ``breaks`` and ``kinks`` one sequence for every member, or a list of B
         sequences (each member's own).
         Returns (X (B, T, nx), stats (B, 6): status, t, steps, rejected, nfev, limit events)."""
-        X0 = np.ascontiguousarray(X0, dtype=float)
+        X0 = np.array(X0, dtype=float, order="C")  # writable always (a copy)
         B = X0.shape[0]
-        t_out = np.ascontiguousarray(np.broadcast_to(np.asarray(t_out, dtype=float), (B, np.shape(t_out)[-1])))
-        P = np.ascontiguousarray(np.broadcast_to(P, (B, P.shape[-1])), dtype=float).view()
-        # read-only always (a view: the caller's array keeps its flag): numba specialises on
-        # the flag, and one parameter set broadcast to B > 1 rows, or B distinct rows, would
-        # otherwise be writable copies whose integrator compiles rhs_into, prepare_static and
-        # local_jacobian_into again instead of using the helper's and before_integrator's
-        P.setflags(write=False)
+        # t_out, P and hmax read-only always (views: the caller's arrays keep their flags):
+        # numba specialises on the flag, and a broadcast single row is read-only while B > 1
+        # rows are writable copies -- whose integrator would compile again (~10 s), as would
+        # rhs_into, prepare_static and local_jacobian_into instead of the helper's
+        t_out = _read_only(np.broadcast_to(np.asarray(t_out, dtype=float), (B, np.shape(t_out)[-1])))
+        P = _read_only(np.broadcast_to(P, (B, P.shape[-1])))
         if X0.shape[1] == 0:  # no states (e.g. every capacitor under an ideal source): nothing to integrate
             stats = np.zeros((B, len(runs.STATS)))
             stats[:, runs.STATS.index("t")] = t_out[:, -1]
             return np.zeros((B, t_out.shape[1], 0)), stats
         atol_v = (rtol * 1e-3 if atol is None else atol) * self.scales
-        hmax = np.ascontiguousarray(np.broadcast_to(np.asarray(hmax, dtype=float), (B,)))
+        hmax = _read_only(np.broadcast_to(np.asarray(hmax, dtype=float), (B,)))
         method = method or tableaus.DEFAULT
         brk, jump = member_breaks(B, breaks, kinks)
         if method == tableaus.BDF:
@@ -219,6 +218,13 @@ class CompiledSystem:
         default: the layout's (lay_for says it for a parameter matrix)."""
         opts = {"autonomous": int(self.layout.autonomous if autonomous is None else autonomous), **tab_options}
         return tableaus.packed(method, **opts)
+
+
+def _read_only(a):
+    """``a`` as a read-only C-contiguous float64 array (a read-only view of it or of its copy)."""
+    a = np.ascontiguousarray(a, dtype=float).view()
+    a.setflags(write=False)
+    return a
 
 
 def member_breaks(B, breaks, kinks=()):
