@@ -37,7 +37,6 @@ class Layout:
     kernels: list          # Kernel objects; index = type code
     slots: dict            # (element id, parameter) -> column of P
     n_params: int
-    autonomous: bool = False  # no waveform, no time-dependent element: f does not depend on t
     #: (element index, column of P) of the elements static but for their type's time switch
     #: (Component.time_switch, a source's sine amplitude): with it 0 in every member they are
     #: static (CompiledSystem.lay_for); timed: every element of a time-dependent type
@@ -50,6 +49,11 @@ class Layout:
     def fields(self) -> EngineLayout:
         """The layout's arrays by name (the same arrays as ``lay``)."""
         return EngineLayout(*self.lay)
+
+    @property
+    def autonomous(self) -> bool:
+        """No waveform and no element of a time-dependent type: f does not depend on t."""
+        return not len(self.fields.ws) and not len(self.timed)
 
     def lay_with(self, **arrays) -> tuple:
         """``lay`` with some of its arrays replaced (by field name), as the engine reads it."""
@@ -197,8 +201,7 @@ def build_layout(circuit) -> Layout | None:
                        xs=i64(xs), xc=i64(xc), xk=i64(xk), xcode=i64(code), xconst=f64(const), oe=i64(sorted(oe)),
                        nonlin=nonlin, cm=i64(cm), st=i64(st), td=i64(td))
     lay = tuple(lay)  # Layout.lay: a plain tuple for numba
-    autonomous = not ws and not any(g.comp.time_dependent for g in circuit.groups)
-    return Layout(lay, kernels, slots, ep[-1], autonomous, switches=np.array(switches, dtype=np.int64).reshape(-1, 2),
+    return Layout(lay, kernels, slots, ep[-1], switches=np.array(switches, dtype=np.int64).reshape(-1, 2),
                   timed=i64(timed))
 
 

@@ -70,21 +70,22 @@ class CompiledSystem:
         the circuit is autonomous (the integrator's Jacobian then skips df/dt).  The same
         arrays' types, so the same compiled engine."""
         layout = self.layout
-        sw = layout.switches
-        if not len(sw):
-            return self.lay, layout.autonomous
-        P = np.asarray(P, dtype=float)
-        off = ~np.any(P.reshape(-1, P.shape[-1])[:, sw[:, 1]] != 0, axis=0)
+        off = ~self._switched_on(P).any(axis=0)
         if not off.any():
             return self.lay, layout.autonomous
         key = off.tobytes()
         if key not in self._lays:
-            f = layout.fields
+            f, static = layout.fields, layout.switches[off, 0]
             st, td = f.st.copy(), f.td.copy()
-            st[sw[off, 0]], td[sw[off, 0]] = 1, 0
-            autonomous = not len(f.ws) and set(layout.timed.tolist()) <= set(sw[off, 0].tolist())
+            st[static], td[static] = 1, 0
+            autonomous = not len(f.ws) and bool(np.isin(layout.timed, static).all())
             self._lays[key] = (layout.lay_with(st=st, td=td), autonomous)
         return self._lays[key]
+
+    def _switched_on(self, P):
+        """(rows, switches) bool: which time switches (Layout.switches) each row of P turns on."""
+        P = np.asarray(P, dtype=float)
+        return P.reshape(-1, P.shape[-1])[:, self.layout.switches[:, 1]] != 0
 
     def rhs(self, t, x, P):
         """dx/dt for x (nx,) or rows (m, nx); P (1 or m, slots)."""
@@ -186,8 +187,7 @@ class CompiledSystem:
         prebuild.start(self)  # a first compile: part of it in a second process
         prebuild.before_integrator(self, method != tableaus.BDF)  # ... and the rest here, before the integrator
         args = (t_out, X0, P, brk, jump, hmax)
-        sw = self.layout.switches[:, 1]
-        kinds = np.unique(P[:, sw] != 0, axis=0, return_inverse=True)[1].reshape(-1) if len(sw) else np.zeros(B, int)
+        kinds = np.unique(self._switched_on(P), axis=0, return_inverse=True)[1].reshape(-1)
         if B == 0 or np.all(kinds == kinds[0]):
             return self._integrate(*args, rtol, atol_v, h0, max_steps, method, tab_options)
         # members whose time switches differ run apart (each its own lay_for): a member's
@@ -211,13 +211,7 @@ class CompiledSystem:
         return self.mod.integrate_batch(t_out, X0, P, lay, self.scales, self.lim_i, self.lim_b, self.lim_r,
                                         brk, jump, float(rtol), atol_v, float(h0),
                                         hmax, int(max_steps),
-                                        self.tableau(method, **{"autonomous": autonomous, **tab_options}))
-
-    def tableau(self, method, autonomous=None, **tab_options):
-        """The packed method for integrate_batch (hemocircuit.kernels.tableaus); ``autonomous``
-        default: the layout's (lay_for says it for a parameter matrix)."""
-        opts = {"autonomous": int(self.layout.autonomous if autonomous is None else autonomous), **tab_options}
-        return tableaus.packed(method, **opts)
+                                        tableaus.packed(method, **{"autonomous": int(autonomous), **tab_options}))
 
 
 def _read_only(a):
