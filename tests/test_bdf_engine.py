@@ -10,7 +10,7 @@ import hemocircuit as hc
 from hemocircuit.analyses.op import operating_point
 from hemocircuit.kernels.system import CompiledSystem
 
-from paths import ROOT, TESTS
+from paths import ROOT, TESTS, SHARED_SVZEROD
 
 NETLISTS = os.path.join(ROOT, "netlists")
 TEST_NETLISTS = os.path.join(TESTS, "netlists")
@@ -157,7 +157,7 @@ def test_bdf_rejects_tableau_options():
         s.integrate(np.linspace(0, 1, 3), np.zeros(c.nx), s.params(c)[0], method="bdf", jac_reuse=3)
 
 
-SHARED_HEART = os.path.join(os.environ.get("SVZEROD_CASES", "/work/shared/svzerod"), "cases",
+SHARED_HEART = os.path.join(SHARED_SVZEROD, "cases",
                             "closedLoopHeart_singleVessel.json")
 
 

@@ -15,7 +15,7 @@ import os
 import numpy as np
 import pytest
 
-from paths import ROOT
+from paths import ROOT, SHARED_SVZEROD as SHARED
 
 from hemocircuit.kernels.system import CompiledSystem
 from hemocircuit.svzerod import load_svzerod
@@ -101,7 +101,6 @@ def test_decomposed_heart_reaches_a_periodic_state_with_equal_stroke_volumes(thi
     assert abs(q_av - q_pv) <= 1e-3 * q_av
 
 
-SHARED = os.environ.get("SVZEROD_CASES", "/work/shared/svzerod")
 
 
 @pytest.mark.parametrize("case", ["piecewise_Chamber_and_Valve", "closed_loop_two_hill"])

@@ -12,7 +12,7 @@ from hemocircuit.analyses.op import operating_point
 from hemocircuit.kernels.layout import EngineLayout
 from hemocircuit.kernels.system import CompiledSystem
 
-from paths import NETLISTS as TEST_NETLISTS, ROOT
+from paths import NETLISTS as TEST_NETLISTS, ROOT, SHARED_SVZEROD
 
 NETLISTS = str(ROOT / "netlists")
 BUNDLED = sorted(glob.glob(os.path.join(NETLISTS, "*.yaml")))
@@ -39,10 +39,10 @@ def test_rhs_matches_numpy_path(path):
     assert np.allclose(system.rhs(1.0, X, P), c.rhs(1.0, X), rtol=1e-9, atol=1e-12)
 
 
-SVZEROD_CASES = os.environ.get("SVZEROD_CASES", "/work/shared/svzerod") + "/cases"
+SHARED_CASES = os.path.join(SHARED_SVZEROD, "cases")
 #: bundled netlists, plus their valve models (elements nonlinear in the pressures: Newton in the
 #: nodal solve) when the shared svZeroDSolver cases are here
-OUTPUT_MODELS = BUNDLED + [os.path.join(SVZEROD_CASES, f"{n}.json") for n in ("valve_tanh", "chamber_elastance_inductor")]
+OUTPUT_MODELS = BUNDLED + [os.path.join(SHARED_CASES, f"{n}.json") for n in ("valve_tanh", "chamber_elastance_inductor")]
 
 
 @pytest.mark.parametrize("path", OUTPUT_MODELS, ids=os.path.basename)
@@ -377,13 +377,12 @@ def test_pwl_kinks_keep_the_jacobian(tmp_path):
     assert st_soft["nfev"] < 0.85 * st_hard["nfev"], (st_soft, st_hard)  # measured 1213 against 1533
 
 
-SVZEROD = os.path.join(os.environ.get("SVZEROD_CASES", "/work/shared/svzerod"), "cases")
 # their cases that load here (valves and the closed-loop heart are nonlinear in the pressures)
 SVZEROD_CASES = ["chamber_elastance_inductor", "closedLoopHeart_singleVessel", "closed_loop_two_hill",
                  "piecewise_Chamber_and_Valve", "pulsatileFlow_R_RCR", "pulsatileFlow_R_coronary",
                  "steadyFlow_RLC_R", "steadyFlow_blood_vessel_junction", "steadyFlow_stenosis_R", "valve_tanh"]
-JAC_CASES = BUNDLED + [os.path.join(SVZEROD, c + ".json") for c in SVZEROD_CASES
-                       if os.path.exists(os.path.join(SVZEROD, c + ".json"))]
+JAC_CASES = BUNDLED + [os.path.join(SHARED_CASES, c + ".json") for c in SVZEROD_CASES
+                       if os.path.exists(os.path.join(SHARED_CASES, c + ".json"))]
 
 
 def _load_any(path):

@@ -23,10 +23,10 @@ import sys
 import numpy as np
 import pytest
 
-from paths import ROOT
+from paths import ROOT, SHARED_SVZEROD
 
 EXAMPLES = ROOT / "examples"
-SVZEROD_MODEL = os.path.join(os.environ.get("SVZEROD_CASES", "/work/shared/svzerod"), "cases",
+SVZEROD_MODEL = os.path.join(SHARED_SVZEROD, "cases",
                              "closedLoopHeart_singleVessel.json")
 
 

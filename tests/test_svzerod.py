@@ -7,10 +7,11 @@ import os
 import numpy as np
 import pytest
 
+from paths import SHARED_SVZEROD as SHARED
+
 from hemocircuit.errors import HemocircuitError, NetlistError
 from hemocircuit.svzerod import import_svzerod, load_svzerod
 
-SHARED = os.environ.get("SVZEROD_CASES", "/work/shared/svzerod")
 have_cases = pytest.mark.skipif(not os.path.isdir(os.path.join(SHARED, "cases")),
                                 reason="svZeroDSolver test cases not present")
 

@@ -11,7 +11,8 @@ import pytest
 from hemocircuit.circuit import load
 from hemocircuit.units import PA_PER_MMHG
 
-SHARED = os.path.normpath(os.path.join(os.path.dirname(__file__), "..", "..", "shared", "svzerod"))
+from paths import SHARED_SVZEROD as SHARED
+
 pytestmark = pytest.mark.skipif(not os.path.isdir(SHARED), reason="../shared/svzerod not present")
 CASES = os.path.join(SHARED, "cases")
 DYN = 10.0 * PA_PER_MMHG  # dyn/cm^2 per mmHg (1 Pa = 10 dyn/cm^2)

@@ -11,11 +11,12 @@ import os
 import numpy as np
 import pytest
 
+from paths import SHARED_SVZEROD as SHARED
+
 from hemocircuit.errors import NetlistError
 from hemocircuit.svzerod import import_svzerod
 
 MMHG = 1333.22387415  # dyn/cm^2
-SHARED = os.environ.get("SVZEROD_CASES", "/work/shared/svzerod")
 
 
 def _sim(cycles=1, points=11, **more):

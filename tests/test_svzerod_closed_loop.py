@@ -10,8 +10,9 @@ import os
 import numpy as np
 import pytest
 
+from paths import SHARED_SVZEROD as SHARED
+
 HERE = os.path.dirname(os.path.abspath(__file__))
-SHARED = os.environ.get("SVZEROD_CASES", "/work/shared/svzerod")
 MODEL = os.path.join(SHARED, "cases", "closedLoopHeart_singleVessel.json")
 pytestmark = pytest.mark.skipif(not os.path.isfile(MODEL), reason="svZeroDSolver test cases not present")
 

@@ -16,12 +16,13 @@ import time
 
 import pytest
 
+from paths import SHARED_SVZEROD as SHARED
+
 from hemocircuit import inputs
 from hemocircuit.cli import main
 from hemocircuit.errors import HemocircuitError, NetlistError
 from hemocircuit.svzerod import import_svzerod, write_netlist
 
-SHARED = os.environ.get("SVZEROD_CASES", "/work/shared/svzerod")
 have_cases = pytest.mark.skipif(not os.path.isdir(os.path.join(SHARED, "cases")),
                                 reason="svZeroDSolver test cases not present")
 SIM = {"number_of_cardiac_cycles": 2, "number_of_time_pts_per_cardiac_cycle": 5}

@@ -11,6 +11,8 @@ import os
 import numpy as np
 import pytest
 
+from paths import SHARED_SVZEROD as SHARED
+
 from hemocircuit.cli import main
 from hemocircuit.errors import HemocircuitError
 from hemocircuit.svzerod import cycles, import_svzerod
@@ -18,7 +20,6 @@ from hemocircuit.svzerod.conformance import read_result
 from hemocircuit.svzerod.tolerances import tolerances
 from hemocircuit.svzerod.output import svzerod_output
 
-SHARED = os.environ.get("SVZEROD_CASES", "/work/shared/svzerod")
 have_cases = pytest.mark.skipif(not os.path.isdir(os.path.join(SHARED, "cases")),
                                 reason="svZeroDSolver test cases not present")
 MMHG = 1333.22387415  # dyn/cm^2

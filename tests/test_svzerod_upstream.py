@@ -19,6 +19,8 @@ import os
 
 import pytest
 
+from paths import SHARED_SVZEROD
+
 from hemocircuit.errors import NetlistError
 
 UPSTREAM = os.environ.get("HEMOCIRCUIT_SVZEROD_UPSTREAM")
@@ -47,7 +49,7 @@ def _cases_dir():
 
 
 def _not_shared():
-    shared = os.environ.get("SVZEROD_CASES", "/work/shared/svzerod")
+    shared = SHARED_SVZEROD
     have = set(os.listdir(os.path.join(shared, "cases"))) if os.path.isdir(os.path.join(shared, "cases")) else set()
     if not UPSTREAM:
         return []
