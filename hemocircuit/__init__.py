@@ -12,12 +12,16 @@ Circuit units: pressure mmHg, flow mL/s, volume mL, time s (see hemocircuit.unit
 import os as _os
 import sys as _sys
 
-# The engine is compiled at LLVM -O1, not numba's default -O3: the same run speed (vasomotion,
-# the body model, a decomposed heart), a first compile 3.4 s shorter (docs/performance.md).
-# Only when NUMBA_OPT is not set and numba is not loaded yet (then the user's numba keeps its
-# level); process-wide, as numba's settings are.  The compile helpers get this process's level.
-if "NUMBA_OPT" not in _os.environ and "numba" not in _sys.modules:
-    _os.environ["NUMBA_OPT"] = "1"
+# The engine is compiled at LLVM -O1, not numba's default -O3, and without LLVM's loop
+# vectorizer (numba's default has it on): the same run speed (its loops are short: vasomotion,
+# the body model, a decomposed heart), a shorter first compile (docs/performance.md).
+# Each only when the user has not set it and numba is not loaded yet (then the user's numba
+# keeps its settings); process-wide, as numba's settings are.  The compile helpers get this
+# process's settings (kernels.prebuild.helper_env).
+ENGINE_NUMBA_SETTINGS = {"NUMBA_OPT": "1", "NUMBA_LOOP_VECTORIZE": "0"}
+if "numba" not in _sys.modules:
+    for _name, _value in ENGINE_NUMBA_SETTINGS.items():
+        _os.environ.setdefault(_name, _value)
 
 from .errors import HemocircuitError, NetlistError, SolverError, TopologyError  # noqa: E402,F401
 

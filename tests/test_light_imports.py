@@ -120,29 +120,39 @@ def test_each_builtin_type_alone_is_the_registry_s_class():
     assert builtin <= set(fast)  # (a plug-in, e.g. the documented one, may be installed too)
 
 
-@pytest.mark.parametrize("env, numba_first, expect", [(None, False, 1), ("3", False, 3), (None, True, 3)])
-def test_engine_optimisation_level(env, numba_first, expect):
-    """hemocircuit compiles at LLVM -O1 (the same run speed as numba's -O3, a shorter first
-    compile; docs/performance.md) unless the user set NUMBA_OPT or loaded numba first."""
+_NUMBA_SETTINGS = ("NUMBA_OPT", "NUMBA_LOOP_VECTORIZE")
+_SHOW_SETTINGS = "import hemocircuit, numba\nprint(int(numba.config.OPT), int(numba.config.LOOP_VECTORIZE))\n"
+
+
+@pytest.mark.parametrize("env, numba_first, expect", [
+    ({}, False, "1 0"),
+    ({"NUMBA_OPT": "3"}, False, "3 0"),
+    ({"NUMBA_LOOP_VECTORIZE": "1"}, False, "1 1"),
+    ({}, True, "3 1")])
+def test_engine_numba_settings(env, numba_first, expect):
+    """hemocircuit compiles at LLVM -O1 without the loop vectorizer (the same run speed as
+    numba's -O3 with it, a shorter first compile; docs/performance.md), each unless the user set
+    it or loaded numba first (numba's defaults: -O3, the loop vectorizer on)."""
     import os
-    code = ("import numba\n" if numba_first else "") + "import hemocircuit, numba\nprint(int(numba.config.OPT))\n"
-    environ = {k: v for k, v in os.environ.items() if k != "NUMBA_OPT"}
-    if env is not None:
-        environ["NUMBA_OPT"] = env
+    code = ("import numba\n" if numba_first else "") + _SHOW_SETTINGS
+    environ = {k: v for k, v in os.environ.items() if k not in _NUMBA_SETTINGS}
+    environ.update(env)
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=True,
                          env=environ)
-    assert int(out.stdout.strip().splitlines()[-1]) == expect
+    assert out.stdout.strip().splitlines()[-1] == expect
 
 
-@pytest.mark.parametrize("numba_first, expect", [(False, "1"), (True, "3")])
-def test_compile_helpers_get_this_process_optimisation_level(numba_first, expect):
-    """The compile helpers (kernels.prebuild, kernels.background) are started with the level
-    this process compiles at, so both compile the same code (a user who imported numba first
-    keeps -O3 in the helpers too, though their own ``import hemocircuit`` would set -O1)."""
+@pytest.mark.parametrize("numba_first, expect", [(False, "1 0"), (True, "3 1")])
+def test_compile_helpers_get_this_process_numba_settings(numba_first, expect):
+    """The compile helpers (kernels.prebuild, kernels.background) are started with the level and
+    loop vectorizer switch this process compiles with, so both compile the same code (a user who
+    imported numba first keeps numba's defaults in the helpers too, though their own ``import
+    hemocircuit`` would set -O1 without the vectorizer)."""
     import os
     code = (("import numba\n" if numba_first else "") + "import hemocircuit, numba\n"
-            "from hemocircuit.kernels.prebuild import helper_env\nprint(helper_env()['NUMBA_OPT'])\n")
-    environ = {k: v for k, v in os.environ.items() if k != "NUMBA_OPT"}
+            "from hemocircuit.kernels.prebuild import helper_env\n"
+            "print(' '.join(helper_env()[k] for k in ('NUMBA_OPT', 'NUMBA_LOOP_VECTORIZE')))\n")
+    environ = {k: v for k, v in os.environ.items() if k not in _NUMBA_SETTINGS}
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=True,
                          env=environ)
     assert out.stdout.strip().splitlines()[-1] == expect

@@ -51,11 +51,12 @@ WAIT_S = 60.0
 
 def helper_env() -> dict:
     """The environment of a compile helper process: this one's, with numba's optimisation level
-    as this process compiles at (hemocircuit/__init__.py), so that both compile the same code."""
+    and loop vectorizer switch as this process compiles with (hemocircuit/__init__.py), so that
+    both compile the same code."""
     env = dict(os.environ)
     numba = sys.modules.get("numba")
     if numba is not None:
-        env["NUMBA_OPT"] = str(int(numba.config.OPT))
+        env.update(NUMBA_OPT=str(int(numba.config.OPT)), NUMBA_LOOP_VECTORIZE=str(int(numba.config.LOOP_VECTORIZE)))
     return env
 
 
