@@ -16,7 +16,7 @@ import pytest
 import hemocircuit as hc
 from hemocircuit.analyses.op import operating_point
 from hemocircuit.analyses.transient import simulate
-from hemocircuit.components.arteriole.parameters import effective
+from hemocircuit.components.arteriole.equations import no_rates
 from hemocircuit.errors import NetlistError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -47,9 +47,13 @@ def ops():
 
 
 def _art_params(circuit):
-    """The arteriole's parameters (SI, no_speed applied) as plain floats."""
+    """The arteriole's parameters (SI) as plain floats, h_w, r_dw, s_w and k_tau with no_speed applied
+    (equations.no_rates)."""
     g, i = circuit.element_group("art")
-    return effective({k: float(v[0, i]) for k, v in g.p.items()})
+    p = {k: float(v[0, i]) for k, v in g.p.items()}
+    vec = np.array([p[k] for k in g.comp.parameters])
+    p.update(zip(("h_w", "r_dw", "s_w", "k_tau"), no_rates(vec)))
+    return p
 
 
 # --- the thesis's numbers (compatibility reading) -------------------------------------------------

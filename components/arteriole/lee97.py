@@ -1,10 +1,21 @@
-"""Relative phosphorylation vs [Ca] for several [cGMP] (thesis figure figrPhospCa, fit to Lee97)."""
+"""Relative phosphorylation vs [Ca] for several [cGMP] (thesis figure figrPhospCa, fit to Lee97):
+the 4-state cross-bridge kinetics (eqs phos, dephos, 4stateSS) at steady state.  Fractions [-],
+concentrations [M]."""
 from __future__ import annotations
 
 import numpy as np
 
-from .kinetics import relative_phosphorylation
+from . import equations as eq
 from .parameters import make_params
+
+
+def relative_phosphorylation(Ca, cGMP, params):
+    """Mp + AMp [-] at kinetic steady state (figure figrPhospCa), for [Ca], [cGMP] in M."""
+    p = eq.vector(params)
+    with np.errstate(divide="ignore"):
+        _, Mp, AMp, _ = eq.quasi_steady(*eq.rates(np.asarray(Ca, dtype=float), np.asarray(cGMP, dtype=float),
+                                                  p, False), p)
+    return Mp + AMp
 
 
 def phosphorylation_curves(params=None, Ca=None, cGMP=None):

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .equations import BRIDGE_STATES, CA_FLOOR
+from .equations import BRIDGE_STATES
 
 DEFAULT_OPTIONS = {"ca_order": 1, "kinetics": "quasi_steady", "passive": False}
 OPTION_CHOICES = {"ca_order": (1, 2), "kinetics": ("quasi_steady", "dynamic"), "passive": (False, True)}
@@ -83,29 +83,3 @@ def unpack(x, options=None) -> dict:
         raise ValueError(f"state array has {x.shape[-1]} states on its last axis, "
                          f"expected {len(names)} ({names})")
     return {n: x[..., i] for i, n in enumerate(names)}
-
-
-def at_ca_floor(states, options=None):
-    """True where [Ca] <= CA_FLOOR (the integrator then resets dCa/dt to 0 and continues)."""
-    return np.asarray((states if isinstance(states, dict) else unpack(states, options))["Ca"]) <= CA_FLOOR
-
-
-def clip_states(states, options=None):
-    """Project onto the physical domain: Ca >= CA_FLOOR and, where Ca is at the floor and
-    falling, dCa/dt = 0 (second order).  Returns a copy of the same type (dict or array)."""
-    o = resolve_options(options)
-    if isinstance(states, dict):
-        base, s = None, dict(states)
-    else:
-        base = np.array(states, dtype=float)
-        s = unpack(base, o)  # views into the copy
-    Ca = np.asarray(s["Ca"], dtype=float)
-    new = {"Ca": np.maximum(Ca, CA_FLOOR)}
-    if o["ca_order"] == 2:
-        new["dCa"] = np.where((Ca <= CA_FLOOR) & (np.asarray(s["dCa"]) < 0), 0.0, s["dCa"])
-    if base is None:
-        s.update(new)
-        return s
-    for k, v in new.items():
-        s[k][...] = v
-    return base

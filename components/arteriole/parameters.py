@@ -86,9 +86,6 @@ PARAMETERS: dict[str, ParamSpec] = {
                                                  "metabolic); not in the thesis (0); may be a waveform"),
 }
 
-#: the NO coefficients that ``no_speed`` scales together (eq dNOdt's four coefficients)
-NO_SPEED_SCALED = ("h_w", "r_dw", "s_w", "k_tau")
-
 _KUO91 = {
     # NO model: tabNewNOValues for h_w, s_w, r_dw, k_tau; the rest tabActiveFit (Kuo)
     "h_w": 38.0e-12, "s_w": 346e-12, "gamma_wb": 7.27, "r_db": 89.5, "r_dw": 47.6e-3,
@@ -131,21 +128,6 @@ def make_params(preset: str = "kuo91", **overrides) -> dict:
         raise KeyError(f"unknown arteriole parameter(s) {sorted(unknown)}")
     out = dict(PRESETS[preset])
     out.update(overrides)
-    return out
-
-
-def effective(params: dict) -> dict:
-    """Apply ``no_speed`` (sec. dynfitting): h_w, r_dw, s_w, k_tau are multiplied by it.
-
-    Returns a new dict with the scaled coefficients and ``no_speed = 1``, so applying it twice
-    is harmless (the equations apply no_speed themselves: equations.no_rates)."""
-    s = params["no_speed"]
-    if np.all(np.equal(s, 1.0)):
-        return params
-    out = dict(params)
-    for k in NO_SPEED_SCALED:
-        out[k] = params[k] * s
-    out["no_speed"] = np.ones_like(s, dtype=float) if np.ndim(s) else 1.0
     return out
 
 

@@ -94,15 +94,3 @@ def test_nan_state_raises(art, kuo):
     from hemocircuit.components.arteriole.element import ArterioleError
     with pytest.raises(ArterioleError, match="arteriole derivatives: non-finite"):
         rates(art, {"Ca": np.nan, "Cw": 1e-8, "lambda": 1.0}, 8000.0, 0.0, kuo)
-
-
-def test_ca_floor_helpers(art):
-    opts = {"ca_order": 2}
-    x = np.array([[-1e-9, -3e-8, 1e-8, 0.9], [1e-7, -3e-8, 1e-8, 0.9], [1e-13, 2e-8, 1e-8, 0.9]])
-    np.testing.assert_array_equal(art.at_ca_floor(x, opts), [True, False, True])
-    y = art.clip_states(x, opts)
-    np.testing.assert_allclose(y[:, 0], [art.CA_FLOOR, 1e-7, art.CA_FLOOR])
-    np.testing.assert_allclose(y[:, 1], [0.0, -3e-8, 2e-8])   # rising Ca keeps its rate
-    assert x[0, 0] == -1e-9                                    # input untouched
-    d = art.clip_states(art.unpack(x, opts), opts)
-    np.testing.assert_array_equal(art.pack(d, opts), y)

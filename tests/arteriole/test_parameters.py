@@ -32,14 +32,14 @@ def test_known_values(art):
     assert (f["q3"], f["l0"], f["f1"], f["lambda_opt"]) == (0.619, 64.3e-6, 98.7e-6, 1.79)
 
 
-def test_effective_applies_no_speed_once(art, kuo):
-    p = art.effective(dict(kuo, no_speed=1 / 0.005))
-    # tabActiveFit values: h_w 7.61e-9, s_w 69.2e-9, r_dw 9.51, k_tau 248e-15
-    np.testing.assert_allclose([p["h_w"], p["s_w"], p["r_dw"], p["k_tau"]],
-                               [7.61e-9, 69.2e-9, 9.51, 248e-15], rtol=2e-3)
-    assert art.effective(p) == p
-    arr = art.effective(dict(kuo, no_speed=np.array([1.0, 2.0])))
-    np.testing.assert_array_equal(arr["h_w"], [38e-12, 76e-12])
+def test_no_speed_scales_the_four_no_coefficients(art, kuo):
+    """equations.no_rates (sec. dynfitting): (h_w, r_dw, s_w, k_tau) times no_speed; 1/0.005
+    restores tabActiveFit's values, and an array of no_speed scales element by element."""
+    rates = art.equations.no_rates(art.equations.vector(dict(kuo, no_speed=1 / 0.005)))
+    # tabActiveFit values: h_w 7.61e-9, r_dw 9.51, s_w 69.2e-9, k_tau 248e-15
+    np.testing.assert_allclose(rates, [7.61e-9, 9.51, 69.2e-9, 248e-15], rtol=2e-3)
+    h_w = art.equations.no_rates(art.equations.vector(dict(kuo, no_speed=np.array([1.0, 2.0]))))[0]
+    np.testing.assert_array_equal(h_w, [38e-12, 76e-12])
     assert kuo["no_speed"] == 1.0
 
 
