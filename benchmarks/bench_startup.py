@@ -82,6 +82,7 @@ def run_once(args, env):
 BREAKDOWN = r"""
 import os, sys, time
 import numpy as np
+import hemocircuit as hc  # first: its numba settings (-O1, no loop vectorizer) apply only before numba loads
 from numba.core import codegen, event
 own, passes, llvm, stack = {}, {}, {}, []
 
@@ -120,13 +121,14 @@ for name in ("_optimize_functions", "_optimize_final_module", "_finalize_final_m
     timed(name)
 event.register("numba:compile", Listener())
 event.register("numba:run_pass", Listener())
-import hemocircuit as hc
 from hemocircuit.analyses.transient import simulate
 c = hc.load(sys.argv[1])
 t0 = time.process_time()
 simulate(c, t_end=10.0, progress=False, compile="wait")
 total = time.process_time() - t0
-print(f"first tran, one process: {total:.1f} s CPU, {len(own)} functions compiled")
+import numba
+print(f"first tran, one process: {total:.1f} s CPU, {len(own)} functions compiled "
+      f"(numba -O{int(numba.config.OPT)}, loop vectorizer {'on' if numba.config.LOOP_VECTORIZE else 'off'})")
 print("LLVM: function passes {:.1f} s, final-module optimisation {:.1f} s, machine code {:.1f} s".format(
     *(llvm.get(k, 0.0) for k in ("_optimize_functions", "_optimize_final_module", "_finalize_final_module"))))
 print("passes: " + ", ".join(f"{k} {v:.1f}" for k, v in sorted(passes.items(), key=lambda kv: -kv[1])[:8]))
