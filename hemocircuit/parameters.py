@@ -11,9 +11,10 @@ the parameter's declared unit (``Component.parameters[name].unit``): mmHg, mL, s
 
 Setting a value accepts what ``--set`` and protocols accept: a number in the declared unit, a
 quantity string with a unit ("5 s"), a pint quantity, a waveform mapping
-({sine: ...}; see hemocircuit.waveforms), or an array of B numbers (one per member).  Each
-value is checked against the parameter's bounds (``build.check_values``); errors name the
-file, element and parameter.
+({sine: ...}; see hemocircuit.waveforms), or an array of B numbers (one per member).  On a
+parameter that carries a waveform, any value other than a waveform replaces it (as in a
+netlist).  Each value is checked against the parameter's bounds (``build.check_values``);
+errors name the file, element and parameter.
 """
 from __future__ import annotations
 
@@ -132,6 +133,17 @@ class ParameterSet:
         _, gi, i, name = self.schema.resolve(path)
         return next((wf for j, n, wf in self._waves[gi] if j == i and n == name), None)
 
+    def constant(self, path: str, what: str) -> float:
+        """The value of ID.PARAM (its first member's) for ``what`` (an analysis that varies it as
+        a number: a fit, a sensitivity study); an error naming it when the parameter carries a
+        waveform, whose time course a number would replace (``with_values``)."""
+        if self.waveform(path) is not None:
+            e, *_ = self.schema.resolve(path)
+            raise NetlistError(f"{what}: {path} carries a waveform (its value varies in time), which a number would "
+                               f"replace; vary a constant parameter, or set {path} to a constant first "
+                               f"(--set {path}=VALUE)", file=e.file, element=e.id)
+        return float(self.values[path][0])
+
     def group_arrays(self, gi: int) -> dict:
         """{name: read-only (1 or B, E)} of group ``gi`` (the circuit's evaluation layout)."""
         return self._arrays[gi]
@@ -161,12 +173,13 @@ class ParameterSet:
                 else:
                     waves[gi].append((i, name, wf))
                     value = 0.0
-            elif isinstance(value, str):  # a quantity replaces a waveform
+            else:  # a value replaces a waveform, in whichever form it is given (as in a netlist)
+                waves[gi] = [w for w in waves[gi] if not (w[0] == i and w[1] == name)]
+            if isinstance(value, str):
                 try:
                     value = parse_quantity(value, par.unit, f"{path}")
                 except UnitError as exc:
                     raise NetlistError(str(exc), file=e.file, element=e.id) from None
-                waves[gi] = [w for w in waves[gi] if not (w[0] == i and w[1] == name)]
             elif hasattr(value, "to"):  # a pint quantity (scalar or array)
                 try:
                     value = np.asarray(value.to(par.unit).magnitude, dtype=float)

@@ -179,6 +179,24 @@ def test_estimated_parameter_set_by_a_protocol_event_is_rejected(tmp_path):
         load_problem(HERE / "rc.yaml", spec)
 
 
+@pytest.mark.parametrize("start", [None, "1 mmHg"])
+def test_a_parameter_with_a_waveform_is_not_fitted(tmp_path, start):
+    """Ps.value driven by a sine: a fit would replace the sine by a number (with_values), so it
+    is an error naming the parameter and the fix, with or without a start."""
+    net = tmp_path / "rc_sine.yaml"
+    net.write_text((HERE / "rc.yaml").read_text().replace(
+        "value: 0 mmHg}", "value: {sine: {offset: 5 mmHg, amplitude: 1 mmHg, frequency: 0.5 Hz}}}"))
+    write_table(tmp_path / "rc.csv", {"t": np.array([0.0, 1.0]), "P": np.array([0.0, 0.0])}, {"t": "s", "P": "mmHg"})
+    par = {"bounds": ["-10 mmHg", "10 mmHg"], **({"start": start} if start else {})}
+    (tmp_path / "run.yaml").write_text("t_end: 2 s\n")
+    spec = write_spec(tmp_path, {
+        "parameters": {"Ps.value": par},
+        "datasets": [{"file": "rc.csv", "observe": "P(a)", "column": "P",
+                      "experiment": {"type": "tran", "protocol": "run.yaml", "time": "t"}}]})
+    with pytest.raises(hc.NetlistError, match=r"fit: Ps.value carries a waveform .*--set Ps.value=VALUE"):
+        load_problem(net, spec)
+
+
 def test_cli_error_exits_2_without_traceback(tmp_path, capsys):
     linear_data(tmp_path, noise=0.0)
     body = yaml.safe_load(linear_spec(tmp_path).read_text())

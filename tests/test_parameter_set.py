@@ -67,6 +67,33 @@ def test_with_values_makes_a_new_circuit_and_keeps_the_original(rc):
     assert rc.with_values({}) is rc
 
 
+@pytest.mark.parametrize("value", [90.0, "90 mmHg", np.float64(90.0), np.array([90.0]), Q_(90, "mmHg"),
+                                   {"steps": [["0 s", "90 mmHg"]]}])
+def test_a_value_replaces_a_waveform_in_every_form(rc, value):
+    """A source driven by a sine, then set to 90 mmHg: the same constant 90 mmHg whether the
+    value is a number in the declared unit, a quantity string, a numpy number or array, a pint
+    quantity or a waveform (as a netlist's ``value: 90 mmHg`` replaces a waveform).  A bare
+    number used to keep the sine and add 90 to it (80 + 5 sin -> 170 + 5 sin: no error)."""
+    sine = rc.with_values({"Ps.value": {"sine": {"offset": "80 mmHg", "amplitude": "5 mmHg", "frequency": "0.1 Hz"}}})
+    assert sine.parameters.waveform("Ps.value") is not None
+    c = sine.with_values({"Ps.value": value})
+    assert c.parameters.waveform("Ps.value") is None or isinstance(value, dict)
+    res = c.simulate(t_end=7.5, dt=2.5, progress=False)
+    np.testing.assert_allclose(res["P(in)"], 90.0, rtol=0, atol=1e-9)
+    # the original keeps its sine: 80 + 5 sin(2 pi 0.1 t) at t = 2.5 s is 85 mmHg
+    assert sine.simulate(t_end=2.5, dt=2.5, progress=False)["P(in)"][-1] == pytest.approx(85.0, abs=1e-6)
+
+
+def test_constant_value_for_a_study_refuses_a_waveform(rc):
+    """ParameterSet.constant: a parameter's number for a fit or a sensitivity study, and an
+    error naming the study, the parameter and the fix when a waveform drives it."""
+    assert rc.parameters.constant("Ps.value", "sensitivity") == 50.0
+    sine = rc.with_values({"Ps.value": {"sine": {"offset": "80 mmHg", "amplitude": "5 mmHg", "frequency": "0.1 Hz"}}})
+    with pytest.raises(NetlistError, match=r"sensitivity: Ps.value carries a waveform.*--set Ps.value=VALUE") as exc:
+        sine.parameters.constant("Ps.value", "sensitivity")
+    assert exc.value.element == "Ps"
+
+
 def test_bounds_and_path_errors_name_element_and_parameter(rc):
     snap = _snapshot(rc)
     cases = [({"R1.R": -1.0}, "R1", "'R'"), ({"R1.R": "0 mmHg*s/mL"}, "R1", "not physical"),

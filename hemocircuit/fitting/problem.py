@@ -266,6 +266,8 @@ class FitProblem:
 
     def _start_value(self, p, unit, lower, upper):
         key = f"parameters.{p.path}"
+        # a number replaces a waveform: its parameter is not fitted (the error says so), whatever the start
+        centre = self.circuit.parameters.constant(p.base_path, "fit") if p.epoch is None else None
         if p.start is not None:
             v = parse_value(p.start, unit, self.spec.file, f"{key}.start")
             if not lower <= v <= upper:
@@ -275,7 +277,7 @@ class FitProblem:
         elif p.epoch is not None:
             v = self._protocol_value(p, unit)
         else:
-            v = float(self.circuit.parameters.values[p.base_path][0])
+            v = centre
         return v
 
     def _protocol_value(self, p, unit):
@@ -286,7 +288,7 @@ class FitProblem:
                     (ev.set for ev in e.protocol.events if float(ev.at) == p.epoch), {})
                 if p.base_path in sets:
                     return parse_value(sets[p.base_path], unit, e.protocol.file, p.path)
-        return float(self.circuit.parameters.values[p.base_path][0])
+        return self.circuit.parameters.constant(p.base_path, "fit")
 
     # ---------------------------------------------------------------- evaluation ----
     @property

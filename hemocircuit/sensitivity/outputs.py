@@ -121,7 +121,7 @@ class CircuitObjective(Objective):
     def parameter_info(self, path, event=None):
         unit = self.circuit.param_unit(path)
         if event is None:
-            return {"unit": unit, "centre": float(self.circuit.parameters.values[path][0])}
+            return {"unit": unit, "centre": self.circuit.parameters.constant(path, "sensitivity")}
         for ev in self.events:
             if abs(ev.at - event) <= 1e-9 * max(1.0, abs(event)) and path in ev.set:
                 try:
@@ -335,7 +335,7 @@ class FitErrorObjective(Objective):
     def parameter_info(self, path, event=None):
         if event is not None:
             raise NetlistError(f"parameter {path}: 'event' applies to a tran output only")
-        info = {"unit": self.circuit.param_unit(path), "centre": float(self.circuit.parameters.values[path][0])}
+        info = {"unit": self.circuit.param_unit(path), "centre": self.circuit.parameters.constant(path, "sensitivity")}
         if path in self._bounds:
             info["lower"], info["upper"] = self._bounds[path]
         return info
