@@ -132,27 +132,14 @@ def make_params(preset: str = "kuo91", **overrides) -> dict:
 
 
 def check_params(params: dict, complete: bool = True) -> list[str]:
-    """Messages for values outside their physical bounds and inconsistent combinations.
-    ``complete`` False: parameters not given are not an error (a netlist's expression-valued
-    ones, whose values are checked against their bounds once evaluated), and the combinations
-    they are part of are not checked."""
+    """Messages for missing parameters (``complete``: a netlist's expression-valued ones are
+    absent until evaluated) and for combinations the equations cannot take.  Each value's own
+    bounds (``PARAMETERS``) are the framework's: the element declares them (``Param``), and
+    assembly and every ``with_values`` check them (build.check_values)."""
     msgs = []
     missing = set(PARAMETERS) - set(params)
     if missing and complete:
         msgs.append(f"missing parameter(s) {sorted(missing)}")
-    for name, spec in PARAMETERS.items():
-        if name not in params:
-            continue
-        v = np.asarray(params[name], dtype=float)
-        bad = ~np.isfinite(v)
-        if spec.lower is not None:
-            bad |= (v <= spec.lower) if spec.lower_open else (v < spec.lower)
-        if spec.upper is not None:
-            bad |= v > spec.upper
-        if np.any(bad):
-            lo = "" if spec.lower is None else f"{spec.lower:g} {'<' if spec.lower_open else '<='} "
-            hi = "" if spec.upper is None else f" <= {spec.upper:g}"
-            msgs.append(f"{name} = {v[bad].ravel()[:3]} violates {lo}{name}{hi} [{spec.unit}]")
     p = params
     for lo, hi in (("NO_L", "NO_U"), ("sigma_L", "sigma_U")):
         if lo in p and hi in p and np.any(np.equal(p[lo], p[hi])):

@@ -4,9 +4,24 @@ import pytest
 
 
 def test_presets_complete_and_within_bounds(art):
+    """Every preset gives every parameter, each within the bounds the element declares (which
+    the framework checks), and no combination check_params rejects."""
+    from hemocircuit.components.arteriole.element import Arteriole
+
     for name, p in art.PRESETS.items():
         assert set(p) == set(art.PARAMETERS), name
+        assert not [k for k, v in p.items() if Arteriole.parameters[k].violates(np.atleast_1d(v)).any()], name
         assert art.check_params(p) == [], name
+
+
+def test_a_value_outside_its_bounds_is_an_error_naming_the_element(art, write):
+    """The bounds of PARAMETERS reach the framework's check: a negative tau_Ca is refused."""
+    import hemocircuit as hc
+
+    c = hc.load(write("elements:\n  - {id: Pa, type: pressure_source, nodes: [in, ground], value: 60 mmHg}\n"
+                      "  - {id: art, type: arteriole, nodes: [in, ground, ground]}\n"))
+    with pytest.raises(hc.NetlistError, match=r"element 'art'.*tau_Ca.*not physical"):
+        c.with_values({"art.tau_Ca": "-1 s"})
 
 
 def test_units_parse_with_pint_and_have_si_dimensions(art):
