@@ -16,6 +16,8 @@ Shapes as :mod:`hemocircuit.component`: ``p`` {name: (1 or B, E)}, ``x`` (B, E, 
 """
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 
 from .kernels.jit import LazyDispatcher
@@ -31,18 +33,23 @@ LOOP_CALLS = 64
 #: (101 rows) take ~5 ms as Python against ~0.9 s of compiling their loops, while a large
 #: circuit's right-hand side (a 3 000-element ladder) compiles its loops at its 4th evaluation
 LOOP_COMPILE_CALLS = 10_000
-_seen: dict = {}  # (kernel function, loop kind) -> [element calls so far, loop ready]
+_seen: dict = {}  # (kernel function, loop kind) -> [element calls so far, loop ready or None: not asked]
 
 
 def _looped(fn, kind, calls) -> bool:
-    """Run a group of ``calls`` element calls of ``fn`` as one compiled loop?"""
+    """Run a group of ``calls`` element calls of ``fn`` as one compiled loop?  A cached loop is
+    used once numba is loaded in this process anyway: loading numba for it (~0.3 s with its
+    runtime) costs more than a short analysis's element calls as Python (a first batch
+    operating point: 0.6 -> 0.2 s)."""
     if calls < LOOP_CALLS:
         return False
     seen = _seen.get((fn, kind))
     if seen is None:
-        seen = _seen[(fn, kind)] = [0, ready(fn, kind)]
+        seen = _seen[(fn, kind)] = [0, None]
     seen[0] += calls
-    return seen[1] or seen[0] >= LOOP_COMPILE_CALLS
+    if seen[1] is None and "numba" in sys.modules:
+        seen[1] = ready(fn, kind)
+    return bool(seen[1]) or seen[0] >= LOOP_COMPILE_CALLS
 
 _PYTHON_REFUSES = (OverflowError, ZeroDivisionError, ValueError)
 

@@ -9,11 +9,14 @@ reference counting (they never allocate) and with numpy's error model (a divisio
 inf/nan); called from Python before that, they run as the Python functions they are.
 
 ``solve_batched(A, b)`` solves A[i] u[i] = b[i] for a stack of small matrices (the nodal
-equations of the batched numpy path).  For many rows it runs compiled (numba, imported on first
-use), several times faster than ``np.linalg.solve`` for the 8x8-ish systems of a circuit
-evaluated for hundreds of batch rows; otherwise numpy.
+equations of the batched numpy path).  For many rows it runs compiled once numba is loaded (or
+enough rows pay for loading it: NUMBA_AMORTISED_ROWS), about twice as fast as
+``np.linalg.solve`` for the 13x13-ish systems of a circuit evaluated for hundreds of batch
+rows; otherwise numpy.
 """
 from __future__ import annotations
+
+import sys
 
 import numpy as np
 
@@ -106,14 +109,20 @@ def _solve_nb(A, b):
     return out
 
 
-#: below this many rows numpy's LAPACK is used: the first numba call of a process costs ~0.4 s
-#: (numba's runtime start), more than a short analysis such as ``op`` spends in solves
+#: below this many rows numpy's LAPACK is used
 NUMBA_MIN_ROWS = 64
+#: ... and above it too until numba is loaded in this process anyway or this many rows have
+#: been solved: the first numba call costs ~0.4 s (its import and runtime start), which the
+#: compiled solve (~0.7 us a row faster than LAPACK's for n ~ 13) pays back after ~5e5 rows,
+#: more than a short analysis such as a batch ``op`` solves
+NUMBA_AMORTISED_ROWS = 500_000
+_rows = [0]  # rows solved in this process
 
 
 def solve_batched(A, b):
     """u with A[i] @ u[i] = b[i]; A (m, n, n), b (m, n).  Singular rows give NaN."""
-    if len(A) >= NUMBA_MIN_ROWS:
+    _rows[0] += len(A)
+    if len(A) >= NUMBA_MIN_ROWS and ("numba" in sys.modules or _rows[0] >= NUMBA_AMORTISED_ROWS):
         return _solve_compiled(A, b)
     try:
         return np.linalg.solve(A, b[..., None])[..., 0]

@@ -63,6 +63,27 @@ def test_check_and_help_do_not_import_numba(args):
     assert "numba" not in loaded_after(args)["modules"]
 
 
+def test_a_batch_operating_point_does_not_import_numba():
+    """Ten members of vasomotion (5 Pa x 2 zeta) at once through the API in a new interpreter:
+    its Jacobians solve 90 batch rows a call, which the compiled solve and element loops would
+    take once numba is loaded; loading it for them (~0.4 s) cost more than the whole operating
+    point as numpy and Python (0.6 -> 0.14 s), so they stay numpy until numba is loaded anyway
+    (or enough rows pay for it: linalg.NUMBA_AMORTISED_ROWS, elementwise.LOOP_COMPILE_CALLS).
+    The states are right: every member at the steady Pa it was given, P(in) = Pa."""
+    code = ("import json, sys\n"
+            "import hemocircuit as hc\n"
+            "from hemocircuit.batch import build_batches, expand_grid, member_operating_points, resolve_values\n"
+            f"c = hc.load({str(ROOT / 'netlists' / 'vasomotion.yaml')!r})\n"
+            "grids = resolve_values(c, [('Pa.value', [60., 70., 80., 90., 100.]), ('art.zeta', [0.1, 0.2])])\n"
+            "(bc, idx), = build_batches(c, expand_grid(grids))\n"
+            "X0, opv, errors = member_operating_points(bc)\n"
+            "print(json.dumps({'numba': 'numba' in sys.modules, 'errors': errors, 'P_in': list(opv['P(in)'])}))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=True)
+    res = json.loads(out.stdout.strip().splitlines()[-1])
+    assert res["numba"] is False and res["errors"] == [None] * 10, res
+    assert res["P_in"] == pytest.approx([60.0] * 2 + [70.0] * 2 + [80.0] * 2 + [90.0] * 2 + [100.0] * 2), res
+
+
 def test_a_large_circuit_takes_the_sparse_path(tmp_path):
     """The other side of the threshold: a ladder of resistors and compliances with more nodal
     unknowns than SPARSE_MIN_UNKNOWNS loads scipy.sparse for its operating point (so the test
