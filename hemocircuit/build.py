@@ -133,15 +133,18 @@ def parse_element(spec, netlist_file=None) -> ElementData:
     return data
 
 
-def check_values(data: ElementData, values: dict | None = None):
-    """Bounds and cross-parameter checks (also used for --set and protocol events)."""
+def check_values(data: ElementData, values: dict | None = None, waveforms: dict | None = None):
+    """Bounds and cross-parameter checks (also used for --set and protocol events).
+    ``waveforms``: {name: waveform or None} in effect with ``values`` where they differ from
+    the netlist's (a value set with_values replaces its waveform; a waveform set replaces it)."""
     values = data.values if values is None else values
+    waveforms = {**data.waveforms, **(waveforms or {})}
     for name, val in values.items():
         if name in data.expressions:
             continue
         par = data.cls.parameters[name]
         arr = np.atleast_1d(np.asarray(val, dtype=float))
-        wf = data.waveforms.get(name)
+        wf = waveforms.get(name)
         if wf is not None and par.lower is not None or wf is not None and par.upper is not None:
             # the value in use is the slot plus the waveform: check the waveform's whole range
             lo, hi = wf.value_range()

@@ -164,17 +164,18 @@ class ParameterSet:
                 raise NetlistError(f"'{name}' follows an expression ({e.expressions[name].text}); it cannot be set",
                                    file=e.file, element=e.id)
             par = e.cls.parameters[name]
+            # a waveform replaces the parameter's waveform, and any other value replaces it too,
+            # in whichever form it is given (as in a netlist)
+            waves[gi] = [w for w in waves[gi] if not (w[0] == i and w[1] == name)]
+            wf = None
             if isinstance(value, dict):  # a waveform (a constant one is just a number)
                 from .waveforms import Constant, parse_waveform
                 wf = parse_waveform(value, par.unit, None, {"file": e.file, "element": e.id})
-                waves[gi] = [w for w in waves[gi] if not (w[0] == i and w[1] == name)]
                 if isinstance(wf, Constant):
-                    value = wf.value
+                    value, wf = wf.value, None
                 else:
                     waves[gi].append((i, name, wf))
                     value = 0.0
-            else:  # a value replaces a waveform, in whichever form it is given (as in a netlist)
-                waves[gi] = [w for w in waves[gi] if not (w[0] == i and w[1] == name)]
             if isinstance(value, str):
                 try:
                     value = parse_quantity(value, par.unit, f"{path}")
@@ -191,7 +192,7 @@ class ParameterSet:
                 raise NetlistError(f"{path} = {value!r} is not a number (in {par.unit}), a quantity with a unit, "
                                    "a waveform or an array of one number per member", file=e.file,
                                    element=e.id) from None
-            check_values(e, {name: arr})
+            check_values(e, {name: arr}, {name: wf})  # the waveform in effect, not the netlist's
             arrays[gi][name] = self._column(arrays[gi][name], i, arr, path, e)
         return ParameterSet(self.schema, self.B, arrays, waves)
 

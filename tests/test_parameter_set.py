@@ -84,6 +84,31 @@ def test_a_value_replaces_a_waveform_in_every_form(rc, value):
     assert sine.simulate(t_end=2.5, dt=2.5, progress=False)["P(in)"][-1] == pytest.approx(85.0, abs=1e-6)
 
 
+WINDKESSEL = """
+elements:
+  - {id: Ps, type: pressure_source, nodes: [in, ground], value: 80 mmHg}
+  - {id: W, type: closed_loop_rcr, nodes: [in, out, ground], Rp: 0.1 mmHg*s/mL, C: 1 mL/mmHg,
+     Rd: {sine: {offset: 1 mmHg*s/mL, amplitude: 0.9 mmHg*s/mL, frequency: 1 Hz}}}
+  - {id: Pv, type: pressure_source, nodes: [out, ground], value: 5 mmHg}
+"""
+
+
+def test_a_value_set_is_checked_with_the_waveform_it_leaves_in_effect(write):
+    """W.Rd (> 0) carries a sine from 0.1 to 1.9 in the netlist.  A constant that replaces it is
+    checked alone (-0.05 was accepted: checked as -0.05 + the old sine's 0.1..1.9), and a new
+    waveform by its own range (a sine from -1 to 1 was accepted: checked as the old one's)."""
+    c = hc.load(write(WINDKESSEL))
+    with pytest.raises(NetlistError, match=r"element 'W': parameter 'Rd' = -0.05 .* not physical"):
+        c.with_values({"W.Rd": "-0.05 mmHg*s/mL"})
+    with pytest.raises(NetlistError, match=r"parameter 'Rd': its waveform's lowest value -1 .* not physical"):
+        c.with_values({"W.Rd": {"sine": {"offset": "0 mmHg*s/mL", "amplitude": "1 mmHg*s/mL", "frequency": "1 Hz"}}})
+    assert c.with_values({"W.Rd": 3.0}).parameters.values["W.Rd"].tolist() == [3.0]
+    # a waveform within the bounds, set where the netlist had none, is checked by its range too
+    c2 = c.with_values({"W.Rd": "2 mmHg*s/mL"}).with_values(
+        {"W.Rd": {"sine": {"offset": "2 mmHg*s/mL", "amplitude": "1 mmHg*s/mL", "frequency": "1 Hz"}}})
+    assert c2.parameters.waveform("W.Rd") is not None
+
+
 def test_constant_value_for_a_study_refuses_a_waveform(rc):
     """ParameterSet.constant: a parameter's number for a fit or a sensitivity study, and an
     error naming the study, the parameter and the fix when a waveform drives it."""
