@@ -133,10 +133,13 @@ def parse_element(spec, netlist_file=None) -> ElementData:
     return data
 
 
-def check_values(data: ElementData, values: dict | None = None, waveforms: dict | None = None):
+def check_values(data: ElementData, values: dict | None = None, waveforms: dict | None = None,
+                 relations: bool = True):
     """Bounds and cross-parameter checks (also used for --set and protocol events).
     ``waveforms``: {name: waveform or None} in effect with ``values`` where they differ from
-    the netlist's (a value set with_values replaces its waveform; a waveform set replaces it)."""
+    the netlist's (a value set with_values replaces its waveform; a waveform set replaces it).
+    ``relations`` False: the bounds only (ParameterSet.with_values checks the relations once
+    every value of its mapping is in, with :func:`check_relations`)."""
     values = data.values if values is None else values
     waveforms = {**data.waveforms, **(waveforms or {})}
     for name, val in values.items():
@@ -156,11 +159,16 @@ def check_values(data: ElementData, values: dict | None = None, waveforms: dict 
         if par.violates(arr).any():
             raise NetlistError(f"parameter '{name}' = {float(arr[par.violates(arr)][0]):g} {par.unit} is not "
                                f"physical: need {par.bounds_text()}", **data.where)
-    comp = data.cls(data.opts)
-    merged = {**data.values, **values}
-    merged = {k: v for k, v in merged.items() if k not in data.expressions}
-    p = {k: np.atleast_2d(np.asarray(v, dtype=float)) for k, v in merged.items()}
-    for _, msg in comp.check(p):
+    if relations:
+        merged = {**data.values, **values}
+        check_relations(data, {k: np.atleast_2d(np.asarray(v, dtype=float)) for k, v in merged.items()
+                               if k not in data.expressions})
+
+
+def check_relations(data: ElementData, p: dict):
+    """The element type's cross-parameter checks (Component.check) of its values ``p`` {name:
+    (1 or B, 1 or E)}; the first failure is an error naming the element."""
+    for _, msg in data.cls(data.opts).check(p):
         raise NetlistError(msg, **data.where)
 
 

@@ -22,7 +22,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from .build import check_values
+from .build import check_relations, check_values
 from .errors import NetlistError
 from .units import UnitError, parse_quantity
 from .names import split_path
@@ -158,6 +158,7 @@ class ParameterSet:
         accepted values).  This set is unchanged, also when a value is rejected."""
         arrays = [dict(a) for a in self._arrays]
         waves = [list(w) for w in self._waves]
+        touched = {}  # element id -> (element data, group, index)
         for path, value in dict(mapping).items():
             e, gi, i, name = self.schema.resolve(path)
             if name in e.expressions:
@@ -192,8 +193,13 @@ class ParameterSet:
                 raise NetlistError(f"{path} = {value!r} is not a number (in {par.unit}), a quantity with a unit, "
                                    "a waveform or an array of one number per member", file=e.file,
                                    element=e.id) from None
-            check_values(e, {name: arr}, {name: wf})  # the waveform in effect, not the netlist's
+            check_values(e, {name: arr}, {name: wf}, relations=False)  # the waveform in effect, not the netlist's
             arrays[gi][name] = self._column(arrays[gi][name], i, arr, path, e)
+            touched[e.id] = (e, gi, i)
+        # the relations between an element's values (Rmin <= Rmax) once the whole mapping is in,
+        # on its current values: not the netlist's, nor half a mapping's
+        for e, gi, i in touched.values():
+            check_relations(e, {n: a[:, i:i + 1] for n, a in arrays[gi].items() if n not in e.expressions})
         return ParameterSet(self.schema, self.B, arrays, waves)
 
     def _column(self, cur, i, arr, path, e):

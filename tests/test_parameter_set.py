@@ -109,6 +109,29 @@ def test_a_value_set_is_checked_with_the_waveform_it_leaves_in_effect(write):
     assert c2.parameters.waveform("W.Rd") is not None
 
 
+VALVE = """
+elements:
+  - {id: Ps, type: pressure_source, nodes: [in, ground], value: 80 mmHg}
+  - {id: V, type: valve_tanh, nodes: [in, out], Rmin: 100 mmHg*s/mL, Rmax: 1e5 mmHg*s/mL, steepness: 10 1/mmHg}
+  - {id: R, type: resistor, nodes: [out, ground], R: 1 mmHg*s/mL}
+"""
+
+
+def test_relations_between_values_are_checked_on_the_values_in_effect(write):
+    """A valve needs Rmin <= Rmax.  Both lowered in one mapping (Rmax 50 before Rmin 10), or Rmax
+    lowered after Rmin was: accepted (both were refused, Rmax checked against the netlist's
+    Rmin 100); Rmin above the Rmax in effect: refused, naming the element."""
+    c = hc.load(write(VALVE))
+    both = c.with_values({"V.Rmax": 50.0, "V.Rmin": 10.0})
+    assert (both.parameters.values["V.Rmin"].tolist(), both.parameters.values["V.Rmax"].tolist()) == ([10.0], [50.0])
+    assert c.with_values({"V.Rmin": 10.0}).with_values({"V.Rmax": 50.0}).parameters.values["V.Rmax"].tolist() == [50.0]
+    with pytest.raises(NetlistError, match=r"element 'V': needs Rmin <= Rmax"):
+        both.with_values({"V.Rmin": 60.0})
+    # per member: one member's bad pair is refused
+    with pytest.raises(NetlistError, match="needs Rmin <= Rmax"):
+        c.batch(2).with_values({"V.Rmin": np.array([10.0, 10.0]), "V.Rmax": np.array([50.0, 5.0])})
+
+
 def test_constant_value_for_a_study_refuses_a_waveform(rc):
     """ParameterSet.constant: a parameter's number for a fit or a sensitivity study, and an
     error naming the study, the parameter and the fix when a waveform drives it."""
