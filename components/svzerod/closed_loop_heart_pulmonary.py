@@ -242,11 +242,6 @@ class ClosedLoopHeartAndPulmonary(Block):
         V(ID) column cannot hold both)."""
         return ("V_heart",)
 
-    def dc_stamp(self, p, A_loc, b_loc, keep):
-        """Steady state of the heart is not a DC state (it is time-varying); the DC guess keeps
-        both branches as pressure definitions (from the current states)."""
-        return A_loc, b_loc
-
     def initial_states(self, p, u, flows=None, x=None):
         out = np.zeros(batch_shape(p, u.shape[:-1]) + (10,))
         for name, k in (("Vaso_ra", 0), ("Vrv_u", 2), ("Vaso_la", 5), ("Vlv_u", 7)):
