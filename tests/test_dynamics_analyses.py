@@ -410,6 +410,26 @@ def test_envelope_members_keep_their_own_operating_point_in_interleaved_chunks(a
     assert len(set(np.round(res[f"steady({Q1})"], 9))) == len(pas)
 
 
+def test_envelope_warm_up_loads_what_the_summaries_use_before_the_workers_fork(artc, monkeypatch):
+    """The envelope's warm-up (run in this process before the workers fork) integrates a chunk
+    for zero time and evaluates a summary's outputs on the compiled path (at least
+    COMPILED_OUTPUT_ROWS rows of one member): without the outputs every forked worker loaded the
+    compiled nodal outputs from numba's cache before its first summary (~0.08 s each)."""
+    import hemocircuit.analyses.envelope as env_mod
+    from hemocircuit.system.outputs import COMPILED_OUTPUT_ROWS, Outputs
+
+    warms, rows = [], []
+    monkeypatch.setattr(env_mod, "run_chunks", lambda fn, jobs, warm=None, **kw: warms.append(warm)
+                        or [fn(j) for j in jobs])
+    res = envelope(artc, ("Pa.value", [70.0, 90.0]), outputs=[Q1], t_end=2.0, dt=0.5, workers=2)
+    assert not any(res["error"]) and len(warms) == 1 and warms[0] is not None
+    real = Outputs.outputs
+    monkeypatch.setattr(Outputs, "outputs", lambda self, t, x, *a, **k: rows.append((self.B, len(x)))
+                        or real(self, t, x, *a, **k))
+    warms[0]()
+    assert rows == [(1, COMPILED_OUTPUT_ROWS)]
+
+
 def test_no_member_with_an_operating_point_gives_failed_rows_on_worker_processes(artc):
     """Every member fails before integrating: nothing is left to run, the rows say why."""
     res = frequency_response(artc, [1.0], [Q1], step=0.0, amplitude=0.05, rtol=1e-6,
