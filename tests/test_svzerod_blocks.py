@@ -325,3 +325,65 @@ def test_valve_tanh_without_open_resistance(tmp_path):
     dp = brentq(lambda d: d - (P1 - P2 - d) / (2 * r) * Rmax * 0.5 * (1 + math.tanh(-k * d)), 0.0, P1 - P2)
     assert (op["P(v0__V)"] - op["P(V__v1)"]) * MMHG == pytest.approx(dp, rel=1e-8)
     assert op["Q(V)"] == pytest.approx((P1 - P2 - dp) / (2 * r), rel=1e-8)
+
+
+# --- their one-element vessels: Resistance, Capacitance, Inductance -----------------------
+_T = np.linspace(0.0, 1.0, 101)
+_Q_SINE = (2.5 * np.sin(2 * np.pi * _T) + 2.2).tolist()  # a sine inflow [cm^3/s], period 1 s
+
+
+def _one_element(typ, values, outlet):
+    return {"simulation_parameters": _sim(points=101),
+            "vessels": [_vessel("v", typ, values, "IN", "OUT")],
+            "boundary_conditions": [{"bc_name": "IN", "bc_type": "FLOW", "bc_values": {"Q": _Q_SINE, "t": _T.tolist()}},
+                                    outlet]}
+
+
+def test_resistance_vessel_drops_r_times_the_flow(tmp_path):
+    """Resistance.cpp: P_in - P_out = R Q_in, Q_in = Q_out.  FLOW Q(t) into it, P_out = 0:
+    P_in = R Q(t) at every row (their pwl inflow, so at its sample times exactly)."""
+    R = 100.0
+    cfg = _one_element("Resistance", {"R": R}, {"bc_name": "OUT", "bc_type": "PRESSURE", "bc_values": {"P": 0.0}})
+    model, _, res = _run(cfg, tmp_path, 1.0, 0.01)
+    P = np.asarray(res["P(IN__v)"]) * MMHG
+    np.testing.assert_allclose(P, R * np.asarray(_Q_SINE), rtol=1e-9, atol=1e-9 * R)
+    np.testing.assert_allclose(np.asarray(res["v.Q_out"]), _Q_SINE, rtol=1e-12, atol=1e-12)
+    assert model.netlist["elements"][0]["type"] == "blood_vessel"
+
+
+def test_capacitance_vessel_integrates_the_net_inflow(tmp_path):
+    """Capacitance.cpp: Q_in - Q_out = C dP_in/dt, P_in = P_out.  Q_in = 10, Q_out = 0 (a FLOW
+    outlet), from P = 0: P_in = P_out = Q t / C (their pulsatileFlow_capacitance's closed form)."""
+    C, Q = 1e-3, 10.0
+    cfg = {"simulation_parameters": _sim(cycles=2),
+           "vessels": [_vessel("v", "Capacitance", {"C": C}, "IN", "OUT")],
+           "boundary_conditions": [{"bc_name": "IN", "bc_type": "FLOW", "bc_values": {"Q": [Q, Q], "t": [0.0, 1.0]}},
+                                   {"bc_name": "OUT", "bc_type": "FLOW", "bc_values": {"Q": [0.0, 0.0], "t": [0.0, 1.0]}}]}
+    _, c, res = _run(cfg, tmp_path, 2.0, 0.1)
+    t = np.asarray(res.t)
+    for node in ("IN__v", "v__OUT"):
+        np.testing.assert_allclose(np.asarray(res[f"P({node})"]) * MMHG, Q * t / C, rtol=1e-9, atol=1e-9 * Q / C)
+    assert c.state_names == ["v.V"]  # the one state: the capacitor's volume
+
+
+def test_inductance_vessel_drops_l_times_the_flow_rate(tmp_path):
+    """Inductance.cpp: P_in - P_out = L dQ_out/dt, Q_in = Q_out.  FLOW Q(t) into it, P_out = 0:
+    the source fixes the inductor's flow (index reduction), and P_in = L dQ/dt, the slope of
+    their pwl inflow on each interval (their pulsatileFlow_inductance: ~ L 2 pi 2.5 cos(2 pi t))."""
+    L = 1.0
+    cfg = _one_element("Inductance", {"L": L}, {"bc_name": "OUT", "bc_type": "PRESSURE", "bc_values": {"P": 0.0}})
+    _, c, res = _run(cfg, tmp_path, 1.0, 0.005)
+    slope = np.diff(_Q_SINE) / np.diff(_T)
+    t = np.asarray(res.t)
+    inside = np.abs(t * 100 - np.round(t * 100)) > 0.25  # rows inside an interval of their inflow
+    P = np.asarray(res["P(IN__v)"])[inside] * MMHG
+    np.testing.assert_allclose(P, L * slope[np.floor(t[inside] * 100).astype(int)], rtol=1e-9, atol=1e-9)
+    assert abs(np.max(P) - L * 2 * np.pi * 2.5) < 0.02 * L * 2 * np.pi * 2.5
+    assert c.nx == 0  # no state left: the source fixes the flow
+
+
+def test_one_element_vessels_take_only_their_own_value():
+    cfg = _one_element("Resistance", {"R": 1.0, "C": 1e-3},
+                       {"bc_name": "OUT", "bc_type": "PRESSURE", "bc_values": {"P": 0.0}})
+    with pytest.raises(NetlistError, match=r"'v'.*unknown value\(s\) \['C'\] \(it takes R\)"):
+        import_svzerod(cfg)

@@ -175,7 +175,9 @@ class Vessel(Block):
 
 class BloodVessel(Vessel):
     type_name = "blood_vessel"
-    svzerod_blocks = ("BloodVessel",)
+    # and their one-element vessels, this with the other two of R, C, L at 0 (Resistance.cpp,
+    # Capacitance.cpp, Inductance.cpp; hemocircuit.svzerod.blocks)
+    svzerod_blocks = ("BloodVessel", "Resistance", "Capacitance", "Inductance")
 
     def branches(self):
         if self.cap:

@@ -27,6 +27,8 @@ def reduce_ideal_sources(imp):
     quantities (``derived:`` in the netlist; ``imp.q_in``/``imp.q_out`` name them)."""
     from hemocircuit.registry import get_type
 
+    from .model import ONE_ELEMENT_VESSELS
+
     comps = [get_type(e["type"])({k: e[k] for k in get_type(e["type"]).options if k in e})
              for e in imp.elements]
     roles = {}  # node -> [(element index, role)]
@@ -38,7 +40,7 @@ def reduce_ideal_sources(imp):
                     roles.setdefault(m[t], []).append((i, role))
     Q, P = imp.u["Q"], imp.u["P"]
     for i, (e, c) in enumerate(list(zip(imp.elements, comps))):
-        if imp.element_block[e["id"]] not in ("BloodVessel", "BloodVesselCRL"):
+        if imp.element_block[e["id"]] not in ("BloodVessel", "BloodVesselCRL", *ONE_ELEMENT_VESSELS):
             continue
         m = dict(zip(c.terminals, e["nodes"]))
         eid, block = e["id"], imp.block_of(e["id"])

@@ -35,7 +35,11 @@ HEART, HEART_IN, HEART_OUT = "CLH", "J_heart_inlet", "J_heart_outlet"
 CLOSED_LOOP_CORONARY = ("ClosedLoopCoronaryLeft", "ClosedLoopCoronaryRight")
 CORONARY_SIDE = {"ClosedLoopCoronaryLeft": ("iml", "Elv_s", "Vlv_u", "V_LV"),
                  "ClosedLoopCoronaryRight": ("imr", "Erv_s", "Vrv_u", "V_RV")}
-SUPPORTED_VESSELS = ("BloodVessel", "BloodVesselCRL", "BloodVesselRC", "ChamberSphere")
+SUPPORTED_VESSELS = ("BloodVessel", "BloodVesselCRL", "BloodVesselRC", "ChamberSphere", "Resistance", "Capacitance",
+                     "Inductance")
+#: their one-element vessels (Resistance.cpp, Capacitance.cpp, Inductance.cpp): a BloodVessel with
+#: the other two of R, C, L at 0 -> (their value's key, the BloodVessel parameter it sets)
+ONE_ELEMENT_VESSELS = {"Resistance": ("R", "R_poiseuille"), "Capacitance": ("C", "C"), "Inductance": ("L", "L")}
 SUPPORTED_JUNCTIONS = ("NORMAL_JUNCTION", "internal_junction", "BloodVesselJunction")
 #: the model's lists of blocks, and the key naming a block in each
 SECTIONS = {"vessels": "vessel_name", "junctions": "junction_name", "boundary_conditions": "bc_name",

@@ -41,7 +41,8 @@ from ..errors import HemocircuitError
 from .model import HEART, HEART_IN, HEART_OUT, check_points, ident, read_model
 
 #: their blocks written by to_vessel_csv (a dynamic_cast list in csv_writer.cpp)
-VESSEL_OUTPUT_TYPES = ("BloodVessel", "BloodVesselCRL", "PiecewiseValve", "LinearElastanceChamber", "ChamberSphere")
+VESSEL_OUTPUT_TYPES = ("BloodVessel", "BloodVesselCRL", "PiecewiseValve", "LinearElastanceChamber", "ChamberSphere",
+                       "Resistance", "Capacitance", "Inductance")
 VESSEL_COLUMNS = ("flow_in", "flow_out", "pressure_in", "pressure_out")
 #: internal variables of the heart block (ClosedLoopHeartPulmonary.cpp setup_dofs), kind of each
 HEART_VARIABLES = ("V_RA", "Q_RA", "P_RV", "V_RV", "Q_RV", "P_pul", "P_LA", "V_LA", "Q_LA", "P_LV", "V_LV", "Q_LV")
