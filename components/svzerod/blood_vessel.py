@@ -175,9 +175,7 @@ class Vessel(Block):
 
 class BloodVessel(Vessel):
     type_name = "blood_vessel"
-    # and their one-element vessels, this with the other two of R, C, L at 0 (Resistance.cpp,
-    # Capacitance.cpp, Inductance.cpp; hemocircuit.svzerod.blocks)
-    svzerod_blocks = ("BloodVessel", "Resistance", "Capacitance", "Inductance")
+    svzerod_blocks = ("BloodVessel", "Resistance", "Capacitance", "Inductance")  # 2-4: two of R, C, L at 0
 
     def branches(self):
         if self.cap:
