@@ -1,6 +1,7 @@
 """Optional: their test cases that are not in ../shared/svzerod, from a checkout of
 SimVascular/svZeroDSolver named by HEMOCIRCUIT_SVZEROD_UPSTREAM (the repository root or its
-tests/cases folder; skipped when unset).  Their case files are never copied into this repository.
+tests/cases folder; skipped when unset).  Their case files are copied into pytest's temporary
+folder for each case, never into this repository.
 
 Compared with their stored results (tests/cases/results), which are not converged for the
 valve, chamber and closed-loop cases: the allowance of each case is the issue's tolerance plus
@@ -16,6 +17,7 @@ eq. 21 count).
 from __future__ import annotations
 
 import os
+import shutil
 
 import pytest
 
@@ -60,12 +62,14 @@ def _not_shared():
 
 
 def _folder(tmp_path, name):
-    """A conformance folder (cases/, results/) of links to their files."""
+    """A conformance folder (cases/, results/) with copies of their two files in pytest's
+    temporary folder: links would lead outside the folder, which the input policy refuses
+    (hemocircuit.access: a model's files are read inside its own folder only)."""
     d = _cases_dir()
     (tmp_path / "cases").mkdir()
     (tmp_path / "results").mkdir()
-    os.symlink(os.path.join(d, name + ".json"), tmp_path / "cases" / (name + ".json"))
-    os.symlink(os.path.join(d, "results", f"result_{name}.json"), tmp_path / "results" / f"result_{name}.json")
+    shutil.copyfile(os.path.join(d, name + ".json"), tmp_path / "cases" / (name + ".json"))
+    shutil.copyfile(os.path.join(d, "results", f"result_{name}.json"), tmp_path / "results" / f"result_{name}.json")
     return tmp_path / "cases" / (name + ".json")
 
 
