@@ -170,7 +170,7 @@ from hemocircuit.kernels import prebuild
 from hemocircuit.kernels.system import CompiledSystem
 c = hc.load(sys.argv[1])
 system = CompiledSystem.of(c)
-fn = system.mod.local_jacobian_into
+fn = system.mod.local_jacobian_into_at  # its tuples by reference (kernels.refs)
 before = prebuild.in_cache(fn)
 proc = prebuild.start(system)
 rc = proc.wait(timeout=900) if proc is not None else None
@@ -185,7 +185,7 @@ print(json.dumps({"before": before, "rc": rc, "after": after, "again": again is 
                   "outputs_loaded": nf.stats.cache_hits and not nf.stats.cache_misses,
                   # prebuild.before_integrator compiled these by signature before the integrator:
                   # one specialisation each means the integrator used those, not new ones
-                  "specialisations": [len(system.mod.rhs_into.overloads), len(system.mod.prepare_static.overloads)],
+                  "specialisations": [len(system.mod.rhs_into_at.overloads), len(system.mod.prepare_static.overloads)],
                   "V": X[0, :, c.state_names.index("C1.V")].tolist(), "Q": out["Q(R1)"].tolist(),
                   "status": float(st[0, 0])}))
 """
@@ -205,7 +205,7 @@ def _run_in_fresh_cache(script, tmp_path):
 
 
 def test_prebuild_helper_compiles_the_jacobian_for_the_integrator(tmp_path):
-    """kernels.prebuild in a fresh cache: the helper process compiles local_jacobian_into (and
+    """kernels.prebuild in a fresh cache: the helper process compiles local_jacobian_into_at (and
     the outputs' nodal_outputs) into numba's cache with the callers' argument types, so the
     integrator and Circuit.outputs load them instead of compiling them (numba's cache hit, no
     miss); this process compiles the nodal solve and right-hand side by signature first
@@ -239,8 +239,8 @@ prebuild._pending[mod.__name__] = proc
 prebuild._decided.add(mod.__name__)  # and no real helper for the integrator below: it compiles everything here
 prebuild.before_integrator(system)
 rc_at_return = proc.returncode  # set by before_integrator's poll only if it saw the helper end
-compiled_here = [len(mod.prepare_static.overloads), len(mod.rhs_into.overloads), len(mod.release_fraction.overloads),
-                 len(mod.local_jacobian_into.overloads)]
+compiled_here = [len(mod.prepare_static.overloads), len(mod.rhs_into_at.overloads), len(mod.release_fraction.overloads),
+                 len(mod.local_jacobian_into_at.overloads)]
 prebuild.before_integrator(system)  # once per module: returns at once
 t = np.linspace(0.0, 5.0, 101)
 X, st = system.integrate_batch(t, np.zeros((1, c.nx)), system.params(c), rtol=1e-8)
@@ -250,7 +250,7 @@ helper_sigs = [sig in fn.signatures for fn, sig in prebuild.helper_signatures(mo
                                                                               system.layout.n_params)]
 print(json.dumps({"compiled_here": compiled_here, "rc_at_return": rc_at_return, "helper_sigs": helper_sigs,
                   "finish_member_sigs": len(mod.finish_member.signatures),
-                  "after": [len(mod.prepare_static.overloads), len(mod.rhs_into.overloads),
+                  "after": [len(mod.prepare_static.overloads), len(mod.rhs_into_at.overloads),
                             len(mod.release_fraction.overloads)],
                   "V": X[0, :, c.state_names.index("C1.V")].tolist(), "status": float(st[0, 0])}))
 """
@@ -258,7 +258,7 @@ print(json.dumps({"compiled_here": compiled_here, "rc_at_return": rc_at_return, 
 
 def test_before_integrator_compiles_the_nodal_solve_here_and_waits_for_the_helper(tmp_path):
     """kernels.prebuild.before_integrator, with a stand-in helper that compiles nothing and
-    ends after 1 s: it compiles prepare_static, rhs_into and the Rosenbrock integrator's
+    ends after 1 s: it compiles prepare_static, rhs_into_at and the Rosenbrock integrator's
     release_fraction in this process (one specialisation each, which the integrator then uses:
     still one each after the run), not
     the local Jacobian (the helper's part), and returns only once the helper has ended, since
@@ -267,7 +267,7 @@ def test_before_integrator_compiles_the_nodal_solve_here_and_waits_for_the_helpe
     the helper's work would be done twice); the run is right (V = C P (1 - exp(-t/RC)))."""
     r = _run_in_fresh_cache(_BEFORE_SCRIPT, tmp_path)
     assert r["compiled_here"] == [1, 1, 1, 0], r
-    # elem_derivs_jac, elem_derivs, local_jacobian_into, make_jac_work, hermite_root, hermite,
+    # elem_derivs_jac, elem_derivs, local_jacobian_into_at, make_jac_work, hermite_root, hermite,
     # stage_dense, finish_member; and one finish_member for every call (no literal specialisation)
     assert r["helper_sigs"] == [True] * 8 and r["finish_member_sigs"] == 1, r
     assert r["rc_at_return"] == 0, r  # it returned after the helper ended, not before

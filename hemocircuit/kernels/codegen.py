@@ -77,7 +77,8 @@ def _header(kernels) -> str:
              "from hemocircuit.kernels.expressions import eval_expr_with, MAX_STACK as EXPR_STACK",
              "# the one step rule of the differences: relative to max(|x|, the state's scale)",
              "from hemocircuit.derivatives import FD_REL",
-             "from hemocircuit.kernels.runs import LIMIT_ON_BOUND, RELEASE_HALVINGS, RELEASE_LAND_BELOW, RELEASE_NEXT", ""]
+             "from hemocircuit.kernels.runs import LIMIT_ON_BOUND, RELEASE_HALVINGS, RELEASE_LAND_BELOW, RELEASE_NEXT",
+             "from hemocircuit.kernels.refs import keep_alive, ref", ""]
     # the shared compiled functions: their numba dispatchers (kernels.jit makes them lazily),
     # so that compile(), signatures and the cache checks of prebuild work on them as on the
     # template's functions

@@ -57,7 +57,7 @@ def bdf_change_D(D, order, factor, R, U, tmp):
 
 
 @njit(cache=True, nogil=True, internal=True, _nrt=False)
-def bdf_newton(t_new, ypred, c, psi, W, piv, scale, tol, P, lay, work, y, d, f, dy):
+def bdf_newton(t_new, ypred, c, psi, W, piv, scale, tol, P, lay_ref, work_ref, y, d, f, dy):
     """Newton's iteration of one BDF step (scipy bdf.solve_bdf_system).  Returns the number of
     iterations, negative when it did not converge."""
     nx = y.shape[0]
@@ -66,7 +66,7 @@ def bdf_newton(t_new, ypred, c, psi, W, piv, scale, tol, P, lay, work, y, d, f, 
         d[i] = 0.0
     dy_norm_old = -1.0
     for k in range(BDF_NEWTON_MAXITER):
-        if not rhs_into(t_new, y, P, lay, work, f):
+        if not rhs_into_at(t_new, y, P, lay_ref, work_ref, f):
             return -(k + 1)
         for i in range(nx):
             dy[i] = c * f[i] - psi[i] - d[i]
@@ -117,6 +117,8 @@ def integrate_batch_bdf(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, 
         T = t_out.shape[0]
         work = make_work(lay)
         jw = make_jac_work(lay)
+        lay_ref = ref(lay)  # the tuples by reference for the right-hand sides (kernels.refs)
+        work_ref = ref(work)
         x = x0.copy()
         f = np.empty(nx)
         fp = np.empty(nx)
@@ -155,7 +157,7 @@ def integrate_batch_bdf(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, 
         k_out = 1
         prepare_static(t, x, P, lay, work)
         nfev = 1
-        if not rhs_into(t, x, P, lay, work, f):
+        if not rhs_into_at(t, x, P, lay_ref, work_ref, f):
             finish_member(out, 1, stats, mb, -3, t, 0, 0, nfev, 0)
             continue
         nj = jacobian_into(t, x, f, P, lay, work, jw, scales, J, ft, xt, ftmp, True, local_jac)
@@ -242,7 +244,7 @@ def integrate_batch_bdf(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, 
                             W[i, i] += 1.0
                         lu_valid = lu_factor(W, piv, nx)
                     if lu_valid:
-                        n_iter = bdf_newton(t_new, ypred, c, psi, W, piv, scale, newton_tol, P, lay, work, ynew, d,
+                        n_iter = bdf_newton(t_new, ypred, c, psi, W, piv, scale, newton_tol, P, lay_ref, work_ref, ynew, d,
                                             fp, dy)
                         nfev += abs(n_iter)
                         if n_iter > 0:
@@ -251,7 +253,7 @@ def integrate_batch_bdf(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, 
                         break
                     # Newton failed with an older Jacobian: a new one at the predicted state
                     nfev += 1
-                    if not rhs_into(t_new, ypred, P, lay, work, ftmp):
+                    if not rhs_into_at(t_new, ypred, P, lay_ref, work_ref, ftmp):
                         break
                     nj = jacobian_into(t_new, ypred, ftmp, P, lay, work, jw, scales, J, ft, xt, fp, True, local_jac)
                     if nj < 0:
@@ -332,7 +334,7 @@ def integrate_batch_bdf(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, 
                 t = t_hit
                 nev += 1
                 nfev += 1
-                if not rhs_into(t, x, P, lay, work, f):
+                if not rhs_into_at(t, x, P, lay_ref, work_ref, f):
                     status = -3
                     break
                 restart = True
@@ -357,7 +359,7 @@ def integrate_batch_bdf(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, 
                 ib += 1
                 h = max(h, h_free)
                 nfev += 1
-                if not rhs_into(t, x, P, lay, work, f):
+                if not rhs_into_at(t, x, P, lay_ref, work_ref, f):
                     status = -3
                     break
                 restart = True
@@ -396,4 +398,5 @@ def integrate_batch_bdf(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, 
             n_equal = 0
             lu_valid = False
         finish_member(out, k_out, stats, mb, status, t, nsteps, nrej, nfev, nev)
+        keep_alive(work)  # the references' tuple lives to here (kernels.refs)
     return out_all, stats

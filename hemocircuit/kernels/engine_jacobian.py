@@ -62,6 +62,12 @@ def make_jac_work(lay):
 
 @njit(cache=True, nogil=True, internal=True, _nrt=False)
 def local_jacobian_into(t, x, P, lay, work, jw, scales, J, xt, analytic, ft, want_ft):
+    """local_jacobian_into_at with the tuples by reference (kernels.refs)."""
+    return local_jacobian_into_at(t, x, P, ref(lay), ref(work), ref(jw), scales, J, xt, analytic, ft, want_ft)
+
+
+@njit(cache=True, nogil=True, internal=True, _nrt=False)
+def local_jacobian_into_at(t, x, P, lay_ref, work_ref, jw_ref, scales, J, xt, analytic, ft, want_ft):
     """State Jacobian J (nx, nx) at (t, x) from element-local differences composed through the
     nodal solve (as svZeroDSolver composes its blocks' derivatives), without a whole
     right-hand side per column.  With f = D(x, u), R(x, u) = A(x) u - b(x) = 0 the nodal
@@ -77,6 +83,9 @@ def local_jacobian_into(t, x, P, lay, work, jw, scales, J, xt, analytic, ft, wan
     right-hand side at t + dt).
     Returns 0, or -1 when it does not apply (an element nonlinear in the pressures, a singular
     nodal matrix): the caller then differences whole right-hand sides."""
+    lay = lay_ref[0]
+    work = work_ref[0]
+    jw = jw_ref[0]
     (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st, td) = lay
     if nonlin != 0:
         return -1
@@ -86,7 +95,7 @@ def local_jacobian_into(t, x, P, lay, work, jw, scales, J, xt, analytic, ft, wan
     u, Al, bl, ul, pl, xl, il, dl, A0, b0 = (work.u, work.Al, work.bl, work.ul, work.pl, work.xl, work.il, work.dl,
                                              work.A0, work.b0)
     E = et.shape[0]
-    effective_params(t, x, P, lay, work)
+    effective_params_at(t, x, P, lay_ref, work_ref)
     Pe = work.Pe
     for i in range(Pb.shape[0]):
         Pb[i] = Pe[i]
@@ -98,7 +107,7 @@ def local_jacobian_into(t, x, P, lay, work, jw, scales, J, xt, analytic, ft, wan
     for e in range(E):
         if st[e] == 1:
             continue
-        stamp_element(e, t, x, Pb, et, L, ep, ex, eu, ui, eo, io, u, Al, bl, ul, pl, xl, il)
+        stamp_element(e, t, x, Pb, lay_ref, work_ref)
         for i in range(L[e]):
             r = ui[eu[e] + i]
             ub[r] += bl[i]
@@ -169,7 +178,7 @@ def local_jacobian_into(t, x, P, lay, work, jw, scales, J, xt, analytic, ft, wan
             hj = xt[j] - x[j]
             Pt = Pb
             if observed:  # expressions read e0's observables: parameters at the moved state
-                effective_params(t, xt, P, lay, work)
+                effective_params_at(t, xt, P, lay_ref, work_ref)
                 Pt = work.Pe
             for i in range(n + 1):
                 col[i] = 0.0
@@ -179,7 +188,7 @@ def local_jacobian_into(t, x, P, lay, work, jw, scales, J, xt, analytic, ft, wan
             for e in range(E):
                 if e != e0 and not (observed and hasx[e] == 1):
                     continue
-                stamp_element(e, t, xt, Pt, et, L, ep, ex, eu, ui, eo, io, u, Al, bl, ul, pl, xl, il)
+                stamp_element(e, t, xt, Pt, lay_ref, work_ref)
                 moved |= residual_change(e, L, eu, ui, Al, bl, ub, rb, hj, col, n)
                 if S[e] > 0 and e == e0 and an[e] == 1:  # its own state: the kernel's partials
                     for i in range(S[e]):
@@ -194,7 +203,7 @@ def local_jacobian_into(t, x, P, lay, work, jw, scales, J, xt, analytic, ft, wan
     if want_ft:
         # the time column: FD_REL seconds as represented at t (derivatives.time_step)
         ht = (t + FD_REL) - t
-        effective_params(t + ht, x, P, lay, work)  # waveforms at t + ht
+        effective_params_at(t + ht, x, P, lay_ref, work_ref)  # waveforms at t + ht
         Pt = work.Pe
         for i in range(n + 1):
             col[i] = 0.0
@@ -205,7 +214,7 @@ def local_jacobian_into(t, x, P, lay, work, jw, scales, J, xt, analytic, ft, wan
             if td[e] == 0:
                 continue
             if st[e] != 1:
-                stamp_element(e, t + ht, x, Pt, et, L, ep, ex, eu, ui, eo, io, u, Al, bl, ul, pl, xl, il)
+                stamp_element(e, t + ht, x, Pt, lay_ref, work_ref)
                 moved |= residual_change(e, L, eu, ui, Al, bl, ub, rb, ht, col, n)
             if S[e] > 0:
                 derivs_at_base(e, t + ht, x, Pt, et, L, ep, ex, eu, ui, eo, io, ub, ul, pl, xl, il, dl)

@@ -144,6 +144,14 @@ def load_element(e, x, Pe, ep, ex, eo, io, pl, xl, il):
 @njit(cache=True, nogil=True, internal=True, _nrt=False)
 def effective_params(t, x, P, lay, work):
     """Parameters with waveforms added and expressions evaluated (into work.Pe)."""
+    effective_params_at(t, x, P, ref(lay), ref(work))
+
+
+@njit(cache=True, nogil=True, internal=True, _nrt=False)
+def effective_params_at(t, x, P, lay_ref, work_ref):
+    """effective_params with the layout and work tuples by reference (kernels.refs)."""
+    lay = lay_ref[0]
+    work = work_ref[0]
     (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st, td) = lay
     Pe, O, pl, xl, il, ol = work.Pe, work.O, work.pl, work.xl, work.il, work.ol
     for i in range(P.shape[0]):
@@ -162,9 +170,14 @@ def effective_params(t, x, P, lay, work):
 
 
 @njit(cache=True, nogil=True, internal=True, _nrt=False)
-def stamp_element(e, t, x, Pe, et, L, ep, ex, eu, ui, eo, io, u, Al, bl, ul, pl, xl, il):
-    """Element e's local stamp into the scratch Al, bl (at the current iterate u).  Arrays, not
-    the layout and work tuples: passing a tuple costs a reference count per member."""
+def stamp_element(e, t, x, Pe, lay_ref, work_ref):
+    """Element e's local stamp into the scratch work.Al, work.bl (at the current iterate work.u),
+    with parameters Pe; the layout and work tuples by reference (kernels.refs): a call passes two
+    pointers, and only the fields used are read."""
+    lay = lay_ref[0]
+    work = work_ref[0]
+    (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st, td) = lay
+    u, Al, bl, ul, pl, xl, il = work.u, work.Al, work.bl, work.ul, work.pl, work.xl, work.il
     Lm = ul.shape[0]
     Le = L[e]
     for i in range(Lm):
@@ -181,15 +194,18 @@ def prepare_static(t, x, P, lay, work):
     """A0 = the constant matrix stamps, b0 = the static elements' right-hand sides, for the
     parameters P (call again whenever P changes)."""
     (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st, td) = lay
-    effective_params(t, x, P, lay, work)
+    lay_ref = ref(lay)  # the tuples by reference (kernels.refs)
+    work_ref = ref(work)
+    effective_params_at(t, x, P, lay_ref, work_ref)
     Pe = work.Pe
-    A0, b0, u, Al, bl, ul, pl, xl, il = work.A0, work.b0, work.u, work.Al, work.bl, work.ul, work.pl, work.xl, work.il
+    A0, b0 = work.A0, work.b0
+    Al, bl = work.Al, work.bl
     A0[:, :] = 0.0
     b0[:] = 0.0
     for e in range(et.shape[0]):
         if cm[e] == 0:
             continue
-        stamp_element(e, t, x, Pe, et, L, ep, ex, eu, ui, eo, io, u, Al, bl, ul, pl, xl, il)
+        stamp_element(e, t, x, Pe, lay_ref, work_ref)
         for i in range(L[e]):
             r = ui[eu[e] + i]
             if st[e] == 1:
@@ -308,7 +324,7 @@ def zero_start(u, n):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def solve_nodes(t, x, Pe, lay, work):
+def solve_nodes(t, x, Pe, lay_ref, work_ref):
     """Node pressures and branch flows u (n+1,; u[n] = 0 is ground) for states x: the MNA
     system A0 + (varying stamps) and b0 + (non-static right-hand sides), solved densely
     (Newton for elements nonlinear in the pressures).  prepare_static must have run for these
@@ -318,7 +334,10 @@ def solve_nodes(t, x, Pe, lay, work):
     in the pressures; they depend on t and x only, e.g. a pressure table or a chamber's
     elastance) are summed once per solve into A1 (or Sw1) and b1, and only the elements
     nonlinear in the pressures (st 2) are stamped again at every iterate (svZeroDSolver's
-    split of a block's contributions by what they depend on)."""
+    split of a block's contributions by what they depend on).  The layout and work tuples by
+    reference (kernels.refs)."""
+    lay = lay_ref[0]
+    work = work_ref[0]
     (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st, td) = lay
     A, b, u, un, piv, A0, b0, A1, Sw1, b1 = (work.A, work.b, work.u, work.un, work.piv, work.A0, work.b0, work.A1,
                                              work.Sw1, work.b1)
@@ -356,7 +375,7 @@ def solve_nodes(t, x, Pe, lay, work):
             for e in range(et.shape[0]):
                 if st[e] != 2 * ph:
                     continue
-                stamp_element(e, t, x, Pe, et, L, ep, ex, eu, ui, eo, io, u, Al, bl, ul, pl, xl, il)
+                stamp_element(e, t, x, Pe, lay_ref, work_ref)
                 add_stamp(e, L, eu, ui, cm, Al, bl, A, Sw, b, schur, vpos, n)
             if ph == 0 and nonlin != 0:  # keep the iterate-independent sum for the next iterates
                 copy_nodal(A, Sw, b, A1, Sw1, b1, schur, nv, n)
@@ -418,14 +437,23 @@ def solve_nodes(t, x, Pe, lay, work):
 
 @njit(cache=True, nogil=True, internal=True, _nrt=False)
 def rhs_into(t, x, P, lay, work, dx):
+    """dx/dt for states x at time t into dx (rhs_into_at, the tuples by reference).  For single
+    calls: a loop takes the references once and calls rhs_into_at."""
+    return rhs_into_at(t, x, P, ref(lay), ref(work), dx)
+
+
+@njit(cache=True, nogil=True, internal=True, _nrt=False)
+def rhs_into_at(t, x, P, lay_ref, work_ref, dx):
     """dx/dt for states x at time t into dx.  Returns False on a singular nodal system
     (dx is then NaN).  An empty dx: the nodal solve only (nodal_outputs_into: the outputs need
     no derivatives, a third of an evaluation; the same compiled function, so no second
     compilation of the inlined nodal solve)."""
+    lay = lay_ref[0]
+    work = work_ref[0]
     (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st, td) = lay
-    effective_params(t, x, P, lay, work)
+    effective_params_at(t, x, P, lay_ref, work_ref)
     Pe = work.Pe
-    if not solve_nodes(t, x, Pe, lay, work):
+    if not solve_nodes(t, x, Pe, lay_ref, work_ref):
         for i in range(dx.shape[0]):
             dx[i] = np.nan
         return False
@@ -458,12 +486,15 @@ def rhs(t, x, P, lay):
 def rhs_batch(t, X, P, lay):
     """dx/dt for rows X (m, nx) with parameter rows P (m or 1, nP)."""
     work = make_work(lay)
+    lay_ref = ref(lay)  # the tuples by reference, once (kernels.refs)
+    work_ref = ref(work)
     out = np.empty(X.shape)
     for k in range(X.shape[0]):
         p = P[k if P.shape[0] > 1 else 0]
         if k == 0 or P.shape[0] > 1:
             prepare_static(t, X[k], p, lay, work)
-        rhs_into(t, X[k], p, lay, work, out[k])
+        rhs_into_at(t, X[k], p, lay_ref, work_ref, out[k])
+    keep_alive(work)  # (kernels.refs)
     return out
 
 
@@ -484,6 +515,8 @@ def nodal_outputs_into(T, X, P, lay, work, dx, U, F):
     and the nodal solution in work.u: its compilation (the integrator's, from the cache) is
     reused instead of typing the inlined nodal solve again (7 s of a first compilation).  An
     empty ``dx`` skips the derivatives there."""
+    lay_ref = ref(lay)  # the tuples by reference, once (kernels.refs)
+    work_ref = ref(work)
     (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st, td) = lay
     Pe, u, Al, bl, ul, pl, xl, il = work.Pe, work.u, work.Al, work.bl, work.ul, work.pl, work.xl, work.il
     m = X.shape[0]
@@ -492,7 +525,7 @@ def nodal_outputs_into(T, X, P, lay, work, dx, U, F):
         p = P[k // per]
         if k % per == 0:
             prepare_static(T[k], X[k], p, lay, work)
-        if not rhs_into(T[k], X[k], p, lay, work, dx):
+        if not rhs_into_at(T[k], X[k], p, lay_ref, work_ref, dx):
             return k
         for i in range(n + 1):
             U[k, i] = u[i]
@@ -502,7 +535,7 @@ def nodal_outputs_into(T, X, P, lay, work, dx, U, F):
                 continue
             # at the converged u, an element nonlinear in the pressures stamps its
             # linearisation there, whose residual is its flow at u
-            stamp_element(e, T[k], X[k], Pe, et, L, ep, ex, eu, ui, eo, io, u, Al, bl, ul, pl, xl, il)
+            stamp_element(e, T[k], X[k], Pe, lay_ref, work_ref)
             acc = -bl[0]
             for j in range(L[e]):
                 acc += Al[0, j] * ul[j]

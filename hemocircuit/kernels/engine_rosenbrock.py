@@ -58,7 +58,9 @@ def release_fraction(t, hh, tlim, x, f, xn, P, lay, work, lim_i, lim_b, lim_r, a
         if held[k]:
             xe[lim_i[k]] = lim_b[k]
     nf = 1
-    if not rhs_into(min(t + hh, tlim), xe, P, lay, work, fe) or not any_released(held, lim_i, fe):
+    lay_ref = ref(lay)  # the tuples by reference, once (kernels.refs)
+    work_ref = ref(work)
+    if not rhs_into_at(min(t + hh, tlim), xe, P, lay_ref, work_ref, fe) or not any_released(held, lim_i, fe):
         return 2.0, nf
     lo = 0.0
     hi = 1.0
@@ -69,7 +71,7 @@ def release_fraction(t, hh, tlim, x, f, xn, P, lay, work, lim_i, lim_b, lim_r, a
             if held[k]:
                 xh[lim_i[k]] = lim_b[k]
         nf += 1
-        if not rhs_into(min(t + m * hh, tlim), xh, P, lay, work, fh):
+        if not rhs_into_at(min(t + m * hh, tlim), xh, P, lay_ref, work_ref, fh):
             return 2.0, nf
         if any_released(held, lim_i, fh):
             hi = m
@@ -140,6 +142,8 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
         cut_max = 0.9 if ctrl == 1 else 0.5  # the largest step after a rejection, of the rejected one
         work = make_work(lay)
         jw = make_jac_work(lay)
+        lay_ref = ref(lay)  # the tuples by reference for the right-hand sides (kernels.refs)
+        work_ref = ref(work)
         x = x0.copy()
         f = np.empty(nx)
         fn = np.empty(nx)
@@ -171,7 +175,7 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
         nev = 0
         status = 0
         prepare_static(t, x, P, lay, work)
-        if not rhs_into(t, x, P, lay, work, f):
+        if not rhs_into_at(t, x, P, lay_ref, work_ref, f):
             # no step (the loop below is skipped), and the one finish_member call at the end:
             # a call with constants here would compile a second specialisation of it (numba
             # types the constants as literals)
@@ -211,7 +215,7 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
                     if tb < t_end:
                         ib += 1
                     nfev += 1
-                    if not rhs_into(t, x, P, lay, work, f):
+                    if not rhs_into_at(t, x, P, lay_ref, work_ref, f):
                         status = -3
                         break
                     age = JAC_REUSE
@@ -249,7 +253,7 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
                         fn[i] = f[i]
                 elif tab_reuse[s] == 0.0:  # else: same point as stage s-1, fn holds its f
                     nfev += 1
-                    if not rhs_into(min(t + tab_c[s] * hh, tlim), xs, P, lay, work, fn):
+                    if not rhs_into_at(min(t + tab_c[s] * hh, tlim), xs, P, lay_ref, work_ref, fn):
                         good = False
                         break
                 # W u_s = gamma (h f + sum_j C_sj u_j + h^2 d_s f_t): no product with J (tableaus)
@@ -290,7 +294,7 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
                     fac = min(fac, 1.0)
                 tn = tb if at_break else t + hh
                 nfev += 1
-                ok = rhs_into(min(tn, tlim), xn, P, lay, work, fn)  # left limit at a breakpoint
+                ok = rhs_into_at(min(tn, tlim), xn, P, lay_ref, work_ref, fn)  # left limit at a breakpoint
                 # hard limits: end the step at the earliest crossing
                 s_hit = 2.0
                 k_hit = -1
@@ -326,12 +330,12 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
                     tn = t + hh
                     at_break = False
                     nfev += 1
-                    ok = rhs_into(tn, xn, P, lay, work, fn)
+                    ok = rhs_into_at(tn, xn, P, lay_ref, work_ref, fn)
                     age = JAC_REUSE
                     nev += 1
                 elif held:
                     nfev += 1
-                    ok = rhs_into(min(tn, tlim), xn, P, lay, work, fn)
+                    ok = rhs_into_at(min(tn, tlim), xn, P, lay_ref, work_ref, fn)
                 if not ok:
                     status = -3
                     break
@@ -373,7 +377,7 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
                 elif at_break and tb < t_end:  # the source may jump here: continue from its right limit
                     ib += 1
                     nfev += 1
-                    if not rhs_into(t, x, P, lay, work, fr):
+                    if not rhs_into_at(t, x, P, lay_ref, work_ref, fr):
                         status = -3
                         break
                     jump = not soft_kinks
@@ -428,4 +432,5 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
                     status = -1
                     break
         finish_member(out, k_out, stats, mb, status, t, nsteps, nrej, nfev, nev)
+        keep_alive(work)  # the references' tuple lives to here (kernels.refs)
     return out_all, stats

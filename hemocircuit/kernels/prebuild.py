@@ -8,7 +8,7 @@ hemocircuit.kernels.prebuild`` (the job on its stdin), and the two processes spl
 each compiling what the other does not need first:
 
 * the helper: ``elem_derivs_jac`` and ``elem_derivs`` (the kernels only the Jacobian and the
-  right-hand side call), then ``local_jacobian_into``, which by then loads the nodal solve's
+  right-hand side call), then ``local_jacobian_into_at``, which by then loads the nodal solve's
   element kernels from this process's cache, then the Jacobian's scratch maker
   ``make_jac_work``, the Rosenbrock integrator's small callees (``hermite_root``, ``hermite``,
   ``stage_dense`` of kernels.dense, ``finish_member`` of kernels.runs: shared by every engine,
@@ -62,7 +62,7 @@ def helper_env() -> dict:
 
 def start(system):
     """Start the helper for ``system``'s engine, once per engine module and process, unless
-    ``local_jacobian_into`` is compiled here or in numba's cache already (or
+    ``local_jacobian_into_at`` is compiled here or in numba's cache already (or
     ``$HEMOCIRCUIT_PREBUILD`` is 0: the benchmark's switch).  Called before every first
     integration (CompiledSystem.integrate_batch) and earlier by ``tran --compile wait``; costs a
     set lookup after the first call.  Returns the process or None."""
@@ -70,7 +70,7 @@ def start(system):
     if name in _decided:
         return None
     _decided.add(name)
-    fn = system.mod.local_jacobian_into
+    fn = system.mod.local_jacobian_into_at
     if os.environ.get("HEMOCIRCUIT_PREBUILD", "1") == "0" or fn.overloads or in_cache(fn):
         return None
     _helpers[:] = [p for p in _helpers if p.poll() is None]
@@ -96,7 +96,7 @@ def before_integrator(system, rosenbrock=True):
     and for a Rosenbrock integrator its callee ``release_fraction`` (which calls rhs_into: the
     helper, busy with the Jacobian, could not start it earlier; here it fills the time this
     process would wait for the helper), then wait while the helper is running until its
-    ``local_jacobian_into`` and scratch makers are in numba's cache (at most WAIT_S), so that
+    ``local_jacobian_into_at`` and scratch makers are in numba's cache (at most WAIT_S), so that
     the integrator loads them instead of compiling them a second time.
     Without this the integrator reaches the Jacobian in its own typing order (make_work,
     prepare_static, rhs_into, local_jacobian_into) and compiled it itself whenever the helper was
@@ -116,7 +116,9 @@ def before_integrator(system, rosenbrock=True):
         t, vx, lay = numba.float64, numba.typeof(x), numba.typeof(system.lay)
         sig_w = (t, vx, numba.typeof(P), lay, numba.typeof(work))
         mod.prepare_static.compile(sig_w)
-        mod.rhs_into.compile(sig_w + (vx,))
+        # the right-hand side proper: its layout and work tuples by reference (kernels.refs)
+        mod.rhs_into_at.compile((t, vx, numba.typeof(P), numba.types.CPointer(lay),
+                                 numba.types.CPointer(numba.typeof(work)), vx))
         if rosenbrock:  # (t, hh, tlim, x, f, xn, P, lay, work, lim_i, lim_b, lim_r, atol, held, xe, fe, xh, fh)
             f64 = numba.float64
             mod.release_fraction.compile((f64, f64, f64, vx, vx, vx) + sig_w[2:] + (
@@ -125,7 +127,7 @@ def before_integrator(system, rosenbrock=True):
     except Exception:  # noqa: BLE001 - only a head start: the integrator compiles what is missing
         pass
     # the helper's part the integrator reaches first, in the helper's order
-    helpers = (mod.local_jacobian_into, mod.make_jac_work, mod.make_work)
+    helpers = (mod.local_jacobian_into_at, mod.make_jac_work, mod.make_work)
     end = time.monotonic() + WAIT_S
     while proc.poll() is None and not all(in_cache(f) for f in helpers) and time.monotonic() < end:
         time.sleep(0.05)
@@ -156,13 +158,15 @@ def helper_signatures(mod, lay, nx, n_params):
     P.setflags(write=False)  # integrate_batch's P is a read-only view (np.broadcast_to) in a single run
     vx, J = numba.typeof(x), numba.typeof(np.empty((1, 1)))
     work, jw = mod.make_work.py_func(lay), mod.make_jac_work.py_func(lay)
+    ref = numba.types.CPointer  # the tuples by reference (kernels.refs)
     # one element's buffers as the callers pass them: (k, pl, xl, ul, t, il, dl)
     elem = (numba.int64, numba.typeof(work.pl), numba.typeof(work.xl), numba.typeof(work.ul), numba.float64,
             numba.typeof(work.il), numba.typeof(work.dl))
     return [(mod.elem_derivs_jac, elem + (numba.typeof(jw.Jx), numba.typeof(jw.Ju))),
             (mod.elem_derivs, elem),
-            (mod.local_jacobian_into, (numba.float64, vx, numba.typeof(P), numba.typeof(lay), numba.typeof(work),
-                                       numba.typeof(jw), vx, J, vx, numba.boolean, vx, numba.boolean)),
+            (mod.local_jacobian_into_at, (numba.float64, vx, numba.typeof(P), ref(numba.typeof(lay)),
+                                          ref(numba.typeof(work)), ref(numba.typeof(jw)), vx, J, vx, numba.boolean, vx,
+                                          numba.boolean)),
             (mod.make_jac_work, (numba.typeof(lay),)),
             # the Rosenbrock integrator's own small callees (event location, dense output, the
             # end of a member's run), which the first process reaches ~1 s into its compile
