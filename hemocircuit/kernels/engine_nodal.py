@@ -124,11 +124,11 @@ def make_work(lay):
 # loops: a call from a function compiled with reference counting costs one per array member of
 # the layout and work tuples (~1 us per evaluation in all).  Not on rhs_into: inlining it at its
 # six call sites quadruples the compile time (25 s -> 100 s) for 14 % speed.  Nor on
-# effective_params and stamp_element, called from several places in the nodal solve and the
+# effective_params_at and stamp_element, called from several places in the nodal solve and the
 # Jacobian: each inlined copy was typed and lowered again (local_jacobian_into held two of each);
 # as functions of their own, compiled without reference counting as all their callers, they are
-# compiled once and LLVM inlines them where it pays (the same machine speed, the first compile
-# 8 s less CPU on the project's machine).
+# compiled once (the same machine speed, the first compile 8 s less CPU on the project's
+# machine), and they take the layout and work tuples by reference (kernels.refs).
 @njit(cache=True, nogil=True, inline="always")
 def load_element(e, x, Pe, ep, ex, eo, io, pl, xl, il):
     """Copy element e's parameters, states and options into the scratch buffers.  (Arrays, not
@@ -142,14 +142,9 @@ def load_element(e, x, Pe, ep, ex, eo, io, pl, xl, il):
 
 
 @njit(cache=True, nogil=True, internal=True, _nrt=False)
-def effective_params(t, x, P, lay, work):
-    """Parameters with waveforms added and expressions evaluated (into work.Pe)."""
-    effective_params_at(t, x, P, ref(lay), ref(work))
-
-
-@njit(cache=True, nogil=True, internal=True, _nrt=False)
 def effective_params_at(t, x, P, lay_ref, work_ref):
-    """effective_params with the layout and work tuples by reference (kernels.refs)."""
+    """Parameters with waveforms added and expressions evaluated (into work.Pe); the layout and
+    work tuples by reference (kernels.refs)."""
     lay = lay_ref[0]
     work = work_ref[0]
     (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st, td) = lay
