@@ -28,9 +28,8 @@ from __future__ import annotations
 from ..errors import did_you_mean
 from ..units import parse_quantity
 from .model import (CLOSED_LOOP_CORONARY, CORONARY_SIDE, HEART, HEART_IN, HEART_OUT, ONE_ELEMENT_VESSELS,
-                    SUPPORTED_BC,
-                    SUPPORTED_VESSELS, as_float, check_period, ident, model_error, quantity_text as fmt, show,
-                    shown_keys)
+                    SUPPORTED_BC, SUPPORTED_VESSELS, as_float, check_period, ident, model_error,
+                    quantity_text as fmt, show, shown_keys)
 
 
 def vessels(imp, blocks):
@@ -58,16 +57,13 @@ def vessels(imp, blocks):
             imp.q_in[name], imp.q_out[name] = f"{eid}.Q_in", f"{eid}.Q_out"
             imp.start(eid, "X", Cp * imp.ic(f"pressure:{imp.inlet[name][0]}:{name}"), V)
             continue
-        if typ in ONE_ELEMENT_VESSELS:  # Resistance: P_in - P_out = R Q, Capacitance: Q_in - Q_out = C dP_in/dt
-            # with P_in = P_out, Inductance: P_in - P_out = L dQ/dt (both with Q_in = Q_out)
+        if typ in ONE_ELEMENT_VESSELS:  # a BloodVessel with only its own value (model.ONE_ELEMENT_VESSELS)
             key, param = ONE_ELEMENT_VESSELS[typ]
             imp.only_keys(name, vals, (key,))
-            one = {"R_poiseuille": 0.0, "C": 0.0, "L": 0.0, param: imp.value(name, vals, key)}
-            R, C, L, S = one["R_poiseuille"], one["C"], one["L"], 0.0
-        else:
-            R = imp.value(name, vals, "R_poiseuille")
-            C, L = imp.value(name, vals, "C", 0.0), imp.value(name, vals, "L", 0.0)
-            S = imp.value(name, vals, "stenosis_coefficient", 0.0)
+            vals = {"R_poiseuille": 0.0, param: imp.value(name, vals, key)}
+        R = imp.value(name, vals, "R_poiseuille")
+        C, L = imp.value(name, vals, "C", 0.0), imp.value(name, vals, "L", 0.0)
+        S = imp.value(name, vals, "stenosis_coefficient", 0.0)
         n_in, n_out = imp.two_port("vessel", name)
         up, down = imp.inlet[name][0], imp.outlet[name][0]
         eid = imp.id_of(name)

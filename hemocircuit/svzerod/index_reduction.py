@@ -3,6 +3,8 @@ ideal pressure source and vessel inductors in series with an ideal flow source, 
 source fixes, written as sources of the known function of time instead."""
 from __future__ import annotations
 
+from .model import ONE_ELEMENT_VESSELS
+
 
 def reduce_ideal_sources(imp):
     """Vessel capacitors across an ideal pressure source, vessel inductors in series with an
@@ -26,8 +28,6 @@ def reduce_ideal_sources(imp):
     vessel's structure.  Their outputs that include the removed flow become derived
     quantities (``derived:`` in the netlist; ``imp.q_in``/``imp.q_out`` name them)."""
     from hemocircuit.registry import get_type
-
-    from .model import ONE_ELEMENT_VESSELS
 
     comps = [get_type(e["type"])({k: e[k] for k in get_type(e["type"]).options if k in e})
              for e in imp.elements]
