@@ -14,10 +14,11 @@ import math
 
 import numpy as np
 
-from hemocircuit.component import Observable, Option, Param, State, Storage
+from hemocircuit.component import Component, Observable, Option, Param, State, Storage, kernel_method, open_branches
 from hemocircuit.kernels.jit import equation
+from hemocircuit.kernels.stamps import branch
 
-from .common import Block, branch, jit as _jit, kernel_method, open_branches
+from .common import jit as _jit
 
 
 # --- the equations (hemocircuit.kernels contract) -------------------------------------------
@@ -97,7 +98,7 @@ def log_observe(p, x, iopt, out):
         out[1] = 1.0 / (k * EPS)
 
 
-class _Store(Block):
+class _Store(Component):
     terminals = ("node", "ref")
     role = "pressure"
     options = {"clamp_at_zero": Option(False, kind=bool, doc="hold V >= 0 (dV/dt = 0 at the limit)")}
@@ -157,7 +158,6 @@ class LogCompliance(_Store):
     #: even where dP <= P0 (a collapsed compartment, reported with V = 0), so the law is
     #: continued linearly below dP - P0 = EPS while solving, and the clamp is off
     steady_opts = {"clamp_at_zero": False, "extended": True}
-    EPS = EPS
     kernel = kernel_method(log_stamp, store_derivs, log_observe, ("V", "C"))
 
     def volume(self, p, dP):
@@ -165,4 +165,4 @@ class LogCompliance(_Store):
         k, P0, Vn = p["k"], p["P0"], p["Vn"]
         e = dP - P0
         V_eps = linear_below(k, Vn)
-        return np.where(e >= self.EPS, Vn + np.log(np.maximum(e, self.EPS)) / k, V_eps + (e / self.EPS - 1) / k)
+        return np.where(e >= EPS, Vn + np.log(np.maximum(e, EPS)) / k, V_eps + (e / EPS - 1) / k)

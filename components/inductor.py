@@ -6,9 +6,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from hemocircuit.component import Observable, Param, State
+from hemocircuit.component import Component, Observable, Param, State, kernel_method, short
+from hemocircuit.kernels.stamps import imposed_flow
 
-from .common import Block, imposed_flow, jit, kernel_method, observe_first_state, short
+from .common import jit, observe_first_state
 
 
 # p = [L], state [q], local unknowns [P_a, P_b]; observable (state-only): q
@@ -22,7 +23,7 @@ def kernel_derivs(p, x, u, t, iopt, dx):
     dx[0] = (u[0] - u[1]) / p[0]  # dq/dt = (P_a - P_b)/L
 
 
-class Inductor(Block):
+class Inductor(Component):
     type_name = "inductor"
     terminals = ("a", "b")
     parameters = {"L": Param("mmHg*s**2/mL", lower=0.0, lower_open=True, doc="inertance")}
@@ -36,7 +37,7 @@ class Inductor(Block):
         return True
 
     def dc_stamp(self, p, A_loc, b_loc, keep):
-        return short(A_loc, b_loc)  # a short circuit: common.short's conductance, no imposed flow
+        return short(A_loc, b_loc)  # a short circuit: a large conductance, no imposed flow
 
     def initial_states(self, p, u, flows=None, x=None):
         # DC: the inductor is a short circuit; its flow is what the guess network sends through it.

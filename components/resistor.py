@@ -1,9 +1,10 @@
 """Linear hydraulic resistor: q = (P_a - P_b) / R  (thesis eq. Poiseuille, R = dP/Q)."""
 from __future__ import annotations
 
-from hemocircuit.component import Component, Param
+from hemocircuit.component import Component, Param, kernel_method
+from hemocircuit.kernels.stamps import conductance
 
-from .common import conductance, jit, kernel_method
+from .common import jit
 
 
 @jit

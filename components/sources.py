@@ -10,10 +10,11 @@ import math
 
 import numpy as np
 
-from hemocircuit.component import Component, Drive, Param
+from hemocircuit.component import Component, Drive, Param, kernel_method
 from hemocircuit.netlist import GROUND
+from hemocircuit.kernels.stamps import branch, imposed_flow
 
-from .common import branch, imposed_flow, jit as _jit, kernel_method
+from .common import jit as _jit
 
 
 def _sine_params(unit):

@@ -24,13 +24,15 @@ import math
 
 import numpy as np
 
-from hemocircuit.component import Observable, Option, Param, State
+from hemocircuit.component import Component, Observable, Option, Param, State, kernel_method
+from hemocircuit.elementwise import per_element
+from hemocircuit.kernels.stamps import branch
+from hemocircuit.kernels.stateless import no_stamp
 from hemocircuit.units import M3_PER_ML
 
 from .arteriole.equations import outlet_concentration
-from .common import Block, branch, jit as _jit, kernel_method, observe_first_state, per_element
+from .common import jit as _jit, observe_first_state
 
-_READINGS = ("consistent", "thesis")
 #: smallest pool volume used as a divisor [m^3] (a collapsed compliance reports V = 0)
 _V_FLOOR = 1e-15
 
@@ -123,35 +125,21 @@ def tissue_balance(p, iopt):
 
 
 @_jit
-def tissue_stamp(p, x, u, t, iopt, A, b):
-    pass
-
-
-@_jit
 def tissue_derivs(p, x, u, t, iopt, dx):
     a, bb, vol = tissue_balance(p, iopt)
     dx[0] = pool_rate(a, bb, vol, x[0])
 
 
-class _Pool(Block):
+class _Pool(Component):
     """Shared part: state C, wall exchange and decay, the two unit readings."""
 
     options = {
-        "units_reading": Option("consistent", choices=_READINGS,
+        "units_reading": Option("consistent", choices=("consistent", "thesis"),
                                 doc="'consistent' (SI, default) or 'thesis' (its numbers; MODEL_NOTES)"),
         "scale": Option(1e-12, kind=float, lower=0.0, lower_open=True, upper=1e3, unit="M",
                         doc="natural size of C [M] (solver tolerances); a number, 0 < scale <= 1e3"),
     }
     OBSERVABLES = (Observable("C", "M", "tracer concentration in the pool", state_only=True),)
-
-    def __init__(self, opts=None):
-        super().__init__(opts)
-        try:
-            self.opts["scale"] = float(self.opts["scale"])  # YAML reads 1e-20 as a string
-        except (TypeError, ValueError):
-            raise ValueError(f"option 'scale' must be a number (M), got {self.opts['scale']!r}") from None
-        if not self.opts["scale"] > 0:
-            raise ValueError("option 'scale' must be > 0")
 
     def states(self):
         return (State("C", "M", self.opts["scale"], "tracer concentration in the pool"),)
@@ -209,7 +197,7 @@ class TissuePool(_Pool):
     type_name = "tissue_pool"
     terminals = ()
     parameters = dict(_COMMON_PARAMETERS)
-    kernel = kernel_method(tissue_stamp, tissue_derivs, observe_first_state, ("C",))
+    kernel = kernel_method(no_stamp, tissue_derivs, observe_first_state, ("C",))
     EDGES = ()
 
     def initial_states(self, p, u, flows=None, x=None):

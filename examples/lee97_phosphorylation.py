@@ -21,7 +21,7 @@ import time
 import numpy as np
 
 from hemocircuit.components.arteriole import make_params
-from hemocircuit.components.arteriole.lee97 import phosphorylation_curves
+from hemocircuit.reproduce.ch4_lee97 import phosphorylation_curves
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 QUICK = os.environ.get("HEMOCIRCUIT_EXAMPLES_QUICK", "") not in ("", "0")  # the test suite's smoke run

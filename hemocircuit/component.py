@@ -24,10 +24,16 @@ element draws from each of its nodes, which is how element flows are reported ge
 """
 from __future__ import annotations
 
+import math
+import sys
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+
+from .errors import SolverError
+from .kernels import Kernel
+from .kernels.stateless import no_derivs, no_observables
 
 
 class _Bounded:
@@ -145,7 +151,19 @@ class Drive:
 
 
 class Component:
-    """Base class of every element type.  Subclasses set the class attributes and hooks."""
+    """Base class of every element type.  Subclasses set the class attributes and hooks.
+
+    A type whose structure does not depend on its options declares it as class attributes
+    (INTERNAL_NODES, BRANCHES, STATES, STORAGES, OBSERVABLES, EDGES: None takes ``role``), which
+    the structure hooks return; a type whose structure does overrides the hooks.  A subclass
+    without a docstring takes its module's (a svZeroDSolver block's: its equations)."""
+
+    INTERNAL_NODES: tuple = ()
+    BRANCHES: tuple = ()
+    STATES: tuple = ()
+    STORAGES: tuple = ()
+    OBSERVABLES: tuple = ()
+    EDGES: tuple | None = None
 
     #: name used as ``type:`` in netlists
     type_name: str = ""
@@ -190,29 +208,36 @@ class Component:
     #: the parameters an input signal drives (:class:`Drive`); None: the element is not a source
     drive: Drive | None = None
 
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        if cls.__doc__ is None:
+            cls.__doc__ = getattr(sys.modules.get(cls.__module__), "__doc__", None)
+
     def __init__(self, opts: dict | None = None):
         self.opts = {k: o.default for k, o in self.options.items()}
         self.opts.update(opts or {})
 
     # --- structure (may depend on options) -------------------------------------------
     def internal_nodes(self) -> tuple[str, ...]:
-        return ()
+        return self.INTERNAL_NODES
 
     def branches(self) -> tuple[tuple[str, str], ...]:
         """Pressure-defining branches (plus, minus) in local node names."""
-        return ()
+        return self.BRANCHES
 
     def states(self) -> tuple[State, ...]:
-        return ()
+        return self.STATES
 
     def observables(self) -> tuple[Observable, ...]:
-        return ()
+        return self.OBSERVABLES
 
     def storages(self) -> tuple[Storage, ...]:
-        return ()
+        return self.STORAGES
 
     def edges(self) -> tuple[tuple[str, str, str], ...]:
         """(local node a, local node b, role) for the topology pass."""
+        if self.EDGES is not None:
+            return self.EDGES
         t = self.terminals
         return ((t[0], t[1], self.role),)
 
@@ -364,43 +389,62 @@ class Component:
 
 
 
-def two_terminal_conductance(g: np.ndarray, j: np.ndarray | None = None):
-    """MNA stamp of flow q = g (Pa - Pb) + j from terminal a to terminal b.
-
-    Returns (A_loc, b_loc) with shapes (B, E, 2, 2) and (B, E, 2).
-    """
-    A = np.empty(g.shape + (2, 2))
-    A[..., 0, 0] = g
-    A[..., 0, 1] = -g
-    A[..., 1, 0] = -g
-    A[..., 1, 1] = g
-    b = np.zeros(g.shape + (2,))
-    if j is not None:
-        b[..., 0] = -j
-        b[..., 1] = j
-    return A, b
+def kernel_method(stamp, derivs=None, observe=None, observables=(), **optional):
+    """A ``Component.kernel`` returning these kernel functions (``optional``: report,
+    derivs_jac); ``derivs`` and ``observe`` default to the stateless ones."""
+    k = Kernel(stamp=stamp, derivs=derivs or no_derivs, observe=observe or no_observables,
+               observables=observables, **optional)
+    return lambda self: k
 
 
-def pressure_branch(value: np.ndarray):
-    """MNA stamp of a pressure-defining branch P_a - P_b = value between two terminals.
-
-    Local unknowns: [P_a, P_b, I] with I the flow from a through the element to b.
-    """
-    shape = value.shape
-    A = np.zeros(shape + (3, 3))
-    A[..., 0, 2] = 1.0   # I leaves node a
-    A[..., 1, 2] = -1.0  # and enters node b
-    A[..., 2, 0] = 1.0
-    A[..., 2, 1] = -1.0
-    b = np.zeros(shape + (3,))
-    b[..., 2] = value
-    return A, b
+def batch_shape(p, *shapes):
+    """(B, E) of an evaluation: the broadcast of every parameter's shape and ``shapes``."""
+    return np.broadcast_shapes(*(np.shape(v) for v in p.values()), *shapes)
 
 
-def flow_branch(q: np.ndarray):
-    """MNA stamp of an imposed flow q from terminal a to terminal b."""
-    A = np.zeros(q.shape + (2, 2))
-    b = np.empty(q.shape + (2,))
-    b[..., 0] = -q
-    b[..., 1] = q
-    return A, b
+# --- DC-guess stamps (dc_stamp), on the batched (B, E, L, L) and (B, E, L) arrays ----------
+def short(A_loc, b_loc, G=1e6):
+    """An inductor from local node 0 to 1 as a conductance G [mL/s/mmHg], no imposed flow (its
+    local unknowns are the two pressures only, with no branch row for P_a = P_b)."""
+    A_loc[..., 0, 0] += G
+    A_loc[..., 0, 1] -= G
+    A_loc[..., 1, 0] -= G
+    A_loc[..., 1, 1] += G
+    b_loc[..., :2] = 0.0
+    return A_loc, b_loc
+
+
+def open_branches(A_loc, b_loc, rows, keep=None):
+    """The branches ``rows`` carry no flow, except in the elements ``keep`` (the stores that
+    anchor a conservation law keep their stamp)."""
+    sel = slice(None) if keep is None else ~np.asarray(keep, dtype=bool)
+    for r in rows:
+        A_loc[:, sel, r, :] = 0.0
+        A_loc[:, sel, r, r] = 1.0
+        b_loc[:, sel, r] = 0.0
+    return A_loc, b_loc
+
+
+#: most kinks periodic_breakpoints lists in one call, over all phases and parameter sets
+MAX_BREAKPOINTS = 4_000_000
+
+
+def periodic_breakpoints(phases_of, p, names, t0, t1):
+    """Times in (t0, t1) of ``phases_of(T, {name: value}) + n T`` (n >= 0) over every
+    parameter set and element of ``p`` (arrays; ``p['period']`` is T, ``names`` the others
+    the phases need): the scheduled kinks of a periodic function of time, where the
+    integrators end a step."""
+    names = tuple(names)
+    arrs = np.broadcast_arrays(*(np.asarray(p[n], float) for n in ("period",) + names))
+    out, count = [], 0
+    for vals in set(zip(*(v.reshape(-1).tolist() for v in arrs))):
+        T = vals[0]
+        for ph in phases_of(T, dict(zip(names, vals[1:]))):
+            n0, n1 = max(0, math.floor((t0 - ph) / T)), math.ceil((t1 - ph) / T)
+            count += max(0, n1 - n0 + 1)
+            if count > MAX_BREAKPOINTS:
+                raise SolverError(f"more than {MAX_BREAKPOINTS} scheduled kinks of a periodic function "
+                                  f"(period {T:g} s) in ({t0:g}, {t1:g}) s: integrate over fewer cycles at a time")
+            out.append(ph + T * np.arange(n0, n1 + 1, dtype=float))
+    pts = np.unique(np.concatenate(out)) if out else np.empty(0)
+    return [float(v) for v in pts[(pts > t0) & (pts < t1)]]

@@ -72,6 +72,22 @@ def _call(fn, run, args):
         return fn.dispatcher(*args)
 
 
+def per_element(fn, comp, p, *args):
+    """``fn(p_e, *args_e, iopt)`` for every element of a batch: how a Python-side hook (a DC
+    guess, an initial state) reaches a law that only a kernel helper defines (an activation,
+    an elastance).  ``p`` {name: (1 or B, E)} is stacked in ``comp.parameters`` order,
+    ``args`` are numbers or arrays broadcast with it, ``iopt`` the type's kernel options.
+    Returns (B, E) floats, or (B, E, k) for a k-tuple result."""
+    names = list(comp.parameters)
+    shape = np.broadcast_shapes(*(np.shape(p[n]) for n in names), *(np.shape(a) for a in args))
+    P = np.stack([np.broadcast_to(np.asarray(p[n], float), shape) for n in names], axis=-1)
+    A = [np.broadcast_to(np.asarray(a, float), shape) for a in args]
+    iopt, run = comp.kernel_options(), _runner(fn)
+    with np.errstate(all="ignore"):
+        rows = [_call(fn, run, (P[idx], *(v[idx] for v in A), iopt)) for idx in np.ndindex(shape)]
+    return np.array(rows, dtype=float).reshape(shape + (np.shape(rows[0]) if rows else ()))
+
+
 def _contiguous(a, shape):
     """``a`` broadcast to ``shape`` as a C-contiguous array (``a`` itself when it is one)."""
     if a.shape == shape and a.flags.c_contiguous:

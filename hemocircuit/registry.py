@@ -46,7 +46,7 @@ def component_types() -> dict[str, type[Component]]:
                                    f"{other.__module__} and {origin}")
         found[cls.type_name] = cls
 
-    for info in pkgutil.iter_modules(pkg.__path__, pkg.__name__ + "."):
+    for info in pkgutil.walk_packages(pkg.__path__, pkg.__name__ + "."):
         module = importlib.import_module(info.name)
         for cls in _classes_in(module):
             add(cls, info.name)
@@ -97,26 +97,29 @@ _TYPE_NAME = re.compile(r"""^[ \t]+type_name\s*=\s*["']([^"']+)["']""", re.MULTI
 
 @functools.lru_cache(maxsize=1)
 def _builtin_index() -> dict[str, str]:
-    """{type name: the module of ``hemocircuit.components`` to import for it} read from the
+    """{type name: the module of ``hemocircuit.components`` that defines it} read from the
     sources (``type_name = "..."`` in a class body), without importing them; a name written in
     two modules is left out (the full registry then reports it)."""
     from . import components as pkg
 
+    root = pkg.__path__[0]
     index, twice = {}, set()
-    for info in pkgutil.iter_modules(pkg.__path__, pkg.__name__ + "."):
-        folder = os.path.join(pkg.__path__[0], info.name.rsplit(".", 1)[1])
-        files = ([os.path.join(d, f) for d, _, fs in os.walk(folder) for f in fs if f.endswith(".py")]
-                 if info.ispkg else [folder + ".py"])
-        for path in files:
+    for folder, _, files in os.walk(root):
+        for f in files:
+            if not f.endswith(".py"):
+                continue
+            path = os.path.join(folder, f)
+            rel = os.path.relpath(path, root)[:-3].replace(os.sep, ".")
+            module = pkg.__name__ + ("" if rel == "__init__" else "." + rel.removesuffix(".__init__"))
             try:
                 with open(path, encoding="utf-8") as fh:
                     names = _TYPE_NAME.findall(fh.read())
             except OSError:
                 continue
             for n in names:
-                if index.get(n, info.name) != info.name:
+                if index.get(n, module) != module:
                     twice.add(n)
-                index[n] = info.name
+                index[n] = module
     return {n: m for n, m in index.items() if n not in twice}
 
 

@@ -1,10 +1,13 @@
 """Chapter 4, the 4-state kinetics fitted to Lee97: relative phosphorylation Mp + AMp against
 [Ca] for [cGMP] from 0.1 nM to 10 uM and the two Lee97 conditions
-(examples/lee97_phosphorylation.py, hemocircuit.components.arteriole.lee97)."""
+(examples/lee97_phosphorylation.py).  The curves are the 4-state cross-bridge kinetics (eqs
+phos, dephos, 4stateSS) at steady state; fractions [-], concentrations [M]."""
 from __future__ import annotations
 
 import numpy as np
 
+from ..components.arteriole import equations as eq
+from ..components.arteriole.parameters import make_params
 from .core import plt
 
 TITLE = "Myosin phosphorylation of the 4-state kinetics (Lee97)"
@@ -12,10 +15,26 @@ CHAPTER = 4
 LABELS = ["figrPhospCa", "figFccGMP"]
 
 
-def run(ctx):
-    from ..components.arteriole import make_params
-    from ..components.arteriole.lee97 import phosphorylation_curves
+def relative_phosphorylation(Ca, cGMP, params):
+    """Mp + AMp [-] at kinetic steady state (figure figrPhospCa), for [Ca], [cGMP] in M."""
+    p = eq.vector(params)
+    with np.errstate(divide="ignore"):
+        _, Mp, AMp, _ = eq.quasi_steady(*eq.rates(np.asarray(Ca, dtype=float), np.asarray(cGMP, dtype=float),
+                                                  p, False), p)
+    return Mp + AMp
 
+
+def phosphorylation_curves(params=None, Ca=None, cGMP=None):
+    """(Ca [M], cGMP [M], phos [-] of shape (len(cGMP), len(Ca))) with phos = Mp + AMp at
+    kinetic steady state.  Defaults: Ca 1e-8..1e-4 M (81 points), cGMP 1e-10..1e-5 M (6 decades),
+    the kuo91 kinetic parameters (tab4State)."""
+    p = make_params("kuo91") if params is None else params
+    Ca = np.logspace(-8, -4, 81) if Ca is None else np.asarray(Ca, dtype=float)
+    cGMP = np.logspace(-10, -5, 6) if cGMP is None else np.asarray(cGMP, dtype=float)
+    return Ca, cGMP, relative_phosphorylation(Ca[None, :], cGMP[:, None], p)
+
+
+def run(ctx):
     p = make_params("kuo91")
     Ca, cg, phos = phosphorylation_curves(p, np.logspace(-8, -4, ctx.setting("Ca points", 41, 161)))
     # figFccGMP: the same surface cut at [Ca] = 1 uM for [cGMP] 0.1 nM .. 10 uM, and at the

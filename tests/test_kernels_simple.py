@@ -15,7 +15,11 @@ from hemocircuit.components.compliance import LinearCompliance, LogCompliance
 from hemocircuit.components.inductor import Inductor
 from hemocircuit.components.resistor import Resistor
 from hemocircuit.components.sources import FlowSource, PressureSource
-from hemocircuit.components.svzerod import BloodVessel, PiecewiseValve, RCRBC, ResistanceBC, ValveTanh
+from hemocircuit.components.svzerod.blood_vessel import BloodVessel
+from hemocircuit.components.svzerod.piecewise_valve import PiecewiseValve
+from hemocircuit.components.svzerod.rcr_bc import RCRBC
+from hemocircuit.components.svzerod.resistance_bc import ResistanceBC
+from hemocircuit.components.svzerod.valve_tanh import ValveTanh
 from hemocircuit.components.tracer_pools import TissuePool, TracerPool
 from hemocircuit.expressions import Expression, Reference, constant_reference
 from hemocircuit.kernels import Kernel
@@ -134,7 +138,7 @@ OPTION_ENCODINGS = [
     (TracerPool, {"units_reading": "consistent", "scale": 1e-20}, [0]),
     (TracerPool, {"units_reading": "thesis"}, [1]),
     (TissuePool, {"units_reading": "consistent"}, [0]),
-    (TissuePool, {"units_reading": "thesis", "scale": "1e-17"}, [1]),
+    (TissuePool, {"units_reading": "thesis", "scale": 1e-17}, [1]),
 ]
 
 

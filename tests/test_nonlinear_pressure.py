@@ -4,7 +4,7 @@ import pytest
 from scipy.optimize import brentq
 
 import hemocircuit as hc
-from hemocircuit.component import Component, Param, two_terminal_conductance
+from hemocircuit.component import Component, Param
 from hemocircuit.registry import component_types
 
 
@@ -21,7 +21,11 @@ class QuadraticResistor(Component):
         a = np.maximum(np.abs(dP), 1e-9)
         q = np.sign(dP) * np.sqrt(a / p["K"])
         g = 0.5 / np.sqrt(a * p["K"])  # dq/d(dP)
-        return two_terminal_conductance(g, q - g * dP)
+        # a legacy numpy hook: q = g (P_a - P_b) + j from a to b
+        j = q - g * dP
+        A = np.empty(g.shape + (2, 2))
+        A[..., 0, 0], A[..., 0, 1], A[..., 1, 0], A[..., 1, 1] = g, -g, -g, g
+        return A, np.stack([-j, j], axis=-1)
 
 
 @pytest.fixture

@@ -19,8 +19,8 @@ import math
 
 from hemocircuit.kernels.jit import equation, njit
 from hemocircuit.units import M3_PER_ML, PA_PER_MMHG
+from hemocircuit.kernels.stamps import conductance
 
-from ..common import conductance
 
 from .equations import (C_IN, CA_FLOOR, DP0, ETA, F1, F2, GAMMA_WB, K3, K4, K7, K_CA1, K_CA2, K_CGMP, L0, L_VES,
                         LAMBDA_OPT, LN10, MAX_EXP, MU_B, N_CA1, N_CA2, N_CGMP, N_VES, NO_L, NO_U, OMEGA_N,

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hemocircuit.component import Component, Observable, Option, Param, State, Storage
+from hemocircuit.component import Component, Observable, Option, State, Storage
 from hemocircuit.errors import HemocircuitError
 from hemocircuit.units import PA_PER_MMHG
 
@@ -26,7 +26,6 @@ from . import compiled, equations, model
 from .parameters import PARAMETERS, PRESETS, check_params
 from .steady_state import solve_steady
 
-_UNITS = {"mol/L": "M", "mol/L/s": "M/s"}
 # observables: name -> (unit in the circuit, doc), in the order compiled.report writes them
 _OBS = {
     "r": ("um", "internal radius"),
@@ -70,13 +69,10 @@ class Arteriole(Component):
 
     type_name = "arteriole"
     terminals = ("in", "out", "ref")
-    parameters = {name: Param(_UNITS.get(spec.unit, spec.unit), default=None, lower=spec.lower, upper=spec.upper,
-                              lower_open=spec.lower_open, doc=spec.doc) for name, spec in PARAMETERS.items()}
+    parameters = PARAMETERS
     options = {
         "preset": Option("kuo91", choices=tuple(PRESETS), doc="parameter set (tables tabPassiveFit, tabActiveFit)"),
-        "ca_order": Option(1, choices=(1, 2), kind=int, doc="first- (eq. dCadt) or second-order (eq. dCadt2) Ca"),
-        "kinetics": Option("quasi_steady", choices=("quasi_steady", "dynamic"), doc="4-state kinetics"),
-        "passive": Option(False, kind=bool, doc="Ca = 0, no myogenic response (passive curves)"),
+        **model.OPTIONS,
         "volume_flow": Option(False, kind=bool, doc="the bed's volume rate leaves the midpoint into ref"),
         "pim_reference": Option("gauge", choices=("gauge", "ref"), doc="intramural pressure against 0 or P(ref)"),
     }
@@ -90,11 +86,8 @@ class Arteriole(Component):
 
     @property
     def model_options(self):
-        o = self.__dict__.get("_model_options")
-        if o is None or any(o[k] != self.opts[k] for k in ("ca_order", "kinetics", "passive")):
-            o = model.resolve_options({k: self.opts[k] for k in ("ca_order", "kinetics", "passive")})
-            self.__dict__["_model_options"] = o
-        return o
+        """The options of the vessel model (model.OPTIONS), checked."""
+        return model.resolve_options({k: self.opts[k] for k in model.OPTIONS})
 
     # --- structure --------------------------------------------------------------------
     def internal_nodes(self):
@@ -110,8 +103,7 @@ class Arteriole(Component):
 
     def states(self):
         names = model.state_names(self.model_options)
-        return tuple(State(n, _UNITS.get(model.STATE_UNITS[n], model.STATE_UNITS[n]), model.STATE_SCALES[n])
-                     for n in names)
+        return tuple(State(n, model.STATE_UNITS[n], model.STATE_SCALES[n]) for n in names)
 
     def observables(self):
         names = [n for n in _OBS if n != "dCa" or self.opts["ca_order"] == 2]

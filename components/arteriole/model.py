@@ -6,7 +6,7 @@ States (``state_names``): [Ca] (M), optionally dCa/dt (M/s, second-order Ca, eq 
 (kinetics 'dynamic').  States are given either as a dict name -> array or as one array whose
 LAST axis holds the states in ``state_names`` order.
 
-Options (``DEFAULT_OPTIONS``): ``ca_order`` 1 (eq dCadt) or 2 (eq dCadt2); ``kinetics``
+Options (``OPTIONS``, which the element declares too): ``ca_order`` 1 (eq dCadt) or 2 (eq dCadt2); ``kinetics``
 'quasi_steady' (default, eq 4stateSS, as the thesis) or 'dynamic' (eq 4state); ``passive``
 (Ca = 0 exactly in the kinetics, no myogenic drive: Ca_bar = 0; alpha -> [1,0,0,0], F_a = 0).
 """
@@ -14,37 +14,34 @@ from __future__ import annotations
 
 import numpy as np
 
+from hemocircuit.component import Option
+
 from .equations import BRIDGE_STATES
 
-DEFAULT_OPTIONS = {"ca_order": 1, "kinetics": "quasi_steady", "passive": False}
-OPTION_CHOICES = {"ca_order": (1, 2), "kinetics": ("quasi_steady", "dynamic"), "passive": (False, True)}
+OPTIONS = {"ca_order": Option(1, choices=(1, 2), kind=int, doc="first- (eq. dCadt) or second-order (eq. dCadt2) Ca"),
+           "kinetics": Option("quasi_steady", choices=("quasi_steady", "dynamic"), doc="4-state kinetics"),
+           "passive": Option(False, choices=(False, True), kind=bool,
+                             doc="Ca = 0, no myogenic response (passive curves)")}
 
-STATE_UNITS = {"Ca": "mol/L", "dCa": "mol/L/s", "Cw": "mol/L", "lambda": "dimensionless",
+STATE_UNITS = {"Ca": "M", "dCa": "M/s", "Cw": "M", "lambda": "dimensionless",
                "M": "dimensionless", "Mp": "dimensionless", "AMp": "dimensionless",
                "AM": "dimensionless"}
 #: natural scales (for solver tolerances).  Measured with kuo91 at 60 mmHg: Ca 4e-8..6e-8 M,
 #: Cw 7e-9 M (no flow) .. 2.4e-7 M (dP = 4 cmH2O), lambda ~ 0.9, dCa ~ omega_n Ca.
 STATE_SCALES = {"Ca": 1e-7, "dCa": 1e-7, "Cw": 1e-7, "lambda": 1.0,
                 "M": 1.0, "Mp": 1.0, "AMp": 1.0, "AM": 1.0}
-class ResolvedOptions(dict):
-    """Options already checked by resolve_options (passed through without re-checking)."""
 
 
 def resolve_options(options=None) -> dict:
-    """``DEFAULT_OPTIONS`` updated with ``options``; raises ValueError on unknown keys/values."""
-    if isinstance(options, ResolvedOptions):
-        return options
-    if options:
-        options = {k: v for k, v in options.items() if k != "_names"}
-    o = ResolvedOptions(DEFAULT_OPTIONS)
-    if options:
-        unknown = set(options) - set(o)
-        if unknown:
-            raise ValueError(f"unknown arteriole option(s) {sorted(unknown)}")
-        o.update(options)
-    for k, choices in OPTION_CHOICES.items():
-        if o[k] not in choices:
-            raise ValueError(f"arteriole option {k}={o[k]!r}: choose one of {choices}")
+    """The ``OPTIONS`` defaults updated with ``options``; raises ValueError on unknown keys/values."""
+    o = {k: opt.default for k, opt in OPTIONS.items()}
+    unknown = set(options or ()) - set(o)
+    if unknown:
+        raise ValueError(f"unknown arteriole option(s) {sorted(unknown)}")
+    o.update(options or {})
+    for k, opt in OPTIONS.items():
+        if o[k] not in opt.choices:
+            raise ValueError(f"arteriole option {k}={o[k]!r}: choose one of {opt.choices}")
     o["passive"] = bool(o["passive"])
     return o
 
@@ -52,20 +49,7 @@ def resolve_options(options=None) -> dict:
 def state_names(options=None) -> list[str]:
     """Ordered state names: ['Ca', ('dCa',) 'Cw', 'lambda' (, 'M', 'Mp', 'AMp', 'AM')]."""
     o = resolve_options(options)
-    if "_names" in o:
-        return o["_names"]
-    names = ["Ca", "dCa"] if o["ca_order"] == 2 else ["Ca"]
-    names += ["Cw", "lambda"]
-    if o["kinetics"] == "dynamic":
-        names += list(BRIDGE_STATES)
-    if isinstance(o, ResolvedOptions):
-        o["_names"] = names
-    return names
-
-
-def state_scales(options=None) -> dict:
-    """Natural scale of each state (same units as the state)."""
-    return {n: STATE_SCALES[n] for n in state_names(options)}
+    return ["Ca", "dCa"][:o["ca_order"]] + ["Cw", "lambda"] + (list(BRIDGE_STATES) if o["kinetics"] == "dynamic" else [])
 
 
 def pack(states: dict, options=None) -> np.ndarray:

@@ -1,9 +1,10 @@
 """Parameters of the active arteriole element (thesis chapters 3-4), all in SI.
 
 Units: Pa, m, N, s; concentrations in M = mol/L (MODEL_NOTES "Units").  Every entry of
-``PARAMETERS`` is ``ParamSpec(unit, lower, upper, doc, lower_open)``: a pint-parseable unit,
-physical bounds (``None`` = unbounded; ``lower_open`` makes the lower bound strict) and a
-one-line description naming the thesis table the value comes from.
+``PARAMETERS`` is the element's declaration (hemocircuit.component.Param), written
+``_P(unit, lower, upper, doc, lower_open)``: a pint-parseable unit, physical bounds (``None`` =
+unbounded; ``lower_open`` makes the lower bound strict) and a one-line description naming the
+thesis table the value comes from.
 
 Presets: ``kuo91`` (Kuo column of tabPassiveFit / tabActiveFit, tab4State) and ``falcone91``
 (Falcone column; where it has '--' or N/A the Kuo value).  Both use the NO coefficients of
@@ -12,37 +13,31 @@ k_tau together (thesis section dynfitting), so ``no_speed = 1/0.005`` restores t
 """
 from __future__ import annotations
 
-from typing import NamedTuple
-
 import numpy as np
 
+from hemocircuit.component import Param
 from hemocircuit.units import PA_PER_MMHG
 
 
-class ParamSpec(NamedTuple):
-    unit: str
-    lower: float | None
-    upper: float | None
-    doc: str
-    lower_open: bool = False
+def _P(unit, lower, upper, doc, lower_open=False):
+    return Param(unit, lower=lower, upper=upper, lower_open=lower_open, doc=doc)
 
 
-_P = ParamSpec
-PARAMETERS: dict[str, ParamSpec] = {
+PARAMETERS: dict[str, Param] = {
     # --- NO model (tabActiveFit, tabNewNOValues) ---------------------------------------
     "h_w": _P("m**2/s", 0.0, None, "NO wall-blood transport coefficient (tabNewNOValues)"),
-    "s_w": _P("mol/L/s", 0.0, None, "basal NO production rate in the wall (tabNewNOValues)"),
+    "s_w": _P("M/s", 0.0, None, "basal NO production rate in the wall (tabNewNOValues)"),
     "gamma_wb": _P("dimensionless", 0.0, None, "baseline wall:blood [NO] ratio (tabActiveFit)", True),
     "r_db": _P("1/s", 0.0, None, "NO decay rate in blood (tabActiveFit)"),
     "r_dw": _P("1/s", 0.0, None, "NO decay rate in the wall (tabNewNOValues)"),
     "k_tau": _P("m**2*mol/L/s", 0.0, None, "shear-stress NO production coefficient (tabNewNOValues)"),
-    "C_in": _P("mol/L", 0.0, None, "[NO] of blood entering the vessel (tabActiveFit)"),
+    "C_in": _P("M", 0.0, None, "[NO] of blood entering the vessel (tabActiveFit)"),
     "mu_b": _P("Pa*s", 0.0, None, "blood viscosity (tabActiveFit, 'Ns/m' read as Pa*s)", True),
     "dP0": _P("Pa", 0.0, None, "normalising pressure drop, 60 mmHg (tabActiveFit)", True),
     "r0": _P("m", 0.0, None, "baseline internal radius, sets A_w and tau_hat (tabActiveFit)", True),
     # --- NO -> cGMP sigmoid (eqs NOcGMP, sigmoiddef; tabActiveFit) ----------------------
-    "NO_L": _P("mol/L", None, None, "[NO] at 5 % of the cGMP sigmoid (tabActiveFit)"),
-    "NO_U": _P("mol/L", None, None, "[NO] at 95 % of the cGMP sigmoid (tabActiveFit)"),
+    "NO_L": _P("M", None, None, "[NO] at 5 % of the cGMP sigmoid (tabActiveFit)"),
+    "NO_U": _P("M", None, None, "[NO] at 95 % of the cGMP sigmoid (tabActiveFit)"),
     "pcGMP_L": _P("dimensionless", None, None, "lower bound of log10[cGMP] (tabActiveFit)"),
     "pcGMP_U": _P("dimensionless", None, None, "upper bound of log10[cGMP] (tabActiveFit)"),
     # --- myogenic sigmoid (tabActiveFit; thesis writes sigma in 'N/m', P r/t_w is Pa) ---
@@ -67,11 +62,11 @@ PARAMETERS: dict[str, ParamSpec] = {
     "K3": _P("1/s", 0.0, None, "phosphorylated attachment rate (tab4State)"),
     "K4": _P("1/s", 0.0, None, "phosphorylated detachment rate (tab4State)"),
     "K7": _P("1/s", 0.0, None, "latch detachment rate (tab4State)"),
-    "k_Ca1": _P("mol/L", 0.0, None, "phosphorylation Ca sensitivity (tab4State)", True),
+    "k_Ca1": _P("M", 0.0, None, "phosphorylation Ca sensitivity (tab4State)", True),
     "n_Ca1": _P("dimensionless", 0.0, None, "phosphorylation Hill exponent (tab4State)", True),
-    "k_Ca2": _P("mol/L", 0.0, None, "dephosphorylation Ca sensitivity (tab4State)", True),
+    "k_Ca2": _P("M", 0.0, None, "dephosphorylation Ca sensitivity (tab4State)", True),
     "n_Ca2": _P("dimensionless", 0.0, None, "dephosphorylation Ca Hill exponent (tab4State)", True),
-    "k_cGMP": _P("mol/L", 0.0, None, "dephosphorylation cGMP sensitivity (tab4State)", True),
+    "k_cGMP": _P("M", 0.0, None, "dephosphorylation cGMP sensitivity (tab4State)", True),
     "n_cGMP": _P("dimensionless", 0.0, None, "dephosphorylation cGMP Hill exponent (tab4State)", True),
     # --- Ca dynamics (eq dCadt, tabTauCaVals; eq dCadt2, tabOmegaZeta) -----------------
     "tau_Ca": _P("s", 0.0, None, "first-order Ca time constant (tabTauCaVals, fast value 1 s)", True),

@@ -25,9 +25,9 @@ import math
 
 import numpy as np
 
-from hemocircuit.component import Observable, Param, State, Storage
+from hemocircuit.component import Observable, open_branches, Param, periodic_breakpoints, State, Storage
 
-from ..common import flow_observables, jit, open_branches
+from ..common import flow_observables, jit
 
 KINDS = ("half_cosine", "piecewise_cosine", "two_hill", "wrapping_cosine", "fourier")
 
@@ -223,31 +223,3 @@ def activation_breakpoints(kind, p, t0, t1):
     """The kinks of activation ``kind`` in (t0, t1) for every parameter set and element of
     ``p`` (Component.breakpoints of the chambers)."""
     return periodic_breakpoints(lambda T, a: kink_phases(kind, T, a), p, USED[kind], t0, t1)
-
-
-def periodic_breakpoints(phases_of, p, names, t0, t1):
-    """Times in (t0, t1) of ``phases_of(T, {name: value}) + n T`` (n >= 0) over every
-    parameter set and element of ``p`` (arrays; ``p['period']`` is T, ``names`` the others
-    the phases need): the scheduled kinks of a periodic function of time, where the
-    integrators end a step."""
-    from hemocircuit.errors import SolverError
-
-    names = tuple(names)
-    arrs = np.broadcast_arrays(*(np.asarray(p[n], float) for n in ("period",) + names))
-    out, count = [], 0
-    for vals in set(zip(*(v.reshape(-1).tolist() for v in arrs))):
-        T = vals[0]
-        for ph in phases_of(T, dict(zip(names, vals[1:]))):
-            n0, n1 = max(0, math.floor((t0 - ph) / T)), math.ceil((t1 - ph) / T)
-            count += max(0, n1 - n0 + 1)
-            if count > MAX_BREAKPOINTS:
-                raise SolverError(f"more than {MAX_BREAKPOINTS} scheduled kinks of a periodic activation "
-                                  f"(period {T:g} s) in ({t0:g}, {t1:g}) s: integrate over fewer cycles at a time")
-            out.append(ph + T * np.arange(n0, n1 + 1, dtype=float))
-    pts = np.unique(np.concatenate(out)) if out else np.empty(0)
-    return [float(v) for v in pts[(pts > t0) & (pts < t1)]]
-
-
-#: most kinks periodic_breakpoints lists in one call, over all phases and parameter sets
-MAX_BREAKPOINTS = 4_000_000
-

@@ -18,11 +18,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from hemocircuit.component import Observable, Option, Param, State, Storage
+from hemocircuit.component import Component, Observable, Option, Param, State, Storage, short
 from hemocircuit.kernels import Kernel
+from hemocircuit.kernels.stamps import branch, imposed_flow
 
-from ..common import (Block, branch, C_UNIT, flow_observables, imposed_flow, jit, L_UNIT, R_UNIT, S_UNIT, short,
-                      stenosis_drop, stenosis_linearised)
+from ..common import C_UNIT, flow_observables, jit, L_UNIT, R_UNIT, S_UNIT, stenosis_drop, stenosis_linearised
 
 PARAMS = {
     "R_poiseuille": Param(R_UNIT, lower=0.0, doc="Poiseuille resistance"),
@@ -92,12 +92,7 @@ def dc_series(A, c, R):
     A[..., c, 0], A[..., c, 1], A[..., c, c] = 1.0, -1.0, -R
 
 
-def dc_conductance(A, b, R):
-    """DC guess of an inductive vessel: a conductance 1/R from in to out (large when R = 0)."""
-    short(A, b, 1.0 / np.maximum(R, 1e-6))
-
-
-class Vessel(Block):
+class Vessel(Component):
     """Common structure of BloodVessel and BloodVesselCRL (options, states, DC stamp)."""
 
     terminals = ("in", "out", "ref")
@@ -194,7 +189,7 @@ class BloodVessel(Vessel):
 
     def dc_fill(self, A, b, R):
         if self.ind and not self.cap:
-            return dc_conductance(A, b, R)
+            return short(A, b, 1.0 / np.maximum(R, 1e-6))  # the inductor a short: 1/R (large when R = 0)
         dc_series(A, 3, R)  # branch 3 carries in -> out through R
         if self.cap and not self.ind:  # Q_in = Q_out, P_out = P_in - R Q_in
             A[..., 1, 3], A[..., 1, 4] = 0.0, 1.0

@@ -15,8 +15,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..common import branch, imposed_flow, jit, stenosis_drop, stenosis_linearised
-from .blood_vessel import BloodVessel, Vessel, dc_conductance, dc_series, vessel_derivs, vessel_report, vessel_stamp
+from hemocircuit.component import short
+from hemocircuit.kernels.stamps import branch, imposed_flow
+from ..common import jit, stenosis_drop, stenosis_linearised
+from .blood_vessel import BloodVessel, Vessel, dc_series, vessel_derivs, vessel_report, vessel_stamp
 
 
 # --- the equations: p = [R_poiseuille, C, L, stenosis_coefficient], iopt = [capacitive, inductive, stenotic]
@@ -78,7 +80,7 @@ class BloodVesselCRL(Vessel):
             return BloodVessel.dc_fill(self, A, b, R)
         A[..., 3, 3] = 1.0  # capacitor flow 0
         if self.ind:
-            dc_conductance(A, b, R)
+            short(A, b, 1.0 / np.maximum(R, 1e-6))  # the inductor a short: 1/R
         else:
             dc_series(A, 4, R)
 

@@ -13,9 +13,9 @@ q enters at ``in`` and leaves at ``out`` (Q_in = Q_out = q); dX/dt = q - (P_in -
 """
 from __future__ import annotations
 
-from hemocircuit.component import Param, State
+from hemocircuit.component import Component, Param, State, kernel_method
 
-from ..common import Block, C_UNIT, flow_observables, jit, kernel_method, R_UNIT
+from ..common import C_UNIT, flow_observables, jit, R_UNIT
 
 
 # --- the equations: p = [Rpd, Cp]; state [X]; local unknowns [P_in, P_out, P_ref, q]
@@ -39,7 +39,7 @@ def bvrc_report(p, x, u, t, iopt, out):
     out[1] = u[3]  # Q_out
 
 
-class BloodVesselRC(Block):
+class BloodVesselRC(Component):
     type_name = "blood_vessel_rc"
     svzerod_blocks = ("BloodVesselRC",)
     terminals = ("in", "out", "ref")

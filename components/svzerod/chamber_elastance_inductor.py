@@ -19,10 +19,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from hemocircuit.component import Option, Param, State
+from hemocircuit.component import Component, Option, Param, State, kernel_method, short
+from hemocircuit.elementwise import per_element
+from hemocircuit.kernels.stamps import branch, imposed_flow
 
-from ..common import (Block, branch, E_UNIT, imposed_flow, jit, kernel_method, L_UNIT, observe_first_state, per_element,
-                      short)
+from ..common import E_UNIT, jit, L_UNIT, observe_first_state
 from .activation import KINDS, Activated, act_parameters, activation
 
 OWN_PARAMS = {"Emax": Param(E_UNIT, lower=0.0, doc="maximum elastance"),
@@ -67,7 +68,7 @@ def cei_report(p, x, u, t, iopt, out):
     out[2] = x[1]  # Q_out
 
 
-class ChamberElastanceInductor(Activated, Block):
+class ChamberElastanceInductor(Activated, Component):
     type_name = "chamber_elastance_inductor"
     svzerod_blocks = ("ChamberElastanceInductor",)
     parameters = {**OWN_PARAMS, **act_parameters()}

@@ -16,9 +16,10 @@ from __future__ import annotations
 
 import math
 
-from hemocircuit.component import Param
+from hemocircuit.component import Param, kernel_method
+from hemocircuit.elementwise import per_element
 
-from ..common import E_UNIT, jit, kernel_method, observe_first_state, per_element
+from ..common import E_UNIT, jit, observe_first_state
 from .activation import act_parameters, activation
 from .chamber_elastance_inductor import OWN_PARAMS, ChamberElastanceInductor, cei_derivs, cei_report, chamber_stamp
 

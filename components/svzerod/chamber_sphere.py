@@ -25,9 +25,10 @@ import math
 
 import numpy as np
 
-from hemocircuit.component import Observable, Param, State, Storage
+from hemocircuit.component import Component, Observable, Param, State, Storage, kernel_method
+from hemocircuit.kernels.stamps import branch, imposed_flow
 
-from ..common import Block, branch, flow_observables, imposed_flow, jit, kernel_method
+from ..common import flow_observables, jit
 
 PARAMS = {"rho": ("mmHg*s**2/cm**2", True, "wall density"), "thick0": ("cm", True, "wall thickness d0"),
       "radius0": ("cm", True, "reference radius r0"), "W1": ("mmHg", False, "material constant W1"),
@@ -95,7 +96,7 @@ def sphere_report(p, x, u, t, iopt, out):
     out[3] = u[3] + 0.0 * qv  # Q_out
 
 
-class ChamberSphere(Block):
+class ChamberSphere(Component):
     type_name = "chamber_sphere"
     svzerod_blocks = ("ChamberSphere",)
     terminals = ("in", "out", "ref")

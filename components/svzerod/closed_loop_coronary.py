@@ -24,9 +24,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from hemocircuit.component import Observable, Param, State, Storage
+from hemocircuit.component import Component, Observable, Param, State, Storage, batch_shape, kernel_method, open_branches
+from hemocircuit.elementwise import per_element
+from hemocircuit.kernels.stamps import branch, conductance
 
-from ..common import batch_shape, Block, branch, C_UNIT, conductance, E_UNIT, flow_observables, jit, kernel_method, open_branches, per_element, R_UNIT
+from ..common import C_UNIT, E_UNIT, flow_observables, jit, R_UNIT
 from .activation import fourier_raw
 from .closed_loop_heart_pulmonary import ventricle_pressure
 
@@ -68,7 +70,7 @@ def clcor_report(p, x, u, t, iopt, out):
     out[4] = (u[4] - u[1]) / p[2]  # Q_out
 
 
-class ClosedLoopCoronary(Block):
+class ClosedLoopCoronary(Component):
     type_name = "closed_loop_coronary"
     svzerod_blocks = ("ClosedLoopCoronaryLeft", "ClosedLoopCoronaryRight")
     terminals = ("in", "out", "ref")

@@ -18,9 +18,8 @@ their 25-mode Fourier series of ventricular elastance, NOT normalised (as in thi
 Valves: v = 0 (closed) while P_upstream <= P_downstream and Q <= 0, else 1; their post_solve
 sets a closed valve's Q to 0.  Here Q >= 0 is a hard limit (the integration stops where Q
 reaches 0 and holds it there) and v = 0 only on it (Q = 0 exactly, dP <= 0): the same on the
-solution.  Below the bound (only the integrator's stages go there) the valve is open, the
-open valve continued smoothly; their v(Q <= 0) made f jump there and the integrator crept along
-the bound with ~1e-10 s steps (docs/svzerod.md, "Speed").
+solution.  Below the bound (only the integrator's stages go there) the open valve is continued
+smoothly, so f does not jump there (docs/svzerod.md, "Speed").
 Note (theirs, kept): the left atrium fills with the right ventricle's outflow v_RV Q_RV; the
 pulmonary RC only sets the back-pressure P_pul.  So the blood volume is
 V_RA + V_RV + V_LA + V_LV + Cpa P_out (not Cp P_pul), which is what the stores declare.
@@ -34,10 +33,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from hemocircuit.component import Observable, Param, State, Storage
+from hemocircuit.component import Component, Observable, Param, State, Storage, batch_shape, kernel_method
 from hemocircuit.derivatives import FD_REL
+from hemocircuit.kernels.stamps import branch
 
-from ..common import batch_shape, Block, branch, C_UNIT, E_UNIT, flow_observables, jit, kernel_method, L_UNIT, R_UNIT
+from ..common import C_UNIT, E_UNIT, flow_observables, jit, L_UNIT, R_UNIT
 from .activation import activation_breakpoints, fourier_raw, wrapping_cosine
 from .chamber_elastance_inductor_exponential import atrium_pressure, atrium_slope
 
@@ -70,12 +70,6 @@ _STATES = ("V_RA", "Q_RA", "V_RV", "Q_RV", "V_pul", "V_LA", "Q_LA", "V_LV", "Q_L
 
 
 @jit
-def _atrial_activation(t, p):
-    """AA: their atrial activation at t (the wrapping_cosine of activation.py with Tsa, tpwave)."""
-    return wrapping_cosine(t, p[PERIOD], p[TSA], p[TPWAVE])
-
-
-@jit
 def ventricle_pressure(F, E_s, V, V_u):
     """P = F(t) E_s (V - V_u): a ventricle's pressure at the raw Fourier elastance F (also the
     intramyocardial pressure of closed_loop_coronary)."""
@@ -86,7 +80,7 @@ def ventricle_pressure(F, E_s, V, V_u):
 def _pressures(p, x, t):
     """(P_RA, P_RV, P_pul, P_LA, P_LV, P_ao) from the states at time t, and the activations
     (AA, F): their atrial activation and the raw ventricular Fourier elastance."""
-    AA, F = _atrial_activation(t, p), fourier_raw(np.fmod(t, p[PERIOD]), p[PERIOD])
+    AA, F = wrapping_cosine(t, p[PERIOD], p[TSA], p[TPWAVE]), fourier_raw(np.fmod(t, p[PERIOD]), p[PERIOD])
     P_ra = atrium_pressure(AA, p[EMAX_RA], p[KXP_RA], p[KXV_RA], p[VASO_RA], x[0])
     P_la = atrium_pressure(AA, p[EMAX_LA], p[KXP_LA], p[KXV_LA], p[VASO_LA], x[5])
     P_rv = ventricle_pressure(F, p[ERV_S], x[2], p[VRV_U])
@@ -104,8 +98,8 @@ def _valve(dp, q):
 @jit
 def heart_stamp(p, x, u, t, iopt, A, b):
     # the two pressures it defines; the ventricles' Fourier elastance is not needed here
-    branch(A, b, 0, 2, 3, atrium_pressure(_atrial_activation(t, p), p[EMAX_RA], p[KXP_RA], p[KXV_RA],
-                                          p[VASO_RA], x[0]))  # P_RA
+    AA = wrapping_cosine(t, p[PERIOD], p[TSA], p[TPWAVE])
+    branch(A, b, 0, 2, 3, atrium_pressure(AA, p[EMAX_RA], p[KXP_RA], p[KXV_RA], p[VASO_RA], x[0]))  # P_RA
     branch(A, b, 1, 2, 4, x[9] / p[CPA])  # P_ao
 
 
@@ -201,7 +195,7 @@ def heart_report(p, x, u, t, iopt, out):
     out[9] = -u[4]  # Q_out
 
 
-class ClosedLoopHeartAndPulmonary(Block):
+class ClosedLoopHeartAndPulmonary(Component):
     type_name = "closed_loop_heart_pulmonary"
     svzerod_blocks = ("ClosedLoopHeartAndPulmonary",)
     terminals = ("in", "out", "ref")

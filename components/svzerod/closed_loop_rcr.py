@@ -11,9 +11,10 @@ q_c = dV/dt; Rd a conductance from c to out.
 """
 from __future__ import annotations
 
-from hemocircuit.component import Observable, Param, State, Storage
+from hemocircuit.component import Component, Observable, Param, State, Storage, kernel_method, open_branches
+from hemocircuit.kernels.stamps import branch, conductance
 
-from ..common import Block, branch, C_UNIT, conductance, flow_observables, jit, kernel_method, open_branches, R_UNIT
+from ..common import C_UNIT, flow_observables, jit, R_UNIT
 
 
 # --- the equations: p = [Rp, C, Rd]; state [V]; local unknowns [P_in, P_out, P_ref, P_c, q_p, q_c]
@@ -42,7 +43,7 @@ def clrcr_report(p, x, u, t, iopt, out):
     out[3] = (u[3] - u[1]) / p[2]  # Q_out
 
 
-class ClosedLoopRCR(Block):
+class ClosedLoopRCR(Component):
     type_name = "closed_loop_rcr"
     svzerod_blocks = ("ClosedLoopRCR",)
     svzerod_steady_zeroed = (("C",), ("V",))  # their to_steady

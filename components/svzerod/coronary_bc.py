@@ -15,9 +15,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from hemocircuit.component import Observable, Param, State
+from hemocircuit.component import Component, Observable, Param, State, kernel_method
+from hemocircuit.kernels.stamps import branch
 
-from ..common import Block, branch, C_UNIT, jit, kernel_method, R_UNIT
+from ..common import C_UNIT, jit, R_UNIT
 
 
 # --- the equations: p = [Ra1, Ra2, Rv1, Ca, Cc, Pim, P_v] (Pim with its waveform added);
@@ -47,7 +48,7 @@ def coronary_report(p, x, u, t, iopt, out):
     out[0] = u[2]  # Q_in
 
 
-class CoronaryBC(Block):
+class CoronaryBC(Component):
     type_name = "coronary_bc"
     svzerod_blocks = ("CORONARY",)
     svzerod_steady_zeroed = (("Ca", "Cc"), ("V_a", "V_im"))  # their to_steady

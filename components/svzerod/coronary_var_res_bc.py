@@ -21,10 +21,9 @@ import math
 
 import numpy as np
 
-from hemocircuit.component import Observable, Param
+from hemocircuit.component import Observable, Param, kernel_method, periodic_breakpoints
 
-from ..common import jit, kernel_method, R_UNIT
-from .activation import periodic_breakpoints
+from ..common import jit, R_UNIT
 from .coronary_bc import CoronaryBC, coronary_balance, coronary_stamp
 
 

@@ -12,9 +12,11 @@ E (Vc - Vrest) carrying q = dVc/dt, and branch (in, out) with P_in = P_out carry
 from __future__ import annotations
 
 
-from hemocircuit.component import Option, Param
+from hemocircuit.component import Component, Option, Param, kernel_method
+from hemocircuit.elementwise import per_element
+from hemocircuit.kernels.stamps import branch
 
-from ..common import Block, branch, E_UNIT, jit, kernel_method, observe_first_state, per_element
+from ..common import E_UNIT, jit, observe_first_state
 from .activation import KINDS, Activated, act_parameters, activation
 
 
@@ -45,7 +47,7 @@ def lec_report(p, x, u, t, iopt, out):
     out[2] = u[4]  # Q_out
 
 
-class LinearElastanceChamber(Activated, Block):
+class LinearElastanceChamber(Activated, Component):
     type_name = "linear_elastance_chamber"
     svzerod_blocks = ("LinearElastanceChamber",)
     parameters = {"Emax": Param(E_UNIT, lower=0.0, doc="active elastance (added at full activation)"),

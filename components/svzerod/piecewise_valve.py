@@ -8,9 +8,10 @@ current pressures are on (the nodal Newton iteration settles on a consistent sid
 """
 from __future__ import annotations
 
-from hemocircuit.component import Observable, Param
+from hemocircuit.component import Component, Observable, Param, kernel_method
+from hemocircuit.kernels.stamps import conductance
 
-from ..common import Block, check_rmin_rmax, conductance, jit, kernel_method, R_UNIT
+from ..common import check_rmin_rmax, jit, R_UNIT
 
 
 # --- the equations: p = [Rmin, Rmax]; local unknowns [P_in, P_out]
@@ -31,7 +32,7 @@ def piecewise_valve_report(p, x, u, t, iopt, out):
     out[0] = _conductance(p, dp) * dp  # Q
 
 
-class PiecewiseValve(Block):
+class PiecewiseValve(Component):
     type_name = "piecewise_valve"
     svzerod_blocks = ("PiecewiseValve",)
     terminals = ("in", "out")

@@ -10,9 +10,10 @@ unknowns [P_node, P_ref, Q_in]: the branch row P_node - P_ref - Rp Q_in = V/C.
 """
 from __future__ import annotations
 
-from hemocircuit.component import Observable, Param, State
+from hemocircuit.component import Component, Observable, Param, State, kernel_method
+from hemocircuit.kernels.stamps import branch
 
-from ..common import Block, branch, C_UNIT, jit, kernel_method, R_UNIT
+from ..common import C_UNIT, jit, R_UNIT
 
 
 # --- the equations: p = [Rp, C, Rd, Pd] (Pd with its waveform added); state [V]; local unknowns [P_node, P_ref, Q_in]
@@ -37,7 +38,7 @@ def rcr_report(p, x, u, t, iopt, out):
     rcr_observe(p, x, iopt, out[1:])  # P_c
 
 
-class RCRBC(Block):
+class RCRBC(Component):
     type_name = "rcr_bc"
     svzerod_blocks = ("RCR",)
     svzerod_steady_zeroed = (("C",), ("V",))  # their to_steady

@@ -6,9 +6,10 @@ Q the flow from ``node`` into the block (to ``ref``, ground in imported models).
 """
 from __future__ import annotations
 
-from hemocircuit.component import Observable, Param
+from hemocircuit.component import Component, Observable, Param, kernel_method
+from hemocircuit.kernels.stamps import conductance, imposed_flow
 
-from ..common import Block, conductance, imposed_flow, jit, kernel_method, R_UNIT
+from ..common import jit, R_UNIT
 
 
 # --- the equations: p = [R, Pd] (Pd with its waveform added); local unknowns [P_node, P_ref]
@@ -24,7 +25,7 @@ def resistance_report(p, x, u, t, iopt, out):
     out[0] = (u[0] - u[1] - p[1]) / p[0]  # Q_in
 
 
-class ResistanceBC(Block):
+class ResistanceBC(Component):
     type_name = "resistance_bc"
     svzerod_blocks = ("RESISTANCE",)
     terminals = ("node", "ref")

@@ -11,18 +11,17 @@ at the iterate (dP0, Q0) with slope c = 1 - Q0 R'(dP0): c dP - R(dP0) Q = (c - 1
 R' = -(Rmax - Rmin) k / (2 cosh^2(k dP)).  This form converges where the conductance form
 Q = dP/R(dP) does not (its slope changes 1e5-fold within 1e-7 mmHg at their k = 1e4), and
 Rmin = 0 is a short; where c < 1 (reverse flow) the step uses c = 1, the fixed-point iteration
-dP = R(dP) Q, whose fixed point is the same root (the right-hand side follows c: with
--Q0 R' dP0 there, as before, it converged to R Q / (1 + Q R'), off the root by up to 40 % of dP
-at reverse flows below 1e-6 mL/s).
+dP = R(dP) Q, whose fixed point is the same root (its right-hand side is (c - 1) dP0 = 0).
 (1 + tanh(-k dP))/2 is evaluated as 1/(1 + exp(2 k dP)), exponent clipped at 700.
 """
 from __future__ import annotations
 
 import math
 
-from hemocircuit.component import Observable, Param
+from hemocircuit.component import Component, Observable, Param, kernel_method
+from hemocircuit.kernels.stamps import branch
 
-from ..common import Block, branch, check_rmin_rmax, jit, kernel_method, R_UNIT
+from ..common import check_rmin_rmax, jit, R_UNIT
 
 
 # --- the equations: p = [Rmin, Rmax, steepness]; local unknowns [P_in, P_out, Q]
@@ -53,7 +52,7 @@ def valve_tanh_report(p, x, u, t, iopt, out):
     out[1] = valve_closure(p[2], u[0] - u[1])  # status
 
 
-class ValveTanh(Block):
+class ValveTanh(Component):
     type_name = "valve_tanh"
     svzerod_blocks = ("ValveTanh",)
     terminals = ("in", "out")

@@ -1,5 +1,5 @@
-"""Kernel functions shared by element types without states or observables (resistors,
-sources): nothing to integrate, nothing to observe."""
+"""Kernel functions shared by element types without a stamp, states or observables (resistors,
+sources, a pool with no nodes): nothing to stamp, integrate or observe."""
 from .jit import njit
 
 
@@ -10,4 +10,9 @@ def no_derivs(p, x, u, t, iopt, dx):
 
 @njit(cache=True, nogil=True)
 def no_observables(p, x, iopt, out):
+    pass
+
+
+@njit(cache=True, nogil=True)
+def no_stamp(p, x, u, t, iopt, A, b):
     pass

@@ -81,7 +81,9 @@ def test_passive_alpha_and_zero_active_force(art, kuo):
 
 
 def test_lee97_phosphorylation_curves(art, kuo):
-    Ca, cG, phos = art.lee97.phosphorylation_curves(kuo)
+    from hemocircuit.reproduce.ch4_lee97 import phosphorylation_curves
+
+    Ca, cG, phos = phosphorylation_curves(kuo)
     assert phos.shape == (6, 81)
     assert np.all(np.diff(phos, axis=1) > 0)          # rises with Ca
     assert np.all(np.diff(phos, axis=0) <= 1e-15)     # cGMP lowers it

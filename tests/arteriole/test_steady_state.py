@@ -22,7 +22,7 @@ def test_steady_state_is_fixed_point(art, options, preset):
     s = art.solve_steady(P, dP, p, options)
     assert s["found"].all() and s["converged"].all()
     d = rates(art, s, P, dP, p, options)
-    scales = art.state_scales(options)
+    scales = {n: art.STATE_SCALES[n] for n in art.state_names(options)}
     assert set(d) == set(art.state_names(options))
     for name, rate in d.items():
         # |dx/dt| / scale in 1/s; the slowest rates of the model are ~1e-3 /s
