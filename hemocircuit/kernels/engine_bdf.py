@@ -117,8 +117,9 @@ def integrate_batch_bdf(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, 
         T = t_out.shape[0]
         work = make_work(lay)
         jw = make_jac_work(lay)
-        lay_ref = ref(lay)  # the tuples by reference for the right-hand sides (kernels.refs)
+        lay_ref = ref(lay)  # the tuples by reference for the right-hand sides and Jacobians (kernels.refs)
         work_ref = ref(work)
+        jw_ref = ref(jw)
         x = x0.copy()
         f = np.empty(nx)
         fp = np.empty(nx)
@@ -160,7 +161,7 @@ def integrate_batch_bdf(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, 
         if not rhs_into_at(t, x, P, lay_ref, work_ref, f):
             finish_member(out, 1, stats, mb, -3, t, 0, 0, nfev, 0)
             continue
-        nj = jacobian_into(t, x, f, P, lay, work, jw, scales, J, ft, xt, ftmp, True, local_jac)
+        nj = jacobian_into(t, x, f, P, lay_ref, work_ref, jw_ref, scales, J, ft, xt, ftmp, True, local_jac)
         if nj < 0:
             finish_member(out, 1, stats, mb, -3, t, 0, 0, nfev, 0)
             continue
@@ -255,7 +256,8 @@ def integrate_batch_bdf(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, 
                     nfev += 1
                     if not rhs_into_at(t_new, ypred, P, lay_ref, work_ref, ftmp):
                         break
-                    nj = jacobian_into(t_new, ypred, ftmp, P, lay, work, jw, scales, J, ft, xt, fp, True, local_jac)
+                    nj = jacobian_into(t_new, ypred, ftmp, P, lay_ref, work_ref, jw_ref, scales, J, ft, xt, fp, True,
+                                       local_jac)
                     if nj < 0:
                         break
                     nfev += nj
@@ -398,5 +400,6 @@ def integrate_batch_bdf(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, 
             n_equal = 0
             lu_valid = False
         finish_member(out, k_out, stats, mb, status, t, nsteps, nrej, nfev, nev)
-        keep_alive(work)  # the references' tuple lives to here (kernels.refs)
+        keep_alive(work)  # the references' tuples live to here (kernels.refs)
+        keep_alive(jw)
     return out_all, stats

@@ -1,12 +1,12 @@
 # Engine template, part 2 of 4: the state Jacobian.  NOT imported on its own (kernels.codegen
 # appends it after engine_nodal.py, whose functions it calls).
 #
-# Element-local (local_jacobian_into: each element's derivatives differenced, or taken from its
+# Element-local (local_jacobian_into_at: each element's derivatives differenced, or taken from its
 # kernel's derivs_jac, composed through the nodal solve) or whole right-hand sides differenced
 # (jacobian_into), and df/dt for non-autonomous circuits.  The step rule is FD_REL
 # (hemocircuit.derivatives): relative to max(|x|, the state's scale).
 
-#: The scratch arrays of local_jacobian_into (make_jac_work), by name.  nu = the number of
+#: The scratch arrays of local_jacobian_into_at (make_jac_work), by name.  nu = the number of
 #: local unknowns of all elements (ui), Lm / Sm the largest element's local unknowns and states.
 JacWork = namedtuple("JacWork", (
     "Pb",          # (nP,) the base parameters (effective, at x)
@@ -33,7 +33,7 @@ JacWork = namedtuple("JacWork", (
 
 @njit(cache=True, nogil=True, internal=True)
 def make_jac_work(lay):
-    """The scratch arrays of local_jacobian_into (JacWork)."""
+    """The scratch arrays of local_jacobian_into_at (JacWork)."""
     (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st, td) = lay
     Lm = 1
     for e in range(et.shape[0]):
@@ -58,12 +58,6 @@ def make_jac_work(lay):
                    Jxs=np.zeros((max(nx, 1), Sm)), Jx=np.zeros((Sm, Sm)), Ju=np.zeros((Sm, Lm)),
                    C=np.zeros((n + 1, nx + 1)), cj=np.zeros(nx + 1, dtype=np.int64),
                    MC=np.zeros((max(nx, 1), nx + 1)))
-
-
-@njit(cache=True, nogil=True, internal=True, _nrt=False)
-def local_jacobian_into(t, x, P, lay, work, jw, scales, J, xt, analytic, ft, want_ft):
-    """local_jacobian_into_at with the tuples by reference (kernels.refs)."""
-    return local_jacobian_into_at(t, x, P, ref(lay), ref(work), ref(jw), scales, J, xt, analytic, ft, want_ft)
 
 
 @njit(cache=True, nogil=True, internal=True, _nrt=False)
@@ -311,17 +305,19 @@ def compose_columns(A, piv, C, M, MC, cj, J, ft, n, nx, nm):
 # inlined (numba IR) into integrate_batch, its one caller: numba links a callee's machine code into
 # every caller and LLVM optimises it again there, so each call level costs compile time
 @njit(cache=True, nogil=True, inline="always")
-def jacobian_into(t, x, f0, P, lay, work, jw, scales, J, ft, xt, ftmp, autonomous, local):
+def jacobian_into(t, x, f0, P, lay_ref, work_ref, jw_ref, scales, J, ft, xt, ftmp, autonomous, local):
     """Jacobian J (nx, nx) and df/dt ft (nx,) at (t, x) with f0 = f(t, x): element-local
-    (local_jacobian_into; ``local`` 1: with the kernels' analytic partials where they have
-    them, 2: differences only; ft with it, local_jacobian_into's time column) when ``local`` and
+    (local_jacobian_into_at; ``local`` 1: with the kernels' analytic partials where they have
+    them, 2: differences only; ft with it, its time column) when ``local`` and
     it applies, otherwise forward differences of whole right-hand sides and ft by a forward
-    difference of one more in t (ft untouched when the circuit is autonomous).
+    difference of one more in t (ft untouched when the circuit is autonomous).  The tuples by
+    reference (kernels.refs), as the integrators hold them.
     Returns the number of right-hand-side evaluations, or -1 if one failed (singular nodal
     system)."""
     nx = x.shape[0]
     nev = 0
-    if local != 0 and local_jacobian_into(t, x, P, lay, work, jw, scales, J, xt, local == 1, ft, not autonomous) == 0:
+    if local != 0 and local_jacobian_into_at(t, x, P, lay_ref, work_ref, jw_ref, scales, J, xt, local == 1, ft,
+                                             not autonomous) == 0:
         return 0  # J and (non-autonomous) ft element-locally
     for i in range(nx):
         xt[i] = x[i]
@@ -329,7 +325,7 @@ def jacobian_into(t, x, f0, P, lay, work, jw, scales, J, ft, xt, ftmp, autonomou
         hj = FD_REL * max(abs(x[j]), scales[j])
         xt[j] = x[j] + hj
         hj = xt[j] - x[j]
-        if not rhs_into(t, xt, P, lay, work, ftmp):
+        if not rhs_into_at(t, xt, P, lay_ref, work_ref, ftmp):
             return -1
         for i in range(nx):
             J[i, j] = (ftmp[i] - f0[i]) / hj
@@ -339,7 +335,7 @@ def jacobian_into(t, x, f0, P, lay, work, jw, scales, J, ft, xt, ftmp, autonomou
         return nev
     # FD_REL seconds as represented at t (derivatives.time_step: absolute, not relative to t)
     ht = (t + FD_REL) - t
-    if not rhs_into(t + ht, x, P, lay, work, ftmp):
+    if not rhs_into_at(t + ht, x, P, lay_ref, work_ref, ftmp):
         return -1
     for i in range(nx):
         ft[i] = (ftmp[i] - f0[i]) / ht
@@ -360,5 +356,8 @@ def jacobian_parts(t, x, P, lay, scales, local, want_ft):
     rhs_into(t, x, P, lay, work, f0)
     J = np.zeros((nx, nx))
     ft = np.zeros(nx)
-    jacobian_into(t, x, f0, P, lay, work, jw, scales, J, ft, np.empty(nx), np.empty(nx), not want_ft, local)
+    jacobian_into(t, x, f0, P, ref(lay), ref(work), ref(jw), scales, J, ft, np.empty(nx), np.empty(nx), not want_ft,
+                  local)
+    keep_alive(work)  # the references' tuples live to here (kernels.refs)
+    keep_alive(jw)
     return J, ft

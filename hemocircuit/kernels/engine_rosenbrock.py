@@ -131,7 +131,7 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
         soft_kinks = tab.soft_kinks != 0
         autonomous = tab.autonomous != 0  # no waveform or time-dependent element: df/dt = 0
         land = tab.land_releases != 0  # a rejected step retried to end on a held state's release
-        local_jac = tab.local_jacobian  # element-local Jacobian (local_jacobian_into) where it applies: 1 analytic parts, 2 FD
+        local_jac = tab.local_jacobian  # element-local Jacobian (local_jacobian_into_at) where it applies: 1 analytic parts, 2 FD
         # the transformed coefficients (tableaus): a, C (ns, ns), m, m_err, c, d, reuse (ns,); H
         # (nd, ns) the dense-output rows (nd 0: cubic Hermite); K holds the stages u_s
         tab_a, tab_C, tab_m, tab_me, tab_c, tab_d = tab.a, tab.C, tab.m, tab.m_err, tab.c, tab.d
@@ -142,8 +142,9 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
         cut_max = 0.9 if ctrl == 1 else 0.5  # the largest step after a rejection, of the rejected one
         work = make_work(lay)
         jw = make_jac_work(lay)
-        lay_ref = ref(lay)  # the tuples by reference for the right-hand sides (kernels.refs)
+        lay_ref = ref(lay)  # the tuples by reference for the right-hand sides and Jacobians (kernels.refs)
         work_ref = ref(work)
+        jw_ref = ref(jw)
         x = x0.copy()
         f = np.empty(nx)
         fn = np.empty(nx)
@@ -197,7 +198,8 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
             if ib < breaks.shape[0] and breaks[ib] < t_end:
                 tb = breaks[ib]
             if age >= JAC_REUSE:
-                nj = jacobian_into(t, x, f, P, lay, work, jw, scales, J, ft, xt, ftmp, autonomous, local_jac)
+                nj = jacobian_into(t, x, f, P, lay_ref, work_ref, jw_ref, scales, J, ft, xt, ftmp, autonomous,
+                                   local_jac)
                 if nj < 0:
                     status = -3
                     break
@@ -432,5 +434,6 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
                     status = -1
                     break
         finish_member(out, k_out, stats, mb, status, t, nsteps, nrej, nfev, nev)
-        keep_alive(work)  # the references' tuple lives to here (kernels.refs)
+        keep_alive(work)  # the references' tuples live to here (kernels.refs)
+        keep_alive(jw)
     return out_all, stats

@@ -99,7 +99,7 @@ def before_integrator(system, rosenbrock=True):
     ``local_jacobian_into_at`` and scratch makers are in numba's cache (at most WAIT_S), so that
     the integrator loads them instead of compiling them a second time.
     Without this the integrator reaches the Jacobian in its own typing order (make_work,
-    prepare_static, rhs_into, local_jacobian_into) and compiled it itself whenever the helper was
+    prepare_static, rhs_into_at, local_jacobian_into_at) and compiled it itself whenever the helper was
     seconds late.  Once per engine module and process."""
     import time
 
@@ -149,7 +149,7 @@ def in_cache(dispatcher) -> bool:
 
 def helper_signatures(mod, lay, nx, n_params):
     """[(dispatcher, signature)] the helper compiles, in its order: the argument types its
-    callers (local_jacobian_into, rhs_into, integrate_batch) pass, the scratch tuples typed
+    callers (local_jacobian_into_at, rhs_into_at, integrate_batch) pass, the scratch tuples typed
     from the Python twins of make_work and make_jac_work (tested against the signatures the
     integrator's own compilation leaves)."""
     import numba

@@ -169,7 +169,7 @@ class CompiledSystem:
         # t_out, P and hmax read-only always (views: the caller's arrays keep their flags):
         # numba specialises on the flag, and a broadcast single row is read-only while B > 1
         # rows are writable copies -- whose integrator would compile again (~10 s), as would
-        # rhs_into, prepare_static and local_jacobian_into instead of the helper's
+        # rhs_into_at, prepare_static and local_jacobian_into_at instead of the helper's
         t_out = _read_only(np.broadcast_to(np.asarray(t_out, dtype=float), (B, np.shape(t_out)[-1])))
         P = _read_only(np.broadcast_to(P, (B, P.shape[-1])))
         if X0.shape[1] == 0:  # no states (e.g. every capacitor under an ideal source): nothing to integrate

@@ -244,7 +244,7 @@ def packed(name="rodas5p", jac_reuse=None, event_restart=1, soft_kinks=1, autono
     """The method as the engine reads it (see the module docstring).  ``autonomous``: the
     circuit has no waveform and no time-dependent element, so df/dt = 0 is not evaluated.
     ``local_jacobian``: the state Jacobian element by element, composed through the nodal
-    solve (engine_jacobian.local_jacobian_into) where it applies: 1 with the kernels' analytic
+    solve (engine_jacobian.local_jacobian_into_at) where it applies: 1 with the kernels' analytic
     partials where they have them (Kernel.derivs_jac), 2 by element-local differences only;
     0: one whole right-hand side differenced per state.  ``controller``: the step-size rule,
     ``"pi"``, ``"predictive"`` or ``"predictive-halving"`` (module docstring); default
