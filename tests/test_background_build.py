@@ -170,7 +170,7 @@ from hemocircuit.kernels import prebuild
 from hemocircuit.kernels.system import CompiledSystem
 c = hc.load(sys.argv[1])
 system = CompiledSystem.of(c)
-fn = system.mod.local_jacobian_into_at  # its tuples by reference (kernels.refs)
+fn = system.mod.integrate_batch
 before = prebuild.in_cache(fn)
 proc = prebuild.start(system)
 rc = proc.wait(timeout=900) if proc is not None else None
@@ -179,13 +179,13 @@ again = prebuild.start(system)  # cached now: no second helper
 t = np.linspace(0.0, 5.0, 101)
 X, st = system.integrate_batch(t, np.zeros((1, c.nx)), system.params(c), rtol=1e-8)
 out = c.outputs(t, X[0])  # 101 rows: through the compiled nodal solve, which the helper compiled too
-nf = system.mod.nodal_outputs
+nf, rf = system.mod.nodal_outputs, system.mod.release_fraction
 print(json.dumps({"before": before, "rc": rc, "after": after, "again": again is None,
-                  "loaded_not_compiled": fn.stats.cache_hits and not fn.stats.cache_misses,
-                  "outputs_loaded": nf.stats.cache_hits and not nf.stats.cache_misses,
+                  "loaded_not_compiled": [bool(f.stats.cache_hits and not f.stats.cache_misses) for f in (fn, rf, nf)],
                   # prebuild.before_integrator compiled these by signature before the integrator:
-                  # one specialisation each means the integrator used those, not new ones
-                  "specialisations": [len(system.mod.rhs_into_at.overloads), len(system.mod.prepare_static.overloads)],
+                  # one specialisation each means the integrator called those, not new ones
+                  "specialisations": [len(getattr(system.mod, name).overloads)
+                                      for name in ("prepare_static", "rhs_into_at", "local_jacobian_into_at")],
                   "V": X[0, :, c.state_names.index("C1.V")].tolist(), "Q": out["Q(R1)"].tolist(),
                   "status": float(st[0, 0])}))
 """
@@ -204,18 +204,18 @@ def _run_in_fresh_cache(script, tmp_path):
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
-def test_prebuild_helper_compiles_the_jacobian_for_the_integrator(tmp_path):
-    """kernels.prebuild in a fresh cache: the helper process compiles local_jacobian_into_at (and
-    the outputs' nodal_outputs) into numba's cache with the callers' argument types, so the
-    integrator and Circuit.outputs load them instead of compiling them (numba's cache hit, no
-    miss); this process compiles the nodal solve and right-hand side by signature first
-    (before_integrator), with the types the integrator calls them with; no second helper
-    starts once it is cached, and the run is right (R-C charging,
-    V = C P (1 - exp(-t/RC)), Q = P/R exp(-t/RC))."""
+def test_prebuild_helper_compiles_the_integrator(tmp_path):
+    """kernels.prebuild in a fresh cache: the helper process compiles the Rosenbrock integrator
+    (for a single run's argument types, its callees as addresses), release_fraction and the
+    outputs' nodal_outputs into numba's cache, so this process loads them instead of compiling
+    them (numba's cache hit, no miss); this process compiles prepare_static, rhs_into_at and
+    local_jacobian_into_at by the signatures the integrator calls them with (one
+    specialisation each); no second helper starts once it is cached, and the run is right (R-C
+    charging, V = C P (1 - exp(-t/RC)), Q = P/R exp(-t/RC))."""
     r = _run_in_fresh_cache(_PREBUILD_SCRIPT, tmp_path)
     assert r["before"] is False and r["rc"] == 0 and r["after"] is True and r["again"] is True
-    assert r["loaded_not_compiled"] and r["outputs_loaded"], r
-    assert r["specialisations"] == [1, 1], r
+    assert r["loaded_not_compiled"] == [True, True, True], r
+    assert r["specialisations"] == [1, 1, 1], r
     t = np.linspace(0.0, 5.0, 101)
     assert r["status"] == 0
     assert np.max(np.abs(np.array(r["V"]) - 0.5 * 80.0 * (1 - np.exp(-t)))) < 2e-7 * 40.0
@@ -233,7 +233,8 @@ c = hc.load(sys.argv[1])
 system = CompiledSystem.of(c)
 mod = system.mod
 # a stand-in helper that compiles nothing and ends after 1 s: before_integrator must compile the
-# nodal solve and right-hand side here, then wait for it (the Jacobian never appears in the cache)
+# nodal solve, the right-hand side and the Jacobian here, then wait for it (the integrator never
+# appears in the cache)
 proc = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(1.0)"])
 prebuild._pending[mod.__name__] = proc
 prebuild._decided.add(mod.__name__)  # and no real helper for the integrator below: it compiles everything here
@@ -244,10 +245,14 @@ compiled_here = [len(mod.prepare_static.overloads), len(mod.rhs_into_at.overload
 prebuild.before_integrator(system)  # once per module: returns at once
 t = np.linspace(0.0, 5.0, 101)
 X, st = system.integrate_batch(t, np.zeros((1, c.nx)), system.params(c), rtol=1e-8)
-# the integrator compiled the helper's part itself here: the signatures the helper compiles by
-# are the ones its callers used, so the helper's work is loaded, not done again
+# the run compiled the helper's part itself here: the signatures the helper compiles by are the
+# ones the run used, so the helper's work is loaded, not done again
+from hemocircuit.kernels import pointers
+types, sigs = pointers.single_run(mod, system.lay, c.nx, system.layout.n_params, system.scales, system.lim_i,
+                                  system.lim_b, system.lim_r)
 helper_sigs = [sig in fn.signatures for fn, sig in prebuild.helper_signatures(mod, system.lay, c.nx,
                                                                               system.layout.n_params)]
+helper_sigs += [types in mod.integrate_batch.signatures, sigs[3].args in mod.release_fraction.signatures]
 print(json.dumps({"compiled_here": compiled_here, "rc_at_return": rc_at_return, "helper_sigs": helper_sigs,
                   "finish_member_sigs": len(mod.finish_member.signatures),
                   "after": [len(mod.prepare_static.overloads), len(mod.rhs_into_at.overloads),
@@ -256,20 +261,20 @@ print(json.dumps({"compiled_here": compiled_here, "rc_at_return": rc_at_return, 
 """
 
 
-def test_before_integrator_compiles_the_nodal_solve_here_and_waits_for_the_helper(tmp_path):
+def test_before_integrator_compiles_its_part_here_and_waits_for_the_helper(tmp_path):
     """kernels.prebuild.before_integrator, with a stand-in helper that compiles nothing and
-    ends after 1 s: it compiles prepare_static, rhs_into_at and the Rosenbrock integrator's
-    release_fraction in this process (one specialisation each, which the integrator then uses:
-    still one each after the run), not
-    the local Jacobian (the helper's part), and returns only once the helper has ended, since
-    the Jacobian never appears in the cache; the integrator then compiles the helper's part
-    itself, with the signatures the helper compiles by (prebuild.helper_signatures: else
-    the helper's work would be done twice); the run is right (V = C P (1 - exp(-t/RC)))."""
+    ends after 1 s: it compiles prepare_static, rhs_into_at and local_jacobian_into_at in this
+    process (one specialisation each, which the integrator then calls: still one each after the
+    run), not release_fraction (the helper's part), and returns only once the helper has ended,
+    since the integrator never appears in the cache; the run then compiles the helper's part
+    itself, with the signatures the helper compiles by (prebuild.helper_signatures and
+    pointers.single_run: else the helper's work would be done twice); the run is right
+    (V = C P (1 - exp(-t/RC)))."""
     r = _run_in_fresh_cache(_BEFORE_SCRIPT, tmp_path)
-    assert r["compiled_here"] == [1, 1, 1, 0], r
-    # elem_derivs_jac, elem_derivs, local_jacobian_into_at, make_jac_work, hermite_root, hermite,
-    # stage_dense, finish_member; and one finish_member for every call (no literal specialisation)
-    assert r["helper_sigs"] == [True] * 8 and r["finish_member_sigs"] == 1, r
+    assert r["compiled_here"] == [1, 1, 0, 1], r
+    # elem_derivs_jac, elem_derivs, the integrator, release_fraction; and one finish_member for
+    # every call (no literal specialisation)
+    assert r["helper_sigs"] == [True] * 4 and r["finish_member_sigs"] == 1, r
     assert r["rc_at_return"] == 0, r  # it returned after the helper ended, not before
     assert r["after"] == [1, 1, 1] and r["status"] == 0, r
     t = np.linspace(0.0, 5.0, 101)

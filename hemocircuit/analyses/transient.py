@@ -188,7 +188,7 @@ def _say_compiling():
     if not _told:
         _told.append(True)
         from ..kernels.codegen import cache_dir
-        print(f"hemocircuit: compiling the engine for these component types (their first run; about 20 s on 2 cores, "
+        print(f"hemocircuit: compiling the engine for these component types (their first run; about 15 s on 2 cores, "
               f"cached in {cache_dir()} for every later run)", file=sys.stderr, flush=True)
 
 

@@ -94,12 +94,14 @@ def _header(kernels) -> str:
         if ker.derivs_jac is not None:
             mod, name = _ref(ker.derivs_jac)
             lines.append(f"from {mod} import {name} as _derivs_jac{k}")
-    lines += ["", "", "def njit(internal=False, **kw):",
+    lines += ["", "", "def njit(internal=False, pointer=False, **kw):",
               "    # numpy error model: a division by zero gives inf/nan, never raises.  internal: called",
               "    # only from compiled code, so numba builds no Python or C entry wrapper for it",
-              "    # (unboxing the layout and work tuples is a large part of each function's compile time)",
-              "    if internal:",
-              "        kw.update(no_cpython_wrapper=True, no_cfunc_wrapper=True)",
+              "    # (unboxing the layout and work tuples is a large part of each function's compile time);",
+              "    # pointer: also called by the Rosenbrock integrator through its address (kernels.pointers):",
+              "    # the C entry wrapper is that address",
+              "    if internal or pointer:",
+              "        kw.update(no_cpython_wrapper=True, no_cfunc_wrapper=not pointer)",
               "    return _njit(error_model='numpy', **kw)", ""]
     sigs = {"stamp": "p, x, u, t, iopt, A, b", "derivs": "p, x, u, t, iopt, dx", "observe": "p, x, iopt, out"}
     for role, args in sigs.items():

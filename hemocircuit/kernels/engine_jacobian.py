@@ -60,7 +60,7 @@ def make_jac_work(lay):
                    MC=np.zeros((max(nx, 1), nx + 1)))
 
 
-@njit(cache=True, nogil=True, internal=True, _nrt=False)
+@njit(cache=True, nogil=True, pointer=True, _nrt=False)
 def local_jacobian_into_at(t, x, P, lay_ref, work_ref, jw_ref, scales, J, xt, analytic, ft, want_ft):
     """State Jacobian J (nx, nx) at (t, x) from element-local differences composed through the
     nodal solve (as svZeroDSolver composes its blocks' derivatives), without a whole
@@ -305,19 +305,19 @@ def compose_columns(A, piv, C, M, MC, cj, J, ft, n, nx, nm):
 # inlined (numba IR) into integrate_batch, its one caller: numba links a callee's machine code into
 # every caller and LLVM optimises it again there, so each call level costs compile time
 @njit(cache=True, nogil=True, inline="always")
-def jacobian_into(t, x, f0, P, lay_ref, work_ref, jw_ref, scales, J, ft, xt, ftmp, autonomous, local):
+def jacobian_into(t, x, f0, P, lay_ref, work_ref, jw_ref, scales, J, ft, xt, ftmp, autonomous, local, rhs_fn, jac_fn):
     """Jacobian J (nx, nx) and df/dt ft (nx,) at (t, x) with f0 = f(t, x): element-local
     (local_jacobian_into_at; ``local`` 1: with the kernels' analytic partials where they have
     them, 2: differences only; ft with it, its time column) when ``local`` and
     it applies, otherwise forward differences of whole right-hand sides and ft by a forward
     difference of one more in t (ft untouched when the circuit is autonomous).  The tuples by
-    reference (kernels.refs), as the integrators hold them.
+    reference (kernels.refs), as the integrators hold them; ``rhs_fn``, ``jac_fn``: rhs_into_at and
+    local_jacobian_into_at, or their addresses (the Rosenbrock integrator's, kernels.pointers).
     Returns the number of right-hand-side evaluations, or -1 if one failed (singular nodal
     system)."""
     nx = x.shape[0]
     nev = 0
-    if local != 0 and local_jacobian_into_at(t, x, P, lay_ref, work_ref, jw_ref, scales, J, xt, local == 1, ft,
-                                             not autonomous) == 0:
+    if local != 0 and jac_fn(t, x, P, lay_ref, work_ref, jw_ref, scales, J, xt, local == 1, ft, not autonomous) == 0:
         return 0  # J and (non-autonomous) ft element-locally
     for i in range(nx):
         xt[i] = x[i]
@@ -325,7 +325,7 @@ def jacobian_into(t, x, f0, P, lay_ref, work_ref, jw_ref, scales, J, ft, xt, ftm
         hj = FD_REL * max(abs(x[j]), scales[j])
         xt[j] = x[j] + hj
         hj = xt[j] - x[j]
-        if not rhs_into_at(t, xt, P, lay_ref, work_ref, ftmp):
+        if not rhs_fn(t, xt, P, lay_ref, work_ref, ftmp):
             return -1
         for i in range(nx):
             J[i, j] = (ftmp[i] - f0[i]) / hj
@@ -335,7 +335,7 @@ def jacobian_into(t, x, f0, P, lay_ref, work_ref, jw_ref, scales, J, ft, xt, ftm
         return nev
     # FD_REL seconds as represented at t (derivatives.time_step: absolute, not relative to t)
     ht = (t + FD_REL) - t
-    if not rhs_into_at(t + ht, x, P, lay_ref, work_ref, ftmp):
+    if not rhs_fn(t + ht, x, P, lay_ref, work_ref, ftmp):
         return -1
     for i in range(nx):
         ft[i] = (ftmp[i] - f0[i]) / ht
@@ -357,7 +357,7 @@ def jacobian_parts(t, x, P, lay, scales, local, want_ft):
     J = np.zeros((nx, nx))
     ft = np.zeros(nx)
     jacobian_into(t, x, f0, P, ref(lay), ref(work), ref(jw), scales, J, ft, np.empty(nx), np.empty(nx), not want_ft,
-                  local)
+                  local, rhs_into_at, local_jacobian_into_at)
     keep_alive(work)  # the references' tuples live to here (kernels.refs)
     keep_alive(jw)
     return J, ft

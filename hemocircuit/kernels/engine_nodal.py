@@ -184,7 +184,7 @@ def stamp_element(e, t, x, Pe, lay_ref, work_ref):
     elem_stamp(et[e], pl, xl, ul, t, il, Al, bl)
 
 
-@njit(cache=True, nogil=True, internal=True, _nrt=False)
+@njit(cache=True, nogil=True, pointer=True, _nrt=False)
 def prepare_static(t, x, P, lay, work):
     """A0 = the constant matrix stamps, b0 = the static elements' right-hand sides, for the
     parameters P (call again whenever P changes)."""
@@ -437,7 +437,7 @@ def rhs_into(t, x, P, lay, work, dx):
     return rhs_into_at(t, x, P, ref(lay), ref(work), dx)
 
 
-@njit(cache=True, nogil=True, internal=True, _nrt=False)
+@njit(cache=True, nogil=True, pointer=True, _nrt=False)
 def rhs_into_at(t, x, P, lay_ref, work_ref, dx):
     """dx/dt for states x at time t into dx.  Returns False on a singular nodal system
     (dx is then NaN).  An empty dx: the nodal solve only (nodal_outputs_into: the outputs need

@@ -27,7 +27,7 @@ def any_released(held, lim_i, fv):
     return False
 
 
-@njit(cache=True, nogil=True, internal=True, _nrt=False)
+@njit(cache=True, nogil=True, pointer=True, _nrt=False)
 def release_fraction(t, hh, tlim, x, f, xn, P, lay, work, lim_i, lim_b, lim_r, atol, held, xe, fe, xh, fh):
     """Where in the step t -> t + hh a state held on its hard limit at t is released: the
     earliest fraction of the step at which one of them, kept on its bound, has a positive
@@ -84,7 +84,7 @@ def release_fraction(t, hh, tlim, x, f, xn, P, lay, work, lim_i, lim_b, lim_r, a
 
 @njit(cache=True, nogil=True)
 def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, breaks_all, bjump_all, rtol, atol, h0,
-                    hmax_all, max_steps, tab):
+                    hmax_all, max_steps, tab, prepare_fn, rhs_fn, jac_fn, release_fn):
     """Integrate each member m from t_out[m, 0] to t_out[m, -1], writing its states at every t_out[m] into
     out[m] (t_out (B, T), X0 (B, nx), P (B, nP), hmax (B,), breaks and bjump (B, K): each member's
     breakpoints, padded with +inf) -> (out (B, T, nx), stats (B, 6): status, t reached, steps, rejected
@@ -104,6 +104,10 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
     f are continuous, the step ends but f(t-) serves as f(t+) (one evaluation less per kink);
     where f does not jump the Jacobian is kept (tab.soft_kinks = 1).
     ``tab``: the method and its options (hemocircuit.kernels.tableaus.packed).
+    ``prepare_fn``, ``rhs_fn``, ``jac_fn``, ``release_fn``: the addresses of prepare_static,
+    rhs_into_at, local_jacobian_into_at and release_fraction (kernels.pointers), called through
+    them: compiling the integrator needs their types only, not their code, so a first run
+    compiles it in its helper process while this one compiles them (kernels.prebuild).
     Its stats row (finish_member): (status, t reached, steps, rejected steps, f evaluations,
     limit events), rows not reached NaN; status 0 done, -1 step size too small, -2 step limit, -3 non-finite state or singular system.
 
@@ -175,8 +179,8 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
         nrej = 0
         nev = 0
         status = 0
-        prepare_static(t, x, P, lay, work)
-        if not rhs_into_at(t, x, P, lay_ref, work_ref, f):
+        prepare_fn(t, x, P, lay, work)
+        if not rhs_fn(t, x, P, lay_ref, work_ref, f):
             # no step (the loop below is skipped), and the one finish_member call at the end:
             # a call with constants here would compile a second specialisation of it (numba
             # types the constants as literals)
@@ -199,7 +203,7 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
                 tb = breaks[ib]
             if age >= JAC_REUSE:
                 nj = jacobian_into(t, x, f, P, lay_ref, work_ref, jw_ref, scales, J, ft, xt, ftmp, autonomous,
-                                   local_jac)
+                                   local_jac, rhs_fn, jac_fn)
                 if nj < 0:
                     status = -3
                     break
@@ -217,7 +221,7 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
                     if tb < t_end:
                         ib += 1
                     nfev += 1
-                    if not rhs_into_at(t, x, P, lay_ref, work_ref, f):
+                    if not rhs_fn(t, x, P, lay_ref, work_ref, f):
                         status = -3
                         break
                     age = JAC_REUSE
@@ -255,7 +259,7 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
                         fn[i] = f[i]
                 elif tab_reuse[s] == 0.0:  # else: same point as stage s-1, fn holds its f
                     nfev += 1
-                    if not rhs_into_at(min(t + tab_c[s] * hh, tlim), xs, P, lay_ref, work_ref, fn):
+                    if not rhs_fn(min(t + tab_c[s] * hh, tlim), xs, P, lay_ref, work_ref, fn):
                         good = False
                         break
                 # W u_s = gamma (h f + sum_j C_sj u_j + h^2 d_s f_t): no product with J (tableaus)
@@ -296,7 +300,7 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
                     fac = min(fac, 1.0)
                 tn = tb if at_break else t + hh
                 nfev += 1
-                ok = rhs_into_at(min(tn, tlim), xn, P, lay_ref, work_ref, fn)  # left limit at a breakpoint
+                ok = rhs_fn(min(tn, tlim), xn, P, lay_ref, work_ref, fn)  # left limit at a breakpoint
                 # hard limits: end the step at the earliest crossing
                 s_hit = 2.0
                 k_hit = -1
@@ -332,12 +336,12 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
                     tn = t + hh
                     at_break = False
                     nfev += 1
-                    ok = rhs_into_at(tn, xn, P, lay_ref, work_ref, fn)
+                    ok = rhs_fn(tn, xn, P, lay_ref, work_ref, fn)
                     age = JAC_REUSE
                     nev += 1
                 elif held:
                     nfev += 1
-                    ok = rhs_into_at(min(tn, tlim), xn, P, lay_ref, work_ref, fn)
+                    ok = rhs_fn(min(tn, tlim), xn, P, lay_ref, work_ref, fn)
                 if not ok:
                     status = -3
                     break
@@ -379,7 +383,7 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
                 elif at_break and tb < t_end:  # the source may jump here: continue from its right limit
                     ib += 1
                     nfev += 1
-                    if not rhs_into_at(t, x, P, lay_ref, work_ref, fr):
+                    if not rhs_fn(t, x, P, lay_ref, work_ref, fr):
                         status = -3
                         break
                     jump = not soft_kinks
@@ -409,8 +413,8 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
                 retry = landed
                 landed = False
                 if land and not retry and np.isfinite(enorm) and lim_i.shape[0] > 0:
-                    s_rel, nf = release_fraction(t, hh, tlim, x, f, xn, P, lay, work, lim_i, lim_b, lim_r, atol,
-                                                 held_now, xe, fe, xh, fr)
+                    s_rel, nf = release_fn(t, hh, tlim, x, f, xn, P, lay, work, lim_i, lim_b, lim_r, atol,
+                                           held_now, xe, fe, xh, fr)
                     nfev += nf
                 if s_rel < RELEASE_LAND_BELOW:
                     # retry ending just past the release (no shrink rule, and growth stays

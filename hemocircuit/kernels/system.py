@@ -9,7 +9,7 @@ import numpy as np
 
 from .codegen import engine_module
 from .layout import ENGINE_TYPES_VAR, build_layout, param_matrix
-from . import prebuild, runs, tableaus
+from . import pointers, prebuild, runs, tableaus
 
 STATUS = {0: "done", -1: "step size too small", -2: "step limit reached",
           -3: "non-finite state or singular nodal system"}
@@ -208,10 +208,13 @@ class CompiledSystem:
             return self.mod.integrate_batch_bdf(t_out, X0, P, lay, self.scales, self.lim_i, self.lim_b,
                                                 self.lim_r, brk, float(rtol), atol_v, float(h0), hmax,
                                                 int(max_steps), int(tab_options.get("local_jacobian", 1)))
+        sigs = pointers.signatures(self.mod, lay, X0.shape[1], P, self.scales, self.lim_i, self.lim_b, self.lim_r,
+                                   atol_v)
         return self.mod.integrate_batch(t_out, X0, P, lay, self.scales, self.lim_i, self.lim_b, self.lim_r,
                                         brk, jump, float(rtol), atol_v, float(h0),
                                         hmax, int(max_steps),
-                                        tableaus.packed(method, **{"autonomous": int(autonomous), **tab_options}))
+                                        tableaus.packed(method, **{"autonomous": int(autonomous), **tab_options}),
+                                        *pointers.addresses(self.mod, sigs))
 
 
 def _read_only(a):
