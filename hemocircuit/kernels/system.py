@@ -32,6 +32,7 @@ class CompiledSystem:
         self.lim_b = np.array([b for _, b, _ in limits], dtype=float)
         self.lim_r = np.array([-1 if r is None else r for _, _, r in limits], dtype=np.int64)
         self._lays = {}  # lay_for's layouts, by which time switches are off
+        self._addresses = {}  # id(lay) -> [lay, the Rosenbrock integrator's addresses, its entry]
 
     @classmethod
     def of(cls, circuit) -> "CompiledSystem | None":
@@ -208,13 +209,33 @@ class CompiledSystem:
             return self.mod.integrate_batch_bdf(t_out, X0, P, lay, self.scales, self.lim_i, self.lim_b,
                                                 self.lim_r, brk, float(rtol), atol_v, float(h0), hmax,
                                                 int(max_steps), int(tab_options.get("local_jacobian", 1)))
-        sigs = pointers.signatures(self.mod, lay, X0.shape[1], P, self.scales, self.lim_i, self.lim_b, self.lim_r,
-                                   atol_v)
-        return self.mod.integrate_batch(t_out, X0, P, lay, self.scales, self.lim_i, self.lim_b, self.lim_r,
-                                        brk, jump, float(rtol), atol_v, float(h0),
-                                        hmax, int(max_steps),
-                                        tableaus.packed(method, **{"autonomous": int(autonomous), **tab_options}),
-                                        *pointers.addresses(self.mod, sigs))
+        found = self._addresses.get(id(lay))
+        if found is None:  # once per layout: the signatures cost ~0.8 ms, a short run's time
+            sigs = pointers.signatures(self.mod, lay, self.scales.size, P, self.scales, self.lim_i, self.lim_b,
+                                       self.lim_r, atol_v)
+            found = self._addresses[id(lay)] = [lay, pointers.addresses(self.mod, sigs), None]  # lay kept: its id
+        args = (t_out, X0, P, lay, self.scales, self.lim_i, self.lim_b, self.lim_r, brk, jump, float(rtol), atol_v,
+                float(h0), hmax, int(max_steps),
+                tableaus.packed(method, **{"autonomous": int(autonomous), **tab_options}), *found[1])
+        if found[2] is not None:
+            return found[2](*args)
+        out = self.mod.integrate_batch(*args)
+        found[2] = _entry_point(self.mod.integrate_batch, args)
+        return out
+
+
+def _entry_point(dispatcher, args):
+    """The compiled entry of ``dispatcher`` for these arguments' types, called directly by the
+    next calls with the same types (integrate_batch's: each always the same type, see above):
+    numba's dispatch types every argument on every call, and the integrator's four addresses
+    (their signatures hold the layout's type) made that ~0.2 ms a call.  None where numba keeps
+    no such entry."""
+    import numba
+
+    try:
+        return dispatcher.overloads[tuple(numba.typeof(a) for a in args)].entry_point
+    except (AttributeError, KeyError, TypeError, ValueError):
+        return None
 
 
 def _read_only(a):
