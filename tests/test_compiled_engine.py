@@ -102,6 +102,30 @@ def test_rc_step_closed_form(tmp_path):
     assert np.max(np.abs(res["V(C1)"] - expect)) < 2e-7 * 40.0  # rtol 1e-8, plus dense output
 
 
+def test_integrator_called_through_its_entry_reads_every_atol_as_float64():
+    """After its first call the Rosenbrock integrator's compiled entry is called directly
+    (numba's dispatch skipped: kernels.system._entry_point), and that entry reads an array as
+    the type it was compiled for.  So integrate_batch hands it atol as a float64 vector
+    whatever the caller gives: an int array, a float32 array and a scalar give the float64
+    run, and R-C charging stays right, V = C P (1 - exp(-t/RC))."""
+    c = hc.load(os.path.join(TEST_NETLISTS, "base_rc.yaml"))  # R = 2 mmHg s/mL, C = 0.5 mL/mmHg
+    system = CompiledSystem.of(c)
+    t, x0, P = np.linspace(0.0, 5.0, 51), np.zeros((1, c.nx)), system.params(c)
+    ref, _ = system.integrate_batch(t, x0, P, rtol=1e-8, atol=np.full(c.nx, 2.0 ** -20))
+    assert system._addresses and all(entry is not None for _, _, entry in system._addresses.values())
+    for atol in (np.full(c.nx, 2.0 ** -20, dtype=np.float32), 2.0 ** -20):
+        X, st = system.integrate_batch(t, x0, P, rtol=1e-8, atol=atol)
+        assert st[0, 0] == 0
+        np.testing.assert_array_equal(X, ref)
+    X, _ = system.integrate_batch(t, x0, P, rtol=1e-8, atol=np.ones(c.nx, dtype=np.int64))  # a loose atol
+    V = X[0, :, c.state_names.index("C1.V")]
+    assert np.max(np.abs(ref[0, :, c.state_names.index("C1.V")] - 0.5 * 80.0 * (1 - np.exp(-t)))) < 2e-7 * 40.0
+    assert np.max(np.abs(V - 0.5 * 80.0 * (1 - np.exp(-t)))) < 0.5  # int atol read as 1.0, not as bits
+    # a (1, nx) atol is refused, not read by the entry as a vector of one element
+    with pytest.raises(ValueError):
+        system.integrate_batch(t, x0, P, rtol=1e-8, atol=np.full((1, c.nx), 2.0 ** -20))
+
+
 def test_compiled_matches_scipy_with_protocol_and_waveform():
     """A step protocol on the inertia variant (inductor following the arteriole's radius
     through an expression): both engines agree within their tolerances."""

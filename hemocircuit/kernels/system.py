@@ -177,7 +177,10 @@ class CompiledSystem:
             stats = np.zeros((B, len(runs.STATS)))
             stats[:, runs.STATS.index("t")] = t_out[:, -1]
             return np.zeros((B, t_out.shape[1], 0)), stats
-        atol_v = (rtol * 1e-3 if atol is None else atol) * self.scales
+        # a float64 vector always: after its first call the integrator's compiled entry is called
+        # directly (_integrate), and numba's entry reads any array as the type it was compiled for
+        atol_v = np.ascontiguousarray(np.broadcast_to((rtol * 1e-3 if atol is None else atol) * self.scales,
+                                                      self.scales.shape), dtype=float)
         hmax = _read_only(np.broadcast_to(np.asarray(hmax, dtype=float), (B,)))
         method = method or tableaus.DEFAULT
         brk, jump = member_breaks(B, breaks, kinks)
@@ -226,7 +229,8 @@ class CompiledSystem:
 
 def _entry_point(dispatcher, args):
     """The compiled entry of ``dispatcher`` for these arguments' types, called directly by the
-    next calls with the same types (integrate_batch's: each always the same type, see above):
+    next calls with the same types (integrate_batch's: each always the same type, see above;
+    the entry does not check them, it reads an array as the type it was compiled for):
     numba's dispatch types every argument on every call, and the integrator's four addresses
     (their signatures hold the layout's type) made that ~0.2 ms a call.  None where numba keeps
     no such entry."""
