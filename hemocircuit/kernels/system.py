@@ -177,10 +177,11 @@ class CompiledSystem:
             stats = np.zeros((B, len(runs.STATS)))
             stats[:, runs.STATS.index("t")] = t_out[:, -1]
             return np.zeros((B, t_out.shape[1], 0)), stats
-        # a float64 vector always: after its first call the integrator's compiled entry is called
-        # directly (_integrate), and numba's entry reads any array as the type it was compiled for
-        atol_v = np.ascontiguousarray(np.broadcast_to((rtol * 1e-3 if atol is None else atol) * self.scales,
-                                                      self.scales.shape), dtype=float)
+        # a writable float64 vector always (a copy: the type pointers.single_run gives the helper):
+        # after its first call the integrator's compiled entry is called directly (_integrate), and
+        # numba's entry reads any array as the type it was compiled for
+        atol_v = np.array(np.broadcast_to((rtol * 1e-3 if atol is None else atol) * self.scales, self.scales.shape),
+                          dtype=float)
         hmax = _read_only(np.broadcast_to(np.asarray(hmax, dtype=float), (B,)))
         method = method or tableaus.DEFAULT
         brk, jump = member_breaks(B, breaks, kinks)
