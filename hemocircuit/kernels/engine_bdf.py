@@ -246,8 +246,8 @@ def integrate_batch_bdf(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, 
                             W[i, i] += 1.0
                         lu_valid = lu_factor(W, piv, nx)
                     if lu_valid:
-                        n_iter = bdf_newton(t_new, ypred, c, psi, W, piv, scale, newton_tol, P, lay_ref, work_ref, ynew, d,
-                                            fp, dy)
+                        n_iter = bdf_newton(t_new, ypred, c, psi, W, piv, scale, newton_tol, P, lay_ref, work_ref,
+                                            ynew, d, fp, dy)
                         nfev += abs(n_iter)
                         if n_iter > 0:
                             break

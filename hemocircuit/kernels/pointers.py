@@ -20,8 +20,6 @@ import numpy as np
 #: the functions the integrator calls through addresses, in its argument order
 NAMES = ("prepare_static", "rhs_into_at", "local_jacobian_into_at", "release_fraction")
 
-_addresses: dict = {}
-
 
 def signatures(mod, lay, nx, P_all, scales, lim_i, lim_b, lim_r, atol) -> tuple:
     """The numba signatures of the NAMES functions as ``integrate_batch`` calls them, for its
@@ -57,12 +55,8 @@ def function_types(sigs) -> tuple:
 
 def addresses(mod, sigs) -> tuple:
     """The address of each NAMES function of engine module ``mod`` for these signatures (each
-    compiled here, or loaded from numba's cache), kept per module and signatures."""
-    key = (mod.__name__, sigs)
-    found = _addresses.get(key)
-    if found is None:
-        found = _addresses[key] = tuple(address(getattr(mod, name), sig) for name, sig in zip(NAMES, sigs))
-    return found
+    compiled here, or loaded from numba's cache); CompiledSystem keeps them per layout."""
+    return tuple(address(getattr(mod, name), sig) for name, sig in zip(NAMES, sigs))
 
 
 _Address = None
