@@ -235,6 +235,26 @@ def test_payne06_steady_state_is_a_fixed_point():
     assert f2[0] < -0.04
 
 
+
+def test_steady_state_is_the_operating_points_states_and_fails_as_it_does():
+    """analyses.op.steady_state (the states only, for a run's start): the fixed point of
+    payne06, equal to the operating point's states, f(x) = 0; a member without an operating
+    point (the log compliance's P0 = 1e300 mmHg) raises the same SolverError, naming it."""
+    from hemocircuit.analyses.op import steady_state
+    from hemocircuit.errors import SolverError
+
+    c = hc.load(str(PAYNE06))
+    x = steady_state(c)
+    assert x.shape == (c.nx,)
+    assert np.array_equal(x, c.operating_point().x)
+    assert np.max(np.abs(c.rhs(0.0, x))) <= 1e-9 * 3.32
+    bad = c.batch(2).with_values({"Cv.P0": np.array([-2.25, 1e300])})
+    with pytest.raises(SolverError, match=r"no operating point found.* in batch member 1 \(1 of 2 members failed: 1\)"):
+        steady_state(bad)
+    with pytest.raises(SolverError, match=r"in batch member 1 \(1 of 2"):
+        bad.operating_point()
+
+
 # ------------------------------------------------------------- mass conservation ----------
 MASS = """
 name: mass-conservation

@@ -137,16 +137,16 @@ def case_start(model, mean_circuit):
     """How the runner starts a case: 'initial' (their initial_condition: closed loops and
     steady_initial false), 'their-steady' (their procedure, for a case that keeps its start)
     or 'operating-point' (ours, the states their initial condition sets overridden)."""
-    from ..analyses.op import operating_point
+    from ..analyses.op import steady_state
 
     if model.initial and (model.closed or not model.sim.get("steady_initial", True)):
         return "initial"
-    if keeps_its_start(model, mean_circuit, operating_point(mean_circuit).x):
+    if keeps_its_start(model, mean_circuit, steady_state(mean_circuit)):
         return "their-steady"
     return "operating-point"
 
 
-def simulate_case(model, rtol=None, timed_runs=1, atol=None, cfg=None):
+def simulate_case(model, rtol=None, timed_runs=1, atol=None, cfg=None, between=None):
     """Our run with their semantics: (result, mask of the rows they write, those rows' times
     in their convention, times (timed_runs, 2): wall and CPU time of each in-process solve [s]:
     the start (operating point, or their steady_initial procedure for a case that keeps its
@@ -161,10 +161,13 @@ def simulate_case(model, rtol=None, timed_runs=1, atol=None, cfg=None):
     on the last two cycles), and with ``output_all_cycles`` the rows of those extra cycles are
     written as theirs are: times i dt, i = 1 .. N-1, in each (their extra-cycle loop restarts
     its step counter), so the result may hold repeated times; compare matches such rows by
-    position."""
+    position.
+
+    ``between``: called (untimed) after each timed run: a benchmark's run of another solver
+    in the same rounds, so that a host whose speed drifts slows both alike."""
     import tempfile
 
-    from ..analyses.op import operating_point
+    from ..analyses.op import steady_state
     from ..analyses.transient import simulate
     from ..circuit import load
     from ..ic import apply_ic
@@ -200,7 +203,7 @@ def simulate_case(model, rtol=None, timed_runs=1, atol=None, cfg=None):
         elif start == "their-steady":
             x0 = their_steady_initial(model, cm)
         else:  # our operating point for their steady_initial, with the states they set
-            x0 = apply_ic(c, operating_point(cm).x, model.initial_given)
+            x0 = apply_ic(c, steady_state(cm), model.initial_given)
         if c.nx == 0:  # no states: the outputs are algebraic functions of time
             t = np.arange(0, (N - 1) * ncyc + 1) * dt
             res = c.outputs(t, np.zeros((t.size, 0)))
@@ -214,6 +217,8 @@ def simulate_case(model, rtol=None, timed_runs=1, atol=None, cfg=None):
             if extra_rule:
                 res = _with_their_extra_cycles(model, cfg, c, res, rtol, atol)
         times.append((time.perf_counter() - t0, time.process_time() - c0))
+        if between is not None:
+            between()
     if isinstance(res, dict) and "_their_times" in res:  # extra cycles: their row times
         t_out = res.pop("_their_times")
         return res, np.ones(t_out.size, bool), t_out, np.array(times)

@@ -283,7 +283,7 @@ def start_state(model, circuit, start="operating-point", sets=None, mean_circuit
     runner) or 'their-steady' (their steady_initial procedure,
     :mod:`hemocircuit.svzerod.steady_initial`).  A closed loop, or steady_initial false,
     starts from their initial_condition (0 where not given), as theirs."""
-    from ..analyses.op import operating_point
+    from ..analyses.op import steady_state
     from ..ic import apply_ic
 
     if start not in ("operating-point", "their-steady"):
@@ -297,7 +297,7 @@ def start_state(model, circuit, start="operating-point", sets=None, mean_circuit
         from .steady_initial import their_steady_initial
 
         return their_steady_initial(model, cm)
-    return apply_ic(circuit, operating_point(cm).x, model.initial_given)
+    return apply_ic(circuit, steady_state(cm), model.initial_given)
 
 
 def simulate_svzerod(model, sets=None, rtol=None, start="operating-point", cfg=None):

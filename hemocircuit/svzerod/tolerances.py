@@ -114,10 +114,10 @@ def run_tolerances(model, mean_circuit, circuit):
     """(rtol, atol) the runner integrates ``circuit`` (the model) at: DRIFT_RTOL and
     :func:`drift_atol` for a run that keeps its start, else :func:`case_rtol` and None (the
     integrator's default atol).  The conformance runner and ``tran --svzerod-output``."""
-    from ..analyses.op import operating_point
+    from ..analyses.op import steady_state
 
     if starts_steady(model, mean_circuit):
-        x_op = operating_point(mean_circuit).x
+        x_op = steady_state(mean_circuit)
         if keeps_its_start(model, mean_circuit, x_op):
             return DRIFT_RTOL, drift_atol(model, mean_circuit, x_op, circuit)
     return case_rtol(model), None
