@@ -75,14 +75,19 @@ def local_jacobian_into_at(t, x, P, lay_ref, work_ref, jw_ref, scales, J, xt, an
     With ``want_ft`` also df/dt into ft the same way: dR/dt and dD/dt differenced in t over the
     elements that depend on t (td), composed as one more column (instead of a whole
     right-hand side at t + dt).
-    Returns 0, or -1 when it does not apply (an element nonlinear in the pressures, a singular
-    nodal matrix): the caller then differences whole right-hand sides."""
+    Elements nonlinear in the pressures (st 2; nonlin): R is then nonlinear in u, and A is its
+    Jacobian dR/du at the nodal solution, which work.u must hold for (t, x) (jacobian_into
+    solves it first): such an element's columns of dR/du are forward differences of its local
+    residual A_e(u) u - b_e(u) in its local unknowns (whatever linearisation its stamp uses
+    for Newton's iteration), and its dR/dx the change of that residual at u fixed.  A valve
+    circuit's Jacobian then costs one nodal solve and element stamps instead of one nodal
+    Newton solve per state.
+    Returns 0, or -1 when it does not apply (a singular nodal matrix): the caller then
+    differences whole right-hand sides."""
     lay = lay_ref[0]
     work = work_ref[0]
     jw = jw_ref[0]
     (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st, td) = lay
-    if nonlin != 0:
-        return -1
     Pb, A, piv, ub, rb, M, col, Db, Ab, bb = jw.Pb, jw.A, jw.piv, jw.ub, jw.rb, jw.M, jw.col, jw.Db, jw.Ab, jw.bb
     C, cj, MC = jw.C, jw.cj, jw.MC
     hasx, obs, an, Jxs, Jxl, Jul = jw.has_expr, jw.observed, jw.analytic, jw.Jxs, jw.Jx, jw.Ju
@@ -108,11 +113,17 @@ def local_jacobian_into_at(t, x, P, lay_ref, work_ref, jw_ref, scales, J, xt, an
             bb[eu[e] + i] = bl[i]
             for k in range(L[e]):
                 Ab[eu[e] + i, k] = Al[i, k]
-                if cm[e] == 0:
+                if cm[e] == 0 and st[e] != 2:
                     A[r, ui[eu[e] + k]] += Al[i, k]
+        if st[e] == 2:
+            residual_u_columns(e, t, x, Pb, L, eu, ui, u, A, n, lay_ref, work_ref)
     if not lu_factor(A, piv, n):
         return -1
-    lu_apply(A, piv, ub, n)
+    if nonlin != 0:  # the solution is work.u (A is Newton's matrix at it, not the system's)
+        for i in range(n + 1):
+            ub[i] = u[i]
+    else:
+        lu_apply(A, piv, ub, n)
     ub[n] = 0.0
     # base residuals, derivatives and dD/du
     for i in range(M.shape[0]):
@@ -221,6 +232,40 @@ def local_jacobian_into_at(t, x, P, lay_ref, work_ref, jw_ref, scales, J, xt, an
     return 0
 
 
+#: central-difference step (relative to max(|u|, 1)) of an element's local unknowns in dR/du
+#: for elements nonlinear in the pressures: a tanh valve switches within 1/k (their
+#: chamber_elastance_inductor: 7.5e-6 mmHg), so a forward step of FD_REL (1e-7 mmHg) would be 1 %
+#: of the switch; central at 1e-10 leaves truncation ~(1e-10 k)^2 and rounding ~1e-6 relative
+U_STEP_REL = 1e-10
+
+
+@njit(cache=True, nogil=True, inline="always")
+def residual_u_columns(e, t, x, Pb, L, eu, ui, u, A, n, lay_ref, work_ref):
+    """Add d r_e / d u of element e (nonlinear in the pressures) into A: central differences of
+    its local residual r_e(u) = A_e(u) u - b_e(u) (its stamp at the point u) in each of its local
+    unknowns, step U_STEP_REL max(|u_g|, 1)."""
+    work = work_ref[0]
+    Al, bl = work.Al, work.bl
+    for k in range(L[e]):
+        g = ui[eu[e] + k]
+        if g >= n:
+            continue
+        ug = u[g]
+        hk = U_STEP_REL * max(abs(ug), 1.0)
+        for side in range(2):
+            u[g] = ug + hk if side == 0 else ug - hk
+            stamp_element(e, t, x, Pb, lay_ref, work_ref)
+            for i in range(L[e]):
+                r = ui[eu[e] + i]
+                if r >= n:
+                    continue
+                acc = -bl[i]
+                for m in range(L[e]):
+                    acc += Al[i, m] * u[ui[eu[e] + m]]
+                A[r, g] += acc / (2.0 * hk) if side == 0 else -acc / (2.0 * hk)
+        u[g] = ug
+
+
 @njit(cache=True, nogil=True, inline="always")
 def residual_change(e, L, eu, ui, Al, bl, ub, rb, h, col, n):
     """Add element e's change of local residual (Al ub - bl, stamped at the moved point, minus
@@ -317,8 +362,16 @@ def jacobian_into(t, x, f0, P, lay_ref, work_ref, jw_ref, scales, J, ft, xt, ftm
     system)."""
     nx = x.shape[0]
     nev = 0
-    if local != 0 and jac_fn(t, x, P, lay_ref, work_ref, jw_ref, scales, J, xt, local == 1, ft, not autonomous) == 0:
-        return 0  # J and (non-autonomous) ft element-locally
+    if local != 0:
+        (n, nx_, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st,
+         td) = lay_ref[0]
+        if nonlin != 0:  # the local Jacobian linearises at work.u, which a rejected step's stages
+            # leave elsewhere: the nodal solution at (t, x) first
+            nev = 1
+            if not rhs_fn(t, x, P, lay_ref, work_ref, ftmp):
+                return -1
+        if jac_fn(t, x, P, lay_ref, work_ref, jw_ref, scales, J, xt, local == 1, ft, not autonomous) == 0:
+            return nev  # J and (non-autonomous) ft element-locally
     for i in range(nx):
         xt[i] = x[i]
     for j in range(nx):
@@ -330,7 +383,7 @@ def jacobian_into(t, x, f0, P, lay_ref, work_ref, jw_ref, scales, J, ft, xt, ftm
         for i in range(nx):
             J[i, j] = (ftmp[i] - f0[i]) / hj
         xt[j] = x[j]
-    nev = nx
+    nev += nx
     if autonomous:
         return nev
     # FD_REL seconds as represented at t (derivatives.time_step: absolute, not relative to t)
