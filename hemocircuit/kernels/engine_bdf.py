@@ -162,7 +162,7 @@ def integrate_batch_bdf(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, 
             finish_member(out, 1, stats, mb, -3, t, 0, 0, nfev, 0)
             continue
         nj = jacobian_into(t, x, f, P, lay_ref, work_ref, jw_ref, scales, J, ft, xt, ftmp, True, local_jac,
-                           rhs_into_at, local_jacobian_into_at)
+                           rhs_into_at, local_jacobian_into_at, False)
         if nj < 0:
             finish_member(out, 1, stats, mb, -3, t, 0, 0, nfev, 0)
             continue
@@ -258,7 +258,7 @@ def integrate_batch_bdf(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, 
                     if not rhs_into_at(t_new, ypred, P, lay_ref, work_ref, ftmp):
                         break
                     nj = jacobian_into(t_new, ypred, ftmp, P, lay_ref, work_ref, jw_ref, scales, J, ft, xt, fp, True,
-                                       local_jac, rhs_into_at, local_jacobian_into_at)
+                                       local_jac, rhs_into_at, local_jacobian_into_at, False)
                     if nj < 0:
                         break
                     nfev += nj

@@ -350,7 +350,8 @@ def compose_columns(A, piv, C, M, MC, cj, J, ft, n, nx, nm):
 # inlined (numba IR) into integrate_batch, its one caller: numba links a callee's machine code into
 # every caller and LLVM optimises it again there, so each call level costs compile time
 @njit(cache=True, nogil=True, inline="always")
-def jacobian_into(t, x, f0, P, lay_ref, work_ref, jw_ref, scales, J, ft, xt, ftmp, autonomous, local, rhs_fn, jac_fn):
+def jacobian_into(t, x, f0, P, lay_ref, work_ref, jw_ref, scales, J, ft, xt, ftmp, autonomous, local, rhs_fn, jac_fn,
+                  solved):
     """Jacobian J (nx, nx) and df/dt ft (nx,) at (t, x) with f0 = f(t, x): element-local
     (local_jacobian_into_at; ``local`` 1: with the kernels' analytic partials where they have
     them, 2: differences only; ft with it, its time column) when ``local`` and
@@ -358,6 +359,8 @@ def jacobian_into(t, x, f0, P, lay_ref, work_ref, jw_ref, scales, J, ft, xt, ftm
     difference of one more in t (ft untouched when the circuit is autonomous).  The tuples by
     reference (kernels.refs), as the integrators hold them; ``rhs_fn``, ``jac_fn``: rhs_into_at and
     local_jacobian_into_at, or their addresses (the Rosenbrock integrator's, kernels.pointers).
+    ``solved``: work.u holds the nodal solution at (t, x) (the last right-hand side was
+    there), so a circuit nonlinear in the pressures needs no nodal solve first.
     Returns the number of right-hand-side evaluations, or -1 if one failed (singular nodal
     system)."""
     nx = x.shape[0]
@@ -365,8 +368,8 @@ def jacobian_into(t, x, f0, P, lay_ref, work_ref, jw_ref, scales, J, ft, xt, ftm
     if local != 0:
         (n, nx_, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st,
          td) = lay_ref[0]
-        if nonlin != 0:  # the local Jacobian linearises at work.u, which a rejected step's stages
-            # leave elsewhere: the nodal solution at (t, x) first
+        if nonlin != 0 and not solved:  # the local Jacobian linearises at work.u, which a
+            # rejected step's stages leave elsewhere: the nodal solution at (t, x) first
             nev = 1
             if not rhs_fn(t, x, P, lay_ref, work_ref, ftmp):
                 return -1
@@ -410,7 +413,7 @@ def jacobian_parts(t, x, P, lay, scales, local, want_ft):
     J = np.zeros((nx, nx))
     ft = np.zeros(nx)
     jacobian_into(t, x, f0, P, ref(lay), ref(work), ref(jw), scales, J, ft, np.empty(nx), np.empty(nx), not want_ft,
-                  local, rhs_into_at, local_jacobian_into_at)
+                  local, rhs_into_at, local_jacobian_into_at, True)
     keep_alive(work)  # the references' tuples live to here (kernels.refs)
     keep_alive(jw)
     return J, ft

@@ -180,6 +180,9 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
         nev = 0
         status = 0
         prepare_fn(t, x, P, lay, work)
+        # work.u holds the nodal solution at (t, x) (the last right-hand side was there): the
+        # Jacobian of a circuit nonlinear in the pressures linearises at it (jacobian_into)
+        u_at_x = True
         if not rhs_fn(t, x, P, lay_ref, work_ref, f):
             # no step (the loop below is skipped), and the one finish_member call at the end:
             # a call with constants here would compile a second specialisation of it (numba
@@ -203,7 +206,7 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
                 tb = breaks[ib]
             if age >= JAC_REUSE:
                 nj = jacobian_into(t, x, f, P, lay_ref, work_ref, jw_ref, scales, J, ft, xt, ftmp, autonomous,
-                                   local_jac, rhs_fn, jac_fn)
+                                   local_jac, rhs_fn, jac_fn, u_at_x)
                 if nj < 0:
                     status = -3
                     break
@@ -259,6 +262,7 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
                         fn[i] = f[i]
                 elif tab_reuse[s] == 0.0:  # else: same point as stage s-1, fn holds its f
                     nfev += 1
+                    u_at_x = False
                     if not rhs_fn(min(t + tab_c[s] * hh, tlim), xs, P, lay_ref, work_ref, fn):
                         good = False
                         break
@@ -373,6 +377,7 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
                 for i in range(nx):
                     x[i] = xn[i]
                     f[i] = fn[i]
+                u_at_x = True  # every path above ends on a right-hand side at (tn, xn)
                 h = hh * fac if not at_break else max(h, hh * fac)
                 if k_hit >= 0 and ev_restart:
                     # restart after the reset from the step that reached the bound: the shortened
