@@ -348,12 +348,14 @@ def solve_nodes(t, x, Pe, lay_ref, work_ref):
     # read u too) made every later solve fail, and the step size shrink to nothing (the
     # decomposed heart: "step size too small")
     restart = nonlin == 0
+    prev = -1.0  # the last iterate's change (-1: none since the start)
     for it in range(2 * NEWTON_MAXIT):
         if it == NEWTON_MAXIT:
             restart = True
         if restart:
             zero_start(u, n)
             restart = False
+            prev = -1.0
         first = it == 0 or it == NEWTON_MAXIT
         # the system's base: A0, b0 at the first iterate, then A1, b1 (the base plus the
         # iterate-independent stamps, kept from the first)
@@ -426,6 +428,13 @@ def solve_nodes(t, x, Pe, lay_ref, work_ref):
             restart = True
         elif change < NEWTON_TOL:
             return True
+        elif 0.0 < change < prev and change * change < NEWTON_TOL * (prev - change):
+            # converging at the rate theta = change / prev: the distance left to the solution
+            # is at most theta / (1 - theta) change (Hairer & Wanner II, IV.8), below NEWTON_TOL,
+            # so the iterate that would only confirm it is not computed
+            return True
+        else:
+            prev = change
     zero_start(u, n)
     return False
 
