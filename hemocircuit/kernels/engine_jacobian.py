@@ -77,9 +77,10 @@ def local_jacobian_into_at(t, x, P, lay_ref, work_ref, jw_ref, scales, J, xt, an
     right-hand side at t + dt).
     Elements nonlinear in the pressures (st 2; nonlin): R is then nonlinear in u, and A is its
     Jacobian dR/du at the nodal solution, which work.u must hold for (t, x) (jacobian_into
-    solves it first): such an element's columns of dR/du are forward differences of its local
-    residual A_e(u) u - b_e(u) in its local unknowns (whatever linearisation its stamp uses
-    for Newton's iteration), and its dR/dx the change of that residual at u fixed.  A valve
+    solves it first, unless its last right-hand side was there): such an element's columns of
+    dR/du are central differences of its local residual A_e(u) u - b_e(u) in its local unknowns
+    (residual_u_columns; whatever linearisation its stamp uses for Newton's iteration), and its
+    dR/dx the change of that residual at u fixed.  A valve
     circuit's Jacobian then costs one nodal solve and element stamps instead of one nodal
     Newton solve per state.
     Returns 0, or -1 when it does not apply (a singular nodal matrix): the caller then
