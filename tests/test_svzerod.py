@@ -556,6 +556,23 @@ def test_runner_adds_their_extra_cycles(tmp_path):
     assert t_out.size == 11 and np.asarray(res.t)[keep][0] == pytest.approx(2.0)
 
 
+
+def test_runner_calls_between_after_each_timed_run_untimed(tmp_path):
+    """simulate_case(between=...) (a benchmark's run of their solver in the same rounds): called
+    once after each timed run, and its time is in none of the runs' times."""
+    import time
+
+    from hemocircuit.svzerod.conformance import simulate_case
+
+    path, cfg = _cycle_error_model(tmp_path, 3, all_cycles=False)
+    m = import_svzerod(path)
+    simulate_case(m, cfg=cfg)  # compiles the engine, if this test runs first
+    calls = []
+    _, _, _, times = simulate_case(m, cfg=cfg, timed_runs=3, between=lambda: (calls.append(1), time.sleep(1.0)))
+    assert len(calls) == 3 and times.shape == (3, 2)
+    assert np.all(times[:, 0] < 1.0), times  # a run takes ~0.05 s; with the sleep it would be > 1 s
+
+
 @have_cases
 def test_their_own_step_is_off_their_converged_result_on_the_chamber_case():
     """compare_their_rows (the accuracy-matched benchmark's measure) on their stored result at
