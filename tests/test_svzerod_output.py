@@ -163,6 +163,25 @@ def test_their_steady_initial_is_their_scheme(tmp_path):
     assert float(c.outputs(0.0, x_op[None])["P(v__OUT)"][0]) * MMHG == pytest.approx(5000.0, rel=1e-9)
 
 
+
+def test_their_steady_initial_failure_names_the_pseudo_time_step(tmp_path):
+    """The compiled procedure's failure is a SolverError naming the pseudo-time step and its
+    time: with tol 0 no Newton iteration counts as converged (the linear RC case converges to
+    rounding in one); with the default tol the same call succeeds."""
+    from hemocircuit.errors import SolverError
+    from hemocircuit.svzerod.output import _circuits
+    from hemocircuit.svzerod.steady_initial import gen_alpha_steps
+
+    path = _rc_model(tmp_path, {"bc_name": "OUT", "bc_type": "RESISTANCE", "bc_values": {"R": 1000.0, "Pd": 0.0}},
+                     {"R_poiseuille": 100.0, "C": 0.01}, ic={"pressure:IN:v": 0.0, "flow:IN:v": 0.0})
+    _, cm = _circuits(import_svzerod(path))
+    x0 = np.zeros(cm.nx)
+    with pytest.raises(SolverError, match=r"Newton did not converge in 2 iterations in pseudo-time step 0 "
+                                          r"\(t = 0\.0666667 s\)"):
+        gen_alpha_steps(cm, x0, 0.1, 3, max_iter=2, tol=0.0)
+    assert np.all(np.isfinite(gen_alpha_steps(cm, x0, 0.1, 3, max_iter=2)))
+
+
 def test_their_steady_initial_makes_rcr_algebraic(tmp_path):
     """Their to_steady sets an RCR's capacitance to 0: after their procedure its P_c is the
     steady Rd Q + Pd even with a 100 s time constant (a plain 3.1 s relaxation would leave it

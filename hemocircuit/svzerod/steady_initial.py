@@ -12,7 +12,7 @@ state: vessel capacitors, inductors and chambers (whose activation keeps running
 pseudo-time) are still relaxing at its end.
 
 Here the same scheme is applied to hemocircuit's ODE form x' = f(t, x) of the time-averaged
-circuit: per step the predictor x_{n+1} = x_n, x'_{n+1} = (1 - 1/gamma) x'_n, then Newton on
+circuit, compiled (the engine's gen_alpha_run): per step the predictor x_{n+1} = x_n, x'_{n+1} = (1 - 1/gamma) x'_n, then Newton on
 x'_{n+alpha_m} = f(t_n + alpha_f h, x_{n+alpha_f}) with x_{n+1} = x_n + h (x'_n + gamma (x'_{n+1} - x'_n)),
 alpha_m = (3 - rho)/(2 (1 + rho)), alpha_f = 1/(1 + rho), gamma = 1/2 + alpha_m - alpha_f
 (their Integrator constructor).  Their zero capacitances make those variables algebraic; here
@@ -39,79 +39,33 @@ def gen_alpha_coefficients(rho):
     return am, af, 0.5 + am - af
 
 
-def _functions(c):
-    """(rhs(t, x), dense jacobian(t, x)) of circuit ``c``: the compiled engine's when it has one
-    (its nodal solve also converges where the Python Newton on tanh valves does not), else the
-    circuit's."""
-    from ..kernels.system import CompiledSystem
-
-    system = CompiledSystem.of(c)
-
-    def jac_py(t, x):
-        J = c.jacobian(t, x)
-        return J.toarray() if hasattr(J, "toarray") else np.asarray(J)
-
-    if system is None:
-        return c.rhs, jac_py
-    P = system.params(c)[0]
-
-    def rhs(t, x):  # the compiled nodal solve, the Python Newton where it does not converge
-        f = system.rhs(t, x, P)
-        return f if np.all(np.isfinite(f)) else c.rhs(t, x)
-
-    def jac(t, x):
-        J = np.asarray(system.jacobian(t, x, P))
-        return J if np.all(np.isfinite(J)) else jac_py(t, x)
-    return rhs, jac
+#: gen_alpha_run's failure codes
+_FAILURES = {1: "Newton did not converge in {max_iter} iterations", 2: "no Newton step reduces the residual",
+             3: "a state became non-finite"}
 
 
 def gen_alpha_steps(c, x0, h, n_steps, rho=0.5, t0=0.0, max_iter=30, tol=1e-11):
     """``n_steps`` generalized-alpha steps of size h [s] of x' = f(t, x) (circuit ``c``) from x0
-    with x'(0) = 0, as their Integrator::step.  Returns the final state."""
+    with x'(0) = 0, as their Integrator::step: one call of the compiled engine's
+    ``gen_alpha_run`` (Newton with its Jacobian and a halving line search, the convergence test
+    max |r| h / scale < tol or the last update below tol).  Returns the final state."""
+    from ..kernels.system import CompiledSystem
+
     x = np.array(x0, float)
     if x.size == 0:  # no states: nothing relaxes
         return x
+    system = CompiledSystem.of(c)
+    if system is None:
+        raise HemocircuitError("their steady_initial runs on the compiled engine: this circuit has a component "
+                               "type without a kernel (docs/components.md)")
     am, af, gamma = gen_alpha_coefficients(rho)
-    rhs, jac = _functions(c)
-    xd = np.zeros_like(x)
-    S = c.state_scales
-    eye = np.eye(x.size)
-
-    def residual(t, xd_new):
-        x_new = x + h * (xd + gamma * (xd_new - xd))
-        return xd + am * (xd_new - xd) - rhs(t, x + af * (x_new - x)), x + af * (x_new - x)
-
-    for i in range(n_steps):
-        t = t0 + i * h + af * h
-        xd_new = xd * (1.0 - 1.0 / gamma)  # their predictor (x_new = x)
-        r, x_af = residual(t, xd_new)
-        for _ in range(max_iter):
-            J = jac(t, x_af)
-            d = np.linalg.solve(am * eye - af * gamma * h * J, -r)
-            # backtracking: their valves (tanh of steepness ~100 per dyn/cm^2) make the full
-            # Newton step leave the region where our nodal equations converge
-            lam, norm0 = 1.0, np.max(np.abs(r) * h / S)
-            for _ in range(40):
-                try:
-                    r_new, x_af_new = residual(t, xd_new + lam * d)
-                    if np.all(np.isfinite(r_new)) and (np.max(np.abs(r_new) * h / S) < max(norm0, tol)
-                                                       or lam < 1e-3):
-                        break
-                except SolverError:
-                    pass
-                lam *= 0.5
-            else:
-                raise SolverError(f"their steady_initial: no Newton step reduces the residual in pseudo-time "
-                                  f"step {i} (t = {t:g} s)", time=t)
-            xd_new, r, x_af = xd_new + lam * d, r_new, x_af_new
-            if np.max(np.abs(r) * h / S) < tol or np.max(np.abs(gamma * h * lam * d) / S) < tol:
-                break
-        else:
-            raise SolverError(f"their steady_initial: Newton did not converge in {max_iter} iterations in "
-                              f"pseudo-time step {i} (t = {t:g} s)", time=t)
-        x, xd = x + h * (xd + gamma * (xd_new - xd)), xd_new
-        if not np.all(np.isfinite(x)):
-            raise SolverError(f"their steady_initial: non-finite state after pseudo-time step {i}", time=t)
+    P = system.params(c)[0]
+    x, status, step = system.mod.gen_alpha_run(x, float(h), int(n_steps), am, af, gamma, float(t0), P,
+                                               system.lay_for(P)[0], system.scales, int(max_iter), float(tol))
+    if status:
+        t = t0 + (step + af) * h
+        raise SolverError(f"their steady_initial: {_FAILURES[int(status)].format(max_iter=max_iter)} in pseudo-time "
+                          f"step {step} (t = {t:g} s)", time=t)
     return x
 
 
