@@ -216,8 +216,7 @@ def shooting_rows(folder, repeat, matched, tol=1e-5):
     """The periodic steady state of each SHOOTING closed loop by Anderson-accelerated shooting
     (analyses.periodic.shoot, method='anderson', no multipliers) from their initial condition
     at the case's rtol (svzerod.tolerances.case_rtol), to a residual ``tol`` (scaled x(T) - x(0);
-    below the 2.3e-5 their 10 cycles leave on closedLoopHeart_singleVessel, measured in
-    session 10), its orbit's output included.  Printed beside it: the orbit's largest distance
+    below the residual their 10 cycles leave, printed beside it), its orbit's output included.  Printed beside it: the orbit's largest distance
     from a tight orbit (rtol 1e-9, residual 1e-9) relative to each state's range over the cycle
     (the case's tolerance is 1e-2 of the range); the residual their 10 cycles leave, cycle by
     cycle with our integrator at the same rtol; their 10 cycles at their step and, where the
@@ -264,18 +263,15 @@ def shooting_rows(folder, repeat, matched, tol=1e-5):
         print(f"\nshooting {name} (anderson, rtol {rtol:g}): {ms:.1f} ms, {orb.iterations} periods, residual "
               f"{orb.residual:.1e}, orbit {err:.1e} of the range off the rtol 1e-9 orbit (their 10 cycles leave "
               f"a residual {np.max(np.abs((x10 - x) / S)):.1e} at this rtol)")
+        if at_step[0][0] is None:
+            print("  their module is not importable: no side-by-side time")
+            continue
         for k in sorted({1, matched.get(name, 1)}):
             c10 = json.loads(json.dumps(cfg))
             n = c10["simulation_parameters"]["number_of_time_pts_per_cardiac_cycle"]
             c10["simulation_parameters"]["number_of_time_pts_per_cardiac_cycle"] = k * (n - 1) + 1
-            if k == 1:
-                theirs, failed = float(np.median([a for a, _ in at_step])) if at_step[0][0] is not None else None, \
-                    at_step[0][1]
-            else:
-                theirs, failed = time_theirs_or_failure(c10, repeat)
-            if theirs is None:
-                print("  their module is not importable: no side-by-side time")
-                break
+            theirs, failed = ((float(np.median([ms_k for ms_k, _ in at_step])), at_step[0][1]) if k == 1
+                              else time_theirs_or_failure(c10, repeat))
             if failed is None:
                 print(f"  their 10 cycles at x{k} their step: {theirs:.1f} ms; ours x{ms / theirs:.2f}")
             else:

@@ -235,7 +235,6 @@ def test_payne06_steady_state_is_a_fixed_point():
     assert f2[0] < -0.04
 
 
-
 def test_steady_state_is_the_operating_points_states_and_fails_as_it_does():
     """analyses.op.steady_state (the states only, for a run's start): the fixed point of
     payne06, equal to the operating point's states, f(x) = 0; a member without an operating

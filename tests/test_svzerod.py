@@ -556,7 +556,6 @@ def test_runner_adds_their_extra_cycles(tmp_path):
     assert t_out.size == 11 and np.asarray(res.t)[keep][0] == pytest.approx(2.0)
 
 
-
 def test_runner_calls_between_after_each_timed_run_untimed(tmp_path):
     """simulate_case(between=...) (a benchmark's run of their solver in the same rounds): called
     once after each timed run, and its time is in none of the runs' times."""

@@ -163,7 +163,6 @@ def test_their_steady_initial_is_their_scheme(tmp_path):
     assert float(c.outputs(0.0, x_op[None])["P(v__OUT)"][0]) * MMHG == pytest.approx(5000.0, rel=1e-9)
 
 
-
 def test_their_steady_initial_failure_names_the_pseudo_time_step(tmp_path):
     """The compiled procedure's failure is a SolverError naming the pseudo-time step and its
     time: with tol 0 no Newton iteration counts as converged (the linear RC case converges to

@@ -431,8 +431,9 @@ def gen_alpha_run(x0, h, n_steps, am, af, gamma, t0, P, lay, scales, max_iter, t
     side and Jacobian cost ~15 and ~28 us of call overhead (18 ms of the procedure's 31 steps
     on chamber_elastance_inductor).
     Returns (x (nx,), status, step): status 0 done; 1 Newton did not converge in ``max_iter``
-    iterations, 2 no step reduced the residual, 3 a state became non-finite, at pseudo-time
-    step ``step``."""
+    iterations, 2 no step reduces the residual, 3 a state became non-finite, 4 the right-hand
+    side, the Jacobian or Newton's matrix failed at the iterate (a nodal system singular or not
+    converging), at pseudo-time step ``step`` (svzerod.steady_initial._FAILURES)."""
     nx = x0.shape[0]
     work = make_work(lay)
     jw = make_jac_work(lay)
@@ -455,7 +456,7 @@ def gen_alpha_run(x0, h, n_steps, am, af, gamma, t0, P, lay, scales, max_iter, t
             # the Jacobian at x_af, where the last right-hand side was (the nodal solution held)
             if not ok or jacobian_into(t, xa, f, P, lay_ref, work_ref, jw_ref, scales, J, ft, xt, ftmp, True, 1,
                                        rhs_into_at, local_jacobian_into_at, True) < 0:
-                status = 2
+                status = 4
                 break
             for a in range(nx):
                 for b in range(nx):
@@ -463,7 +464,7 @@ def gen_alpha_run(x0, h, n_steps, am, af, gamma, t0, P, lay, scales, max_iter, t
                 W[a, a] += am
                 d[a] = -r[a]
             if not lu_factor(W, piv, nx):
-                status = 2
+                status = 4
                 break
             lu_apply(W, piv, d, nx)
             norm0 = 0.0

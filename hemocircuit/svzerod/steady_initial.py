@@ -12,7 +12,8 @@ state: vessel capacitors, inductors and chambers (whose activation keeps running
 pseudo-time) are still relaxing at its end.
 
 Here the same scheme is applied to hemocircuit's ODE form x' = f(t, x) of the time-averaged
-circuit, compiled (the engine's gen_alpha_run): per step the predictor x_{n+1} = x_n, x'_{n+1} = (1 - 1/gamma) x'_n, then Newton on
+circuit, compiled (the engine's gen_alpha_run): per step the predictor x_{n+1} = x_n,
+x'_{n+1} = (1 - 1/gamma) x'_n, then Newton on
 x'_{n+alpha_m} = f(t_n + alpha_f h, x_{n+alpha_f}) with x_{n+1} = x_n + h (x'_n + gamma (x'_{n+1} - x'_n)),
 alpha_m = (3 - rho)/(2 (1 + rho)), alpha_f = 1/(1 + rho), gamma = 1/2 + alpha_m - alpha_f
 (their Integrator constructor).  Their zero capacitances make those variables algebraic; here
@@ -41,7 +42,8 @@ def gen_alpha_coefficients(rho):
 
 #: gen_alpha_run's failure codes
 _FAILURES = {1: "Newton did not converge in {max_iter} iterations", 2: "no Newton step reduces the residual",
-             3: "a state became non-finite"}
+             3: "a state became non-finite",
+             4: "the right-hand side or its Jacobian failed (a singular or non-converging nodal system)"}
 
 
 def gen_alpha_steps(c, x0, h, n_steps, rho=0.5, t0=0.0, max_iter=30, tol=1e-11):
