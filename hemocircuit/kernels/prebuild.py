@@ -24,7 +24,6 @@ missing itself, as without it.
 """
 from __future__ import annotations
 
-import glob
 import os
 import pickle
 import subprocess
@@ -119,14 +118,19 @@ def in_cache(dispatcher) -> bool:
     """True when numba's on-disk cache holds some compilation of ``dispatcher`` (its index
     file exists; numba keeps one per function).  True as well when that cannot be told (another
     numba's internals): then no helper starts, as before there was one.  The index is
-    ``MODULE.QUALNAME-DISAMBIGUATOR.pyXY.nbi`` in the cache's folder (numba.core.caching)."""
+    ``MODULE.QUALNAME-LINE.pyXY<abiflags>.nbi`` in the cache's folder (numba.core.caching:
+    '<' and '>' dropped from the name, LINE the function's first line, the disambiguator of
+    numba's source-file locators): one stat, ~30 us, where a glob of the folder took ~13 ms
+    in a cache of 13 000 files (a first run's wait for the helper polls this every 50 ms)."""
     try:
         folder = Path(dispatcher._cache.cache_path)
-        py = dispatcher.py_func
+        code = dispatcher.py_func.__code__
+        qualname = dispatcher.py_func.__qualname__
     except AttributeError:
         return True
-    stem = f"{Path(py.__code__.co_filename).stem}.{py.__qualname__.replace('<locals>', '')}-"
-    return any(folder.glob(glob.escape(stem) + "*.nbi"))
+    name = "{}.{}-{}.py{}{}{}.nbi".format(Path(code.co_filename).stem, qualname.replace("<", "").replace(">", ""),
+                                         code.co_firstlineno, *sys.version_info[:2], getattr(sys, "abiflags", ""))
+    return (folder / name).exists()
 
 
 def helper_signatures(mod, lay, nx, n_params):
