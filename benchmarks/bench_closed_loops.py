@@ -5,6 +5,7 @@ run of the same 30 beats at their step and finer (when ``svzerod`` or ``pysvzero
 importable: the PyPI wheel, or their source built as docs/performance.md says).
 
     python benchmarks/bench_closed_loops.py [--rtols 1e-4 1e-5 1e-6] [--theirs 1 2 5 10]
+    python benchmarks/bench_closed_loops.py --jacobians   # the Jacobian's two ways, three beats
 
 Errors: max over the last beat of |ours - reference| / the reference's range, worst over the
 pressure columns (P) and the flow columns (Q) separately.  Times: wall seconds of one
@@ -70,12 +71,47 @@ def theirs(div):
         return time.perf_counter() - t0, str(exc)
 
 
+def jacobian_rows(rtol=1e-6, periods=3, repeat=5):
+    """The first ``periods`` beats from the netlist's start at ``rtol``, the state Jacobian
+    composed element by element (the engine's default) against whole right-hand sides
+    differenced (``local_jacobian=0``): in turn, medians of ``repeat`` calls of the compiled
+    integrator each (CompiledSystem.integrate, no outputs)."""
+    from hemocircuit.analyses.transient import simulate
+    from hemocircuit.kernels.system import CompiledSystem
+    from hemocircuit.svzerod import load_svzerod
+
+    c = load_svzerod(MODEL, "mmHg")
+    x0 = simulate(c, 1e-3, dt=1e-3, engine="compiled", progress=False).x[0]  # the netlist's start
+    system = CompiledSystem.of(c)
+    P = system.params(c)[0]
+    t_out = np.array([0.0, periods * PERIOD])
+    times = {1: [], 0: []}
+    stats = {}
+    for lj in (1, 0):
+        system.integrate(t_out, x0, P, rtol=rtol, local_jacobian=lj)  # compiled outside the timings
+    for _ in range(repeat):
+        for lj in (1, 0):
+            t0 = time.perf_counter()
+            _, stats[lj] = system.integrate(t_out, x0, P, rtol=rtol, local_jacobian=lj)
+            times[lj].append(time.perf_counter() - t0)
+    print(f"\n{periods} beats from the start at rtol {rtol:g}")
+    print(f"{'state Jacobian':>24s} {'step attempts':>14s} {'rejected':>9s} {'f evals':>8s} {'median ms':>10s}")
+    for lj, name in ((1, "element by element"), (0, "whole right-hand sides")):
+        s = stats[lj]
+        print(f"{name:>24s} {s['steps']:14d} {s['rejected']:9d} {s['nfev']:8d} {np.median(times[lj]) * 1e3:10.1f}")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--rtols", type=float, nargs="+", default=[1e-4, 1e-5, 1e-6])
     ap.add_argument("--theirs", type=int, nargs="*", default=[1, 2, 5, 10],
                     help="their runs at 1000 x these points per cycle")
+    ap.add_argument("--jacobians", action="store_true",
+                    help="only the first three beats with each way of forming the state Jacobian")
     args = ap.parse_args(argv)
+    if args.jacobians:
+        jacobian_rows()
+        return
     ours(1e-4)  # compile (or load) the engine outside the timings
     ref, t_ref = ours(1e-9)
     print(f"reference rtol 1e-9: {ref.stats['steps']} steps, {t_ref:.1f} s")
