@@ -97,7 +97,7 @@ class ParameterValues(Mapping):
 class ParameterSet:
     """Parameter values of B members for one circuit structure (immutable; see module doc)."""
 
-    __slots__ = ("schema", "B", "_arrays", "_waves")
+    __slots__ = ("schema", "B", "_arrays", "_waves", "_digest")
 
     def __init__(self, schema: ParameterSchema, B: int, arrays, waves):
         # arrays: per group {name: read-only (1 or B, E)}; waves: per group ((i, name, wf), ...)
@@ -105,6 +105,7 @@ class ParameterSet:
         self.B = int(B)
         self._arrays = tuple(arrays)
         self._waves = tuple(tuple(w) for w in waves)
+        self._digest = None  # fingerprint(), once
 
     @classmethod
     def from_elements(cls, schema: ParameterSchema) -> "ParameterSet":
@@ -283,8 +284,15 @@ class ParameterSet:
         return cls(first.schema, B, arrays, first._waves)
 
     def fingerprint(self) -> str:
-        """A digest of every value and waveform (equal sets have equal fingerprints): a key
-        for memos of results that depend only on the values."""
+        """A digest of every value and waveform (equal sets have equal fingerprints: a key
+        for memos of results that depend only on the values; computed once: the set is
+        immutable, and every operating point asks for it)."""
+        digest = getattr(self, "_digest", None)
+        if digest is None:
+            digest = self._digest = self._hash()
+        return digest
+
+    def _hash(self) -> str:
         import hashlib
 
         h = hashlib.sha1(str(self.B).encode())

@@ -192,8 +192,10 @@ class CompiledSystem:
         prebuild.start(self)  # a first compile: part of it in a second process
         prebuild.before_integrator(self, method != tableaus.BDF)  # ... and the rest here, before the integrator
         args = (t_out, X0, P, brk, jump, hmax)
+        if B <= 1:
+            return self._integrate(*args, rtol, atol_v, h0, max_steps, method, tab_options)
         kinds = np.unique(self._switched_on(P), axis=0, return_inverse=True)[1].reshape(-1)
-        if B == 0 or np.all(kinds == kinds[0]):
+        if np.all(kinds == kinds[0]):
             return self._integrate(*args, rtol, atol_v, h0, max_steps, method, tab_options)
         # members whose time switches differ run apart (each its own lay_for): a member's
         # numbers do not depend on the batch it runs in

@@ -64,6 +64,7 @@ class System(Assembly, Jacobians, Outputs):
         self.dynamic_groups = [self.groups[g.index] for g in full.dynamic_groups]
         self.A_const = full.A_const[members] if full.A_const.shape[0] > 1 else full.A_const
         self.b_const = full.b_const[members] if full.b_const.shape[0] > 1 else full.b_const
+        self._dc_replaced = {k: (a[members] if a.shape[0] > 1 else a) for k, a in full._dc_replaced.items()}
         Ainv = full.Ainv
         self.Ainv = None if Ainv is None else (Ainv[members] if Ainv.shape[0] > 1 else Ainv)
         self.lu = None if full.lu is None else full.lu.subset(members)

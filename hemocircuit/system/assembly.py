@@ -77,6 +77,10 @@ class Assembly:
         self.b_const = np.zeros((self.B, N1))
         self.all_constant = True
         self.dynamic_groups = []
+        # the constant groups' local matrices that the DC network replaces (_const_part): every
+        # DC-guess iteration takes them out again (their stamps were ~0.1 ms of a small
+        # circuit's operating point)
+        self._dc_replaced = {}
         for g in self.groups:
             # the compiled layout's rule (kernels.layout): an expression may move its right-hand side
             g.static = (g.constant and g.S == 0 and not g.waves and not g.exprs
@@ -85,6 +89,8 @@ class Assembly:
                 A_loc, b_loc = g.comp.stamp(g.p, np.zeros((1, g.E, g.S)), None, 0.0, None)
                 A_loc = np.broadcast_to(A_loc, (A_loc.shape[0], g.E, g.L, g.L))
                 self.A_const = self.A_const + self._scatter_A(g, A_loc)
+                if g.comp.has_dc_stamp():
+                    self._dc_replaced[g.index] = A_loc
                 if g.static:
                     b_loc = np.broadcast_to(b_loc, (b_loc.shape[0], g.E, g.L))
                     self.b_const = self.b_const + scatter_add(g.uidx.reshape(-1), N1, b_loc)
@@ -206,9 +212,8 @@ class Assembly:
                           "(an element nonlinear in the pressures)", time=float(np.ravel(t)[0]) if np.ndim(t) else t)
 
     def _const_part(self, g, Bx):
-        A_loc, _ = g.comp.stamp(g.p, np.zeros((1, g.E, g.S)), None, 0.0, None)
-        A_loc = np.broadcast_to(A_loc, (A_loc.shape[0], g.E, g.L, g.L))
-        return self._rep(self._scatter_A(g, A_loc), Bx)
+        """A constant group's part of A_const (its stamp kept by _prepare), for Bx rows."""
+        return self._rep(self._scatter_A(g, self._dc_replaced[g.index]), Bx)
 
     def _dc_stamp(self, g, p, A_loc, b_loc):
         """The group's stamp in the DC-guess network (Component.dc_stamp, on writable copies).
