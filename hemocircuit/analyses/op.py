@@ -272,9 +272,10 @@ def dc_guess(circuit, t=0.0, max_iter=200, tol=DC_GUESS_TOL, start=None):
     for it in range(max_iter):
         u, plist_b, stamps = _dc_u(circuit, t, X)
         Xn = X.copy()
-        for g, p, (A_loc, b_loc, src) in zip(circuit.groups, plist_b, stamps):
-            if g.S == 0:
+        for g, p, st in zip(circuit.groups, plist_b, stamps):
+            if g.S == 0:  # (a static group's stamp is None: not stamped again)
                 continue
+            A_loc, b_loc, src = st
             if src is not None:  # a waveform adds to its parameter (an arteriole's pCa_shift)
                 name = g.comp.waveform_params[0]
                 p = {**p, name: p[name] + src}

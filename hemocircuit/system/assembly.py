@@ -164,7 +164,9 @@ class Assembly:
             A = np.array(np.broadcast_to(self._rep(self.A_const, Bx), (Bx, N1 * N1))) if need_A else None
         stamps = [None] * len(self.groups)
         for k, (g, p) in enumerate(zip(self.groups, plist)):
-            if g.static and not dc:
+            # a static group is in A_const and b_const already; in the DC network too, unless
+            # its DC stamp differs
+            if g.static and not (dc and g.comp.has_dc_stamp()):
                 continue
             xl = x[:, g.sidx]
             src = g.source_values(t, Bx) if g.waves else None
