@@ -75,7 +75,7 @@ def jacobian_rows(rtol=1e-6, periods=3, repeat=5):
     """The first ``periods`` beats from the netlist's start at ``rtol``, the state Jacobian
     composed element by element (the engine's default) against whole right-hand sides
     differenced (``local_jacobian=0``): in turn, medians of ``repeat`` calls of the compiled
-    integrator each (CompiledSystem.integrate, no outputs)."""
+    integrator each (CompiledSystem.integrate with the run's breakpoints, no outputs)."""
     from hemocircuit.analyses.transient import simulate
     from hemocircuit.kernels.system import CompiledSystem
     from hemocircuit.svzerod import load_svzerod
@@ -85,14 +85,15 @@ def jacobian_rows(rtol=1e-6, periods=3, repeat=5):
     system = CompiledSystem.of(c)
     P = system.params(c)[0]
     t_out = np.array([0.0, periods * PERIOD])
+    breaks, kinks = c.jumps_and_kinks(0.0, periods * PERIOD)  # the activation's, as a run passes them
     times = {1: [], 0: []}
     stats = {}
     for lj in (1, 0):
-        system.integrate(t_out, x0, P, rtol=rtol, local_jacobian=lj)  # compiled outside the timings
+        system.integrate(t_out, x0, P, rtol=rtol, breaks=breaks, kinks=kinks, local_jacobian=lj)  # compiled outside the timings
     for _ in range(repeat):
         for lj in (1, 0):
             t0 = time.perf_counter()
-            _, stats[lj] = system.integrate(t_out, x0, P, rtol=rtol, local_jacobian=lj)
+            _, stats[lj] = system.integrate(t_out, x0, P, rtol=rtol, breaks=breaks, kinks=kinks, local_jacobian=lj)
             times[lj].append(time.perf_counter() - t0)
     print(f"\n{periods} beats from the start at rtol {rtol:g}")
     print(f"{'state Jacobian':>24s} {'step attempts':>14s} {'rejected':>9s} {'f evals':>8s} {'median ms':>10s}")

@@ -28,6 +28,29 @@ from .units import UnitError, parse_quantity
 from .names import split_path
 
 
+def _digest_into(h, obj):
+    """Feed ``obj`` (a group's waveform entries: tuples, waveform dataclasses, arrays, numbers,
+    names) into the hash ``h`` in full: every array's bytes and every float's exact repr
+    (numpy's repr of a long array elides its middle, and rounds to 8 digits)."""
+    import dataclasses
+
+    if isinstance(obj, np.ndarray):
+        h.update(f"{obj.dtype}{obj.shape}".encode())
+        h.update(np.ascontiguousarray(obj).tobytes())
+    elif dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        h.update(type(obj).__name__.encode())
+        for f in dataclasses.fields(obj):
+            h.update(f.name.encode())
+            _digest_into(h, getattr(obj, f.name))
+    elif isinstance(obj, (list, tuple)):
+        h.update(b"(")
+        for item in obj:
+            _digest_into(h, item)
+        h.update(b")")
+    else:
+        h.update(repr(obj).encode())
+
+
 def _frozen(a):
     a = np.array(a, dtype=float)
     a.flags.writeable = False
@@ -106,6 +129,16 @@ class ParameterSet:
         self._arrays = tuple(arrays)
         self._waves = tuple(tuple(w) for w in waves)
         self._digest = None  # fingerprint(), once
+
+    def __setstate__(self, state):
+        """Unpickled: the slots as pickled, the value arrays read-only again (pickle gives
+        writable arrays; the set is immutable, and its fingerprint is kept)."""
+        for name, value in (state[1] if isinstance(state, tuple) else state).items():
+            setattr(self, name, value)
+        for arrays in self._arrays:
+            for a in arrays.values():
+                if isinstance(a, np.ndarray):
+                    a.flags.writeable = False
 
     @classmethod
     def from_elements(cls, schema: ParameterSchema) -> "ParameterSet":
@@ -301,7 +334,7 @@ class ParameterSet:
                 h.update(n.encode())
                 h.update(str(a[n].shape).encode())
                 h.update(np.ascontiguousarray(a[n]).tobytes())
-            h.update(repr(w).encode())
+            _digest_into(h, w)
         return h.hexdigest()
 
     def __eq__(self, other):

@@ -258,3 +258,40 @@ def test_pickled_circuit_drops_private_caches(rc):
     assert back.cached("probe", lambda: 2) == 2  # memo not carried
     x = np.array([[10.0, 5.0]] * 2)
     np.testing.assert_array_equal(pickle.loads(pickle.dumps(sub)).rhs(0.0, x), sub.rhs(0.0, x))
+
+
+def test_fingerprint_tells_long_tables_apart(rc):
+    """Two 2 000-point pressure tables that differ in one middle value only, and two whose
+    values differ by 1e-12 relative, have different fingerprints (numpy's repr, which the
+    digest once hashed, elides a long array's middle and rounds to 8 digits); equal tables
+    have equal ones, and a set's fingerprint is the same when asked again."""
+    t = np.arange(2000) * 0.01
+    v = 80.0 + np.sin(t)
+
+    def table(values):
+        return rc.with_values({"Ps.value": {"pwl": [[f"{a} s", f"{float(b)!r} mmHg"] for a, b in zip(t.tolist(), values)]}})
+
+    base = table(v)
+    middle, tiny = v.copy(), v.copy()
+    middle[1000] += 1.0
+    tiny[5] *= 1 + 1e-12
+    fp = base.parameters.fingerprint()
+    assert fp == base.parameters.fingerprint() == table(v).parameters.fingerprint()
+    assert table(middle).parameters.fingerprint() != fp
+    assert table(tiny).parameters.fingerprint() != fp
+
+
+def test_unpickled_values_stay_read_only(rc):
+    """A pickled and unpickled parameter set (a worker's copy) keeps its values read-only and
+    its fingerprint: the set is immutable there too."""
+    import pickle
+
+    ps = rc.with_values({"R1.R": "3 mmHg*s/mL"}).parameters
+    fp = ps.fingerprint()
+    back = pickle.loads(pickle.dumps(ps))
+    assert back.fingerprint() == fp
+    with pytest.raises(ValueError):
+        back.values["R1.R"][0] = 1.0
+    arrays = [a for gi in range(len(rc.groups)) for a in back.group_arrays(gi).values()]
+    assert arrays and not any(a.flags.writeable for a in arrays)
+

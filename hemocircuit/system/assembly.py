@@ -79,7 +79,8 @@ class Assembly:
         self.dynamic_groups = []
         # the constant groups' local matrices that the DC network replaces (_const_part): every
         # DC-guess iteration takes them out again (their stamps were ~0.1 ms of a small
-        # circuit's operating point)
+        # circuit's operating point).  (rows, E, L, L) each: a fifth of A_const's size on
+        # body.yaml with 200 members
         self._dc_replaced = {}
         for g in self.groups:
             # the compiled layout's rule (kernels.layout): an expression may move its right-hand side
