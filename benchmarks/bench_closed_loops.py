@@ -88,8 +88,8 @@ def jacobian_rows(rtol=1e-6, periods=3, repeat=5):
     breaks, kinks = c.jumps_and_kinks(0.0, periods * PERIOD)  # the activation's, as a run passes them
     times = {1: [], 0: []}
     stats = {}
-    for lj in (1, 0):
-        system.integrate(t_out, x0, P, rtol=rtol, breaks=breaks, kinks=kinks, local_jacobian=lj)  # compiled outside the timings
+    for lj in (1, 0):  # compiled (or loaded) outside the timings
+        system.integrate(t_out, x0, P, rtol=rtol, breaks=breaks, kinks=kinks, local_jacobian=lj)
     for _ in range(repeat):
         for lj in (1, 0):
             t0 = time.perf_counter()

@@ -269,7 +269,8 @@ def test_fingerprint_tells_long_tables_apart(rc):
     v = 80.0 + np.sin(t)
 
     def table(values):
-        return rc.with_values({"Ps.value": {"pwl": [[f"{a} s", f"{float(b)!r} mmHg"] for a, b in zip(t.tolist(), values)]}})
+        rows = [[f"{a} s", f"{float(b)!r} mmHg"] for a, b in zip(t.tolist(), values)]
+        return rc.with_values({"Ps.value": {"pwl": rows}})
 
     base = table(v)
     middle, tiny = v.copy(), v.copy()
@@ -294,4 +295,3 @@ def test_unpickled_values_stay_read_only(rc):
         back.values["R1.R"][0] = 1.0
     arrays = [a for gi in range(len(rc.groups)) for a in back.group_arrays(gi).values()]
     assert arrays and not any(a.flags.writeable for a in arrays)
-

@@ -218,7 +218,7 @@ def condense(lay, work):
     S0 = Avv - Avc Z stored; an evaluation then solves only S0 + (varying stamps) (nv x nv).
     Used when that costs fewer operations a solve than the dense LU (below) and Acc is regular;
     otherwise the dense path (chamber_elastance_inductor: 7 of 11 unknowns varying, condensed
-    8 % faster than dense, which the earlier rule 'at most half' had chosen)."""
+    8 % faster than dense)."""
     (n, nx, et, L, S, ep, ex, eu, ui, eo, io, eb, ws, w0, wd, xs, xc, xk, xcode, xconst, oe, nonlin, cm, st, td) = lay
     A0, Fc, Z, S0, Avc, pivc, order, vpos, y = (work.A0, work.Fc, work.Z, work.S0, work.Avc, work.pivc, work.order,
                                                 work.vpos, work.y)

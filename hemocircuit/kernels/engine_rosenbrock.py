@@ -207,6 +207,9 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
             if age >= JAC_REUSE:
                 nj = jacobian_into(t, x, f, P, lay_ref, work_ref, jw_ref, scales, J, ft, xt, ftmp, autonomous,
                                    local_jac, rhs_fn, jac_fn, u_at_x)
+                # (a Jacobian of whole right-hand sides leaves work.u at its last column's point:
+                # one retried after a failed LU below solves the nodes at (t, x) first)
+                u_at_x = False
                 if nj < 0:
                     status = -3
                     break
@@ -227,6 +230,7 @@ def integrate_batch(t_out_all, X0, P_all, lay, scales, lim_i, lim_b, lim_r, brea
                     if not rhs_fn(t, x, P, lay_ref, work_ref, f):
                         status = -3
                         break
+                    u_at_x = True
                     age = JAC_REUSE
                     continue
             for i in range(nx):
